@@ -1,0 +1,84 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_forces_hpp__
+#define __pinsettle_forces_hpp__
+
+#include <pinocchio/multibody.hpp>
+
+#include <string>
+
+namespace pinsettle
+{
+
+  typedef std::vector<pinocchio::Force> ForceVector;
+
+  ///
+  /// \brief Applied efforts acting on a mechanism besides gravity (springs, loads, ...).
+  ///
+  /// The solver calls computeForces once per step, before pinocchio::aba. A solve without a
+  /// ForceModel computes nothing extra per step.
+  ///
+  class ForceModel
+  {
+  public:
+    virtual ~ForceModel() = default;
+
+    /// \brief Whether computeForces fills spatial forces; only then is aba called with fext.
+    virtual bool hasExternalForces() const
+    {
+      return false;
+    }
+
+    ///
+    /// \brief Add the applied efforts at the state (q, v).
+    ///
+    /// \param[in] model The model of the mechanism.
+    /// \param[in] data Scratch data of the model (kinematic quantities may be stale).
+    /// \param[in] q The joint configuration (dim model.nq).
+    /// \param[in] v The joint velocity (dim model.nv).
+    /// \param[in,out] tau Generalized efforts (dim model.nv, N m or N), zero on entry.
+    /// \param[in,out] fext Spatial forces on each joint, expressed in the joint's local frame
+    ///                (size model.njoints), zero on entry; only touched when
+    ///                hasExternalForces() is true.
+    ///
+    virtual void computeForces(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q,
+      const Eigen::VectorXd & v,
+      Eigen::VectorXd & tau,
+      ForceVector & fext) const = 0;
+  };
+
+  ///
+  /// \brief A constant generalized effort (a motor torque held fixed, a constant load on a
+  /// joint).
+  ///
+  class ConstantGeneralizedForce : public ForceModel
+  {
+  public:
+    /// \param[in] tau The constant effort (dim model.nv, N m or N).
+    explicit ConstantGeneralizedForce(const Eigen::VectorXd & tau);
+
+    void computeForces(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q,
+      const Eigen::VectorXd & v,
+      Eigen::VectorXd & tau,
+      ForceVector & fext) const override;
+
+    const Eigen::VectorXd & effort() const
+    {
+      return tau_;
+    }
+
+  private:
+    Eigen::VectorXd tau_;
+  };
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_forces_hpp__

@@ -1,0 +1,15 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_pinsettle_hpp__
+#define __pinsettle_pinsettle_hpp__
+
+#include "pinsettle/energy.hpp"
+#include "pinsettle/forces.hpp"
+#include "pinsettle/result.hpp"
+#include "pinsettle/settings.hpp"
+#include "pinsettle/solver.hpp"
+#include "pinsettle/urdf.hpp"
+
+#endif // ifndef __pinsettle_pinsettle_hpp__

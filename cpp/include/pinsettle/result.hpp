@@ -1,0 +1,79 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_result_hpp__
+#define __pinsettle_result_hpp__
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <vector>
+
+namespace pinsettle
+{
+
+  /// \brief How a solve ended.
+  enum class Status
+  {
+    /// The stopping rule held: energy decreasing and the window sum <= max_e.
+    Converged,
+    /// Settings::max_steps steps were taken without convergence.
+    MaxSteps,
+    /// Settings::max_time seconds elapsed without convergence.
+    TimeLimit,
+    /// The abort callback asked to stop (Ctrl-C from Python); the state is the current one.
+    Aborted,
+    /// A non-finite value appeared; the state is the last finite one.
+    Diverged
+  };
+
+  /// \brief snake_case name of a status: "converged", "max_steps", ...
+  const char * toString(Status status);
+
+  /// \brief One sample of the optional trace.
+  struct TraceSample
+  {
+    /// Step index (number of ABA evaluations before this sample).
+    std::int64_t step;
+    /// Simulated time (s).
+    double time;
+    /// Exact kinetic energy (J).
+    double energy;
+    /// Simplified energy sum |v|^2 + |w|^2 (m^2/s^2 + rad^2/s^2).
+    double simplified_energy;
+  };
+
+  ///
+  /// \brief Outcome of a kinetic-damping solve.
+  ///
+  struct Result
+  {
+    /// Final configuration (dim model.nq).
+    Eigen::VectorXd q;
+    /// Final joint velocity (dim model.nv).
+    Eigen::VectorXd v;
+    Status status = Status::MaxSteps;
+    /// Steps taken (ABA evaluations).
+    std::int64_t steps = 0;
+    /// Detected energy peaks, i.e. damping events.
+    std::int64_t peaks = 0;
+    /// Simulated time (s).
+    double sim_time = 0.;
+    /// Wall-clock time of the solve (s).
+    double wall_time = 0.;
+    /// Exact kinetic energy 1/2 v^T M(q) v of the final state (J).
+    double kinetic_energy = 0.;
+    /// Simplified energy sum |v|^2 + |w|^2 of the final state.
+    double simplified_kinetic_energy = 0.;
+    /// max |rnea(q, 0, 0) - applied generalized forces| of the final configuration (N m or N).
+    double residual = 0.;
+    /// Samples recorded when Settings::trace_every > 0, in step order.
+    std::vector<TraceSample> trace;
+    /// Recording stride in force at the end (grows when the trace was decimated).
+    std::int64_t trace_stride = 0;
+  };
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_result_hpp__

@@ -1,0 +1,73 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_settings_hpp__
+#define __pinsettle_settings_hpp__
+
+#include <cstdint>
+#include <limits>
+#include <string>
+
+namespace pinsettle
+{
+
+  /// \brief Which kinetic-energy signal drives the peak detection.
+  enum class EnergyMeasure
+  {
+    /// E = sum_i 1/2 m_i |v_i|^2 + 1/2 w_i^T I_i w_i (J), equal to 1/2 qdot^T M(q) qdot.
+    Exact,
+    /// E_s = sum_i |v_i|^2 + |w_i|^2 (m^2/s^2 + rad^2/s^2), masses and inertias dropped.
+    Simplified
+  };
+
+  /// \brief Name of an energy measure: "exact" or "simplified".
+  const char * toString(EnergyMeasure measure);
+
+  /// \brief Parse "exact" or "simplified"; throws std::invalid_argument otherwise.
+  EnergyMeasure energyMeasureFromString(const std::string & name);
+
+  ///
+  /// \brief Inputs of the kinetic-damping solver. The solver only reads them.
+  ///
+  struct Settings
+  {
+    /// Time step of the semi-implicit Euler integration (s), > 0.
+    double dt = 1e-3;
+    /// Velocity scale applied at each detected energy peak, in [0, 1).
+    double kt = 0.5;
+    /// Relative peak threshold: the middle of three samples is a peak when it exceeds both
+    /// neighbours by more than err times its own value (dimensionless, >= 0). Relative so that
+    /// peaks keep being detected when the energy has fallen by many orders of magnitude.
+    double err = 1e-12;
+    /// Length of the stopping window (steps), >= 1.
+    std::int64_t ds = 100;
+    /// Stopping bound on the sum of the last ds energy samples, in the unit of the chosen
+    /// energy measure (J for exact), >= 0.
+    double max_e = 1e-12;
+    /// Largest number of steps (ABA evaluations), >= 1.
+    std::int64_t max_steps = 1000000;
+    /// Wall-clock budget (s), > 0; infinity means none.
+    double max_time = std::numeric_limits<double>::infinity();
+    /// Energy signal of the peak detector and the stopping rule.
+    EnergyMeasure energy = EnergyMeasure::Exact;
+    /// Move the configuration back to the parabola-interpolated peak before damping.
+    bool backtrack = false;
+    /// Record a trace sample every trace_every steps; 0 disables the trace.
+    std::int64_t trace_every = 0;
+    /// Largest number of trace samples kept (>= 2); when full, every other sample is dropped
+    /// and the recording stride doubles, so the whole run stays covered in bounded memory.
+    std::int64_t trace_capacity = 10000;
+    /// The wall clock and the abort callback are checked every check_every steps (>= 1).
+    std::int64_t check_every = 256;
+  };
+
+  ///
+  /// \brief Check every field of the settings.
+  /// \throws std::invalid_argument naming the field, the allowed range and the value given.
+  ///
+  void checkSettings(const Settings & settings);
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_settings_hpp__

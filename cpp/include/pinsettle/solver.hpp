@@ -1,0 +1,105 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_solver_hpp__
+#define __pinsettle_solver_hpp__
+
+#include "pinsettle/forces.hpp"
+#include "pinsettle/result.hpp"
+#include "pinsettle/settings.hpp"
+
+#include <functional>
+#include <vector>
+
+namespace pinsettle
+{
+
+  /// \brief Called every Settings::check_every steps; returning true stops the run with
+  /// Status::Aborted and keeps the current state.
+  typedef std::function<bool()> AbortCallback;
+
+  ///
+  /// \brief Check a configuration given by a user.
+  ///
+  /// \param[in] q The joint configuration (dim model.nq).
+  /// \param[in] name How the caller calls it in error messages ("q0").
+  /// \throws std::invalid_argument on a wrong size, a non-finite entry or a quaternion whose norm
+  ///         differs from 1 by more than 1e-6 (the joint is named).
+  ///
+  void checkConfiguration(
+    const pinocchio::Model & model, const Eigen::VectorXd & q, const char * name = "q0");
+
+  ///
+  /// \brief Static residual: max |rnea(q, 0, 0) - applied generalized forces at (q, 0)|.
+  ///
+  /// \param[in] q The joint configuration (dim model.nq).
+  /// \param[in] forces Applied efforts, or nullptr for gravity alone.
+  /// \return The largest absolute net static generalized force (N m or N).
+  ///
+  double computeStaticResidual(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces = nullptr);
+
+  ///
+  /// \brief Kinetic-damping equilibrium solver.
+  ///
+  /// Simulates the mechanism with pinocchio::aba and semi-implicit Euler (pinocchio::integrate, so
+  /// free-flyer and spherical joints stay on their manifold), and scales the joint velocity by
+  /// Settings::kt at each detected peak of the kinetic energy, until the energy stays small.
+  /// The solver owns its pinocchio::Data and a workspace sized for the model; the step loop does
+  /// not allocate. The model must outlive the solver.
+  ///
+  class Solver
+  {
+  public:
+    explicit Solver(const pinocchio::Model & model);
+
+    ///
+    /// \brief Settle the mechanism from rest at q0.
+    ///
+    /// \param[in] q0 The start configuration (dim model.nq).
+    /// \param[in] settings Solver settings, checked with checkSettings.
+    /// \param[in] forces Applied efforts, or nullptr for gravity alone.
+    /// \param[in] abort Optional callback polled every settings.check_every steps.
+    /// \throws std::invalid_argument on bad settings or a bad q0.
+    ///
+    Result solve(
+      const Eigen::VectorXd & q0,
+      const Settings & settings = Settings(),
+      const ForceModel * forces = nullptr,
+      const AbortCallback & abort = AbortCallback());
+
+    ///
+    /// \brief Settle the mechanism from the state (q0, v0).
+    ///
+    /// \param[in] v0 The start joint velocity (dim model.nv, finite).
+    ///
+    Result solve(
+      const Eigen::VectorXd & q0,
+      const Eigen::VectorXd & v0,
+      const Settings & settings,
+      const ForceModel * forces = nullptr,
+      const AbortCallback & abort = AbortCallback());
+
+    const pinocchio::Model & model() const
+    {
+      return model_;
+    }
+
+    /// Scratch of the last solve: kinematics of the last ABA call.
+    pinocchio::Data data;
+
+  private:
+    const pinocchio::Model & model_;
+    // Workspace, sized once for the model.
+    Eigen::VectorXd q_, v_, v_prev_, dq_, q_next_, tau_;
+    ForceVector fext_;
+    std::vector<double> window_;
+  };
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_solver_hpp__

@@ -1,0 +1,195 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+// The Python module pinsettle._core: the only translation unit that includes pybind11.
+// Pinocchio's Python objects are Boost.Python objects; they are read here by reference through
+// boost::python::extract, so a model is never copied.
+//
+
+#include <pinocchio/bindings/python/pybind11.hpp>
+
+#include <pybind11/eigen.h>
+#include <pybind11/stl.h>
+
+#include "pinsettle/energy.hpp"
+#include "pinsettle/solver.hpp"
+
+#include <optional>
+#include <sstream>
+
+namespace py = pybind11;
+namespace bp = boost::python;
+using namespace pinsettle;
+
+namespace
+{
+
+  const pinocchio::Model & modelFrom(const py::handle & obj, const char * name = "model")
+  {
+    bp::extract<pinocchio::Model &> model(obj.ptr());
+    if (!model.check())
+    {
+      std::ostringstream msg;
+      msg << name << " must be a pinocchio.Model (import pinocchio first), got "
+          << py::str(py::type::handle_of(obj).attr("__qualname__")).cast<std::string>();
+      throw py::type_error(msg.str());
+    }
+    return model();
+  }
+
+  void checkVelocity(const pinocchio::Model & model, const Eigen::VectorXd & v, const char * name)
+  {
+    if (v.size() != model.nv)
+      throw std::invalid_argument(
+        std::string(name) + " must have model.nv = " + std::to_string(model.nv)
+        + " entries, got " + std::to_string(v.size()));
+    for (Eigen::Index k = 0; k < v.size(); ++k)
+      if (!std::isfinite(v[k]))
+        throw std::invalid_argument(
+          std::string(name) + "[" + std::to_string(k) + "] is not finite; every entry must be");
+  }
+
+  py::dict toDict(const Result & r)
+  {
+    py::dict out;
+    out["q"] = r.q;
+    out["v"] = r.v;
+    out["status"] = toString(r.status);
+    out["steps"] = r.steps;
+    out["peaks"] = r.peaks;
+    out["sim_time"] = r.sim_time;
+    out["wall_time"] = r.wall_time;
+    out["kinetic_energy"] = r.kinetic_energy;
+    out["simplified_kinetic_energy"] = r.simplified_kinetic_energy;
+    out["residual"] = r.residual;
+    if (r.trace.empty())
+    {
+      out["trace"] = py::none();
+      return out;
+    }
+    const Eigen::Index n = static_cast<Eigen::Index>(r.trace.size());
+    Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> step(n);
+    Eigen::VectorXd time(n), energy(n), simplified(n);
+    for (Eigen::Index k = 0; k < n; ++k)
+    {
+      const TraceSample & s = r.trace[static_cast<std::size_t>(k)];
+      step[k] = s.step;
+      time[k] = s.time;
+      energy[k] = s.energy;
+      simplified[k] = s.simplified_energy;
+    }
+    py::dict trace;
+    trace["step"] = step;
+    trace["time"] = time;
+    trace["kinetic_energy"] = energy;
+    trace["simplified_kinetic_energy"] = simplified;
+    trace["stride"] = r.trace_stride;
+    out["trace"] = trace;
+    return out;
+  }
+
+  py::dict solve(
+    const py::object & model_obj,
+    const Eigen::VectorXd & q0,
+    const Eigen::VectorXd & v0,
+    const Settings & settings,
+    const py::object & callback)
+  {
+    const pinocchio::Model & model = modelFrom(model_obj);
+    checkVelocity(model, v0, "v0");
+    Solver solver(model);
+
+    // Polled with the GIL released in between: Ctrl-C (SIGINT) ends the run as "aborted" and
+    // keeps the state; an exception from the user's callback ends it and is re-raised.
+    std::optional<py::error_already_set> error;
+    const AbortCallback hook = [&]() -> bool {
+      py::gil_scoped_acquire gil;
+      if (PyErr_CheckSignals() != 0)
+      {
+        if (PyErr_ExceptionMatches(PyExc_KeyboardInterrupt))
+        {
+          PyErr_Clear();
+          return true;
+        }
+        error.emplace();
+        return true;
+      }
+      if (callback.is_none())
+        return false;
+      try
+      {
+        return py::bool_(callback());
+      }
+      catch (py::error_already_set & e)
+      {
+        error.emplace(std::move(e));
+        return true;
+      }
+    };
+
+    Result result;
+    {
+      py::gil_scoped_release release;
+      result = solver.solve(q0, v0, settings, nullptr, hook);
+    }
+    if (error)
+      throw std::move(*error);
+    return toDict(result);
+  }
+
+} // namespace
+
+PYBIND11_MODULE(_core, m)
+{
+  m.doc() = "pinsettle C++ core: kinetic-damping static equilibrium on Pinocchio's ABA";
+  // Registers the Boost.Python converters of pinocchio.Model.
+  py::module_::import("pinocchio");
+
+  py::class_<Settings>(m, "Settings", "Solver settings (inputs only; see pinsettle.Settings).")
+    .def(py::init<>())
+    .def(py::init<const Settings &>(), py::arg("other"))
+    .def_readwrite("dt", &Settings::dt, "Time step (s), > 0.")
+    .def_readwrite("kt", &Settings::kt, "Velocity scale at each energy peak, in [0, 1).")
+    .def_readwrite("err", &Settings::err, "Relative peak threshold, >= 0.")
+    .def_readwrite("ds", &Settings::ds, "Stopping window length (steps), >= 1.")
+    .def_readwrite(
+      "max_e", &Settings::max_e, "Bound on the sum of the last ds energy samples, >= 0.")
+    .def_readwrite("max_steps", &Settings::max_steps, "Largest number of steps, >= 1.")
+    .def_readwrite("max_time", &Settings::max_time, "Wall-clock budget (s), > 0; inf: none.")
+    .def_property(
+      "energy", [](const Settings & s) { return std::string(toString(s.energy)); },
+      [](Settings & s, const std::string & name) { s.energy = energyMeasureFromString(name); },
+      "Energy signal of the peak detector: 'exact' or 'simplified'.")
+    .def_readwrite("backtrack", &Settings::backtrack, "Back up to the interpolated peak.")
+    .def_readwrite(
+      "trace_every", &Settings::trace_every, "Trace a sample every N steps; 0: no trace.")
+    .def_readwrite("trace_capacity", &Settings::trace_capacity, "Most trace samples kept.")
+    .def_readwrite(
+      "check_every", &Settings::check_every, "Steps between clock and Ctrl-C checks, >= 1.")
+    .def("check", &checkSettings, "Raise ValueError naming the first invalid setting.");
+
+  m.def(
+    "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
+    py::arg("callback") = py::none());
+
+  m.def(
+    "kinetic_energies",
+    [](const py::object & model_obj, const Eigen::VectorXd & q, const Eigen::VectorXd & v) {
+      const pinocchio::Model & model = modelFrom(model_obj);
+      checkConfiguration(model, q, "q");
+      checkVelocity(model, v, "v");
+      pinocchio::Data data(model);
+      return computeKineticEnergies(model, data, q, v);
+    },
+    py::arg("model"), py::arg("q"), py::arg("v"));
+
+  m.def(
+    "static_residual",
+    [](const py::object & model_obj, const Eigen::VectorXd & q) {
+      const pinocchio::Model & model = modelFrom(model_obj);
+      checkConfiguration(model, q, "q");
+      pinocchio::Data data(model);
+      return computeStaticResidual(model, data, q);
+    },
+    py::arg("model"), py::arg("q"));
+}

@@ -1,0 +1,30 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#include "pinsettle/forces.hpp"
+
+namespace pinsettle
+{
+
+  ConstantGeneralizedForce::ConstantGeneralizedForce(const Eigen::VectorXd & tau)
+  : tau_(tau)
+  {
+  }
+
+  void ConstantGeneralizedForce::computeForces(
+    const pinocchio::Model & model,
+    pinocchio::Data & /*data*/,
+    const Eigen::VectorXd & /*q*/,
+    const Eigen::VectorXd & /*v*/,
+    Eigen::VectorXd & tau,
+    ForceVector & /*fext*/) const
+  {
+    if (tau_.size() != model.nv)
+      throw std::invalid_argument(
+        "ConstantGeneralizedForce: effort has " + std::to_string(tau_.size())
+        + " entries, the model has nv = " + std::to_string(model.nv));
+    tau += tau_;
+  }
+
+} // namespace pinsettle

@@ -1,0 +1,41 @@
+"""pinsettle: where a mechanism comes to rest.
+
+Static equilibria of Pinocchio models by kinetic damping: the mechanism is simulated with its
+true dynamics (Pinocchio's ABA) and its velocity is scaled down at each peak of its kinetic
+energy, until the energy stays below a limit.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata as _metadata
+
+import pinocchio  # noqa: F401  (registers the converters that pinsettle._core reads models with)
+
+from ._core import kinetic_energies, static_residual
+from ._solve import Result, Settings, Trace, solve
+from .robots import load_robot, robot_names, robot_urdf
+
+__version__ = _metadata.version("pinsettle")
+
+__all__ = [
+    "Result",
+    "Settings",
+    "Trace",
+    "get_cmake_dir",
+    "kinetic_energies",
+    "load_robot",
+    "robot_names",
+    "robot_urdf",
+    "solve",
+    "static_residual",
+]
+
+
+def get_cmake_dir() -> str:
+    """Folder of pinsettleConfig.cmake, for ``-Dpinsettle_DIR=...`` or ``CMAKE_PREFIX_PATH``."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent / "lib" / "cmake" / "pinsettle"
+    if not path.is_dir():
+        raise FileNotFoundError(f"the C++ package of pinsettle is not installed at {path}")
+    return str(path)

@@ -1,0 +1,232 @@
+"""The Python face of the C++ solver: settings, result and ``solve``."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio
+
+from . import _core
+
+#: Settings keys with the Python type each one takes (used for clear messages).
+SETTING_TYPES: dict[str, str] = {
+    "dt": "float",
+    "kt": "float",
+    "err": "float",
+    "ds": "int",
+    "max_e": "float",
+    "max_steps": "int",
+    "max_time": "float",
+    "energy": "str ('exact' or 'simplified')",
+    "backtrack": "bool",
+    "trace_every": "int",
+    "trace_capacity": "int",
+    "check_every": "int",
+}
+
+
+def _unknown_key_message(kind: str, key: str, known: list[str]) -> str:
+    close = difflib.get_close_matches(key, known, n=1)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    return f"unknown {kind} '{key}'{hint} Known {kind}s: {', '.join(known)}"
+
+
+class Settings(_core.Settings):
+    """Solver settings, inputs only: the solver never writes them back.
+
+    ``Settings(kt=0.3, dt=5e-4)`` sets fields by name; an unknown name or a value of the wrong
+    type raises ``TypeError``, a value out of range raises ``ValueError`` when solving (or on
+    ``check()``), naming the field and its allowed range.
+
+    Fields: ``dt`` time step (s); ``kt`` velocity scale at each energy peak, in [0, 1); ``err``
+    relative peak threshold; ``ds`` stopping window (steps); ``max_e`` bound on the sum of the
+    last ``ds`` energy samples (J for the exact measure); ``max_steps``; ``max_time`` (s);
+    ``energy`` ('exact' or 'simplified'); ``backtrack`` (back up to the interpolated peak before
+    damping); ``trace_every`` (0: no trace); ``trace_capacity``; ``check_every`` (steps between
+    checks of the clock and Ctrl-C).
+    """
+
+    def __init__(self, **fields: Any) -> None:
+        super().__init__()
+        for key, value in fields.items():
+            set_setting(self, key, value)
+
+    def replace(self, **fields: Any) -> Settings:
+        """A copy with some fields changed."""
+        out = Settings()
+        for key in SETTING_TYPES:
+            set_setting(out, key, getattr(self, key))
+        for key, value in fields.items():
+            set_setting(out, key, value)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {key: getattr(self, key) for key in SETTING_TYPES}
+
+    def __repr__(self) -> str:
+        body = ", ".join(f"{k}={v!r}" for k, v in self.to_dict().items())
+        return f"Settings({body})"
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, _core.Settings):
+            return NotImplemented
+        return all(getattr(self, k) == getattr(other, k) for k in SETTING_TYPES)
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def set_setting(settings: _core.Settings, key: str, value: Any) -> None:
+    """Set one field with a message that names it when the key or the type is wrong."""
+    if key not in SETTING_TYPES:
+        raise TypeError(_unknown_key_message("setting", key, list(SETTING_TYPES)))
+    if isinstance(value, bool) and SETTING_TYPES[key] != "bool":
+        raise TypeError(f"setting '{key}' expects {SETTING_TYPES[key]}, got bool {value!r}")
+    if SETTING_TYPES[key] == "float" and isinstance(value, (int, np.integer)):
+        value = float(value)
+    try:
+        setattr(settings, key, value)
+    except TypeError:
+        raise TypeError(
+            f"setting '{key}' expects {SETTING_TYPES[key]}, got {type(value).__name__} {value!r}"
+        ) from None
+
+
+@dataclass(frozen=True)
+class Trace:
+    """Energy samples recorded every ``stride`` steps (``Settings.trace_every``)."""
+
+    step: np.ndarray
+    time: np.ndarray
+    kinetic_energy: np.ndarray
+    simplified_kinetic_energy: np.ndarray
+    stride: int
+
+
+@dataclass(frozen=True)
+class Result:
+    """Outcome of a solve.
+
+    ``q`` (dim model.nq) and ``v`` (dim model.nv) are the final state; ``status`` is one of
+    'converged', 'max_steps', 'time_limit', 'aborted', 'diverged'; ``residual`` is
+    max |rnea(q, 0, 0) - applied efforts| in N m or N; energies are those of the final state.
+    """
+
+    q: np.ndarray
+    v: np.ndarray
+    status: str
+    steps: int
+    peaks: int
+    sim_time: float
+    wall_time: float
+    kinetic_energy: float
+    simplified_kinetic_energy: float
+    residual: float
+    trace: Trace | None = None
+    settings: Settings = field(default_factory=Settings, repr=False)
+
+    @property
+    def converged(self) -> bool:
+        return self.status == "converged"
+
+    def summary(self, model: pinocchio.Model | None = None) -> str:
+        """A readable report; with the model, the final joint values by name."""
+        lines = [
+            f"status           {self.status}",
+            f"steps            {self.steps} ({self.peaks} damping events, "
+            f"{self.sim_time:.4g} s simulated)",
+            f"wall time        {self.wall_time * 1e3:.3f} ms",
+            f"residual         {self.residual:.3e} (max |net static generalized force|)",
+            f"kinetic energy   {self.kinetic_energy:.3e} J",
+        ]
+        if model is not None:
+            lines.append("joints")
+            for j in range(1, model.njoints):
+                iq, nq = model.idx_qs[j], model.nqs[j]
+                values = " ".join(f"{x: .9f}" for x in self.q[iq : iq + nq])
+                lines.append(f"  {model.names[j]:<28} {values}")
+        return "\n".join(lines)
+
+
+def _as_vector(value: Any, name: str, size: int, size_name: str) -> np.ndarray:
+    if isinstance(value, (str, bytes)) or np.iscomplexobj(value):
+        raise TypeError(
+            f"{name} must be a 1-D array of {size_name} = {size} real numbers, "
+            f"got {type(value).__name__}"
+        )
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"{name} must be a 1-D array of {size_name} = {size} real numbers, "
+            f"got {type(value).__name__} {value!r}"
+        ) from None
+    if arr.ndim != 1 or arr.shape[0] != size:
+        raise ValueError(f"{name} must have shape ({size},) ({size_name}), got {arr.shape}")
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise ValueError(f"{name}[{bad[0]}] is {arr[bad[0]]}; every entry must be finite")
+    return arr
+
+
+def make_settings(settings: Any, overrides: Mapping[str, Any]) -> Settings:
+    """The settings of a solve: a copy of ``settings`` (None, Settings or a dict) with
+    ``overrides`` applied."""
+    if settings is None:
+        out = Settings()
+    elif isinstance(settings, _core.Settings):
+        out = Settings(**{k: getattr(settings, k) for k in SETTING_TYPES})
+    elif isinstance(settings, Mapping):
+        out = Settings(**settings)
+    else:
+        raise TypeError(
+            f"settings must be a pinsettle.Settings, a dict or None, got {type(settings).__name__}"
+        )
+    for key, value in overrides.items():
+        set_setting(out, key, value)
+    return out
+
+
+def solve(
+    model: pinocchio.Model,
+    q0: Any = None,
+    settings: Settings | Mapping[str, Any] | None = None,
+    *,
+    v0: Any = None,
+    callback: Callable[[], bool] | None = None,
+    **overrides: Any,
+) -> Result:
+    """Settle a mechanism by kinetic damping and return where it comes to rest.
+
+    Args:
+        model: a ``pinocchio.Model`` (from the ``pin`` package).
+        q0: start configuration (dim model.nq); the neutral configuration when None.
+        settings: a ``Settings`` (or a dict of fields); never modified.
+        v0: start joint velocity (dim model.nv); zero when None.
+        callback: called every ``check_every`` steps without arguments; returning True stops the
+            run with status 'aborted'. Ctrl-C does the same.
+        **overrides: any ``Settings`` field, e.g. ``kt=0.3``.
+
+    Raises:
+        TypeError: ``model`` is not a ``pinocchio.Model``; an unknown setting or a value of the
+            wrong type.
+        ValueError: a setting out of range, or a ``q0``/``v0`` of the wrong size, with a
+            non-finite entry or a non-normalised quaternion; the message names it.
+    """
+    if not isinstance(model, pinocchio.Model):
+        raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+    if model.nv == 0:
+        raise ValueError("model has no degree of freedom: nothing to settle")
+    s = make_settings(settings, overrides)
+    s.check()
+    q = pinocchio.neutral(model) if q0 is None else _as_vector(q0, "q0", model.nq, "model.nq")
+    v = np.zeros(model.nv) if v0 is None else _as_vector(v0, "v0", model.nv, "model.nv")
+    if callback is not None and not callable(callback):
+        raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
+    raw = _core.solve(model, q, v, s, callback)
+    trace = raw.pop("trace")
+    return Result(**raw, trace=None if trace is None else Trace(**trace), settings=s)
+

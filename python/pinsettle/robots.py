@@ -1,0 +1,86 @@
+"""Robots shipped by the ``example-robot-data`` wheel, by name, as ``pinocchio.Model``.
+
+Only the kinematic and inertial model is built: meshes are never loaded for solving.
+"""
+
+from __future__ import annotations
+
+import site
+import sys
+from pathlib import Path
+
+import pinocchio
+
+from ._solve import _unknown_key_message
+
+# name -> (URDF path below example-robot-data/robots, root attached by a free-flyer joint)
+ROBOTS: dict[str, tuple[str, bool]] = {
+    "ur3": ("ur_description/urdf/ur3_robot.urdf", False),
+    "ur5": ("ur_description/urdf/ur5_robot.urdf", False),
+    "ur10": ("ur_description/urdf/ur10_robot.urdf", False),
+    "panda": ("panda_description/urdf/panda.urdf", False),
+    "z1": ("z1_description/urdf/z1.urdf", False),
+    "kinova": ("kinova_description/robots/kinova.urdf", False),
+    "xarm7": ("xarm_description/urdf/xarm7.urdf", False),
+    "so_arm100": ("so_arm_description/urdf/so100.urdf", False),
+    "so_arm101": ("so_arm_description/urdf/so101.urdf", False),
+    "double_pendulum": ("double_pendulum_description/urdf/double_pendulum.urdf", False),
+    "double_pendulum_continuous": (
+        "double_pendulum_description/urdf/double_pendulum_continuous.urdf",
+        False,
+    ),
+    "double_pendulum_simple": (
+        "double_pendulum_description/urdf/double_pendulum_simple.urdf",
+        False,
+    ),
+    "asr_twodof": ("asr_twodof_description/urdf/TwoDofs.urdf", False),
+    "finger_edu": ("finger_edu_description/robots/finger_edu.urdf", False),
+    "baxter": ("baxter_description/urdf/baxter.urdf", False),
+    "allegro_right_hand": ("allegro_hand_description/urdf/allegro_right_hand.urdf", False),
+    "talos_left_arm": ("talos_data/robots/talos_left_arm.urdf", False),
+    "solo12": ("solo_description/robots/solo12.urdf", True),
+    "anymal": ("anymal_b_simple_description/robots/anymal.urdf", True),
+    "go1": ("go1_description/urdf/go1.urdf", True),
+    "talos": ("talos_data/robots/talos_reduced.urdf", True),
+}
+
+
+def robots_dir() -> Path:
+    """The folder of the example-robot-data URDFs installed in this environment."""
+    roots = [*sys.path, *site.getsitepackages(), site.getusersitepackages()]
+    # pinocchio itself lives below site-packages/cmeel.prefix: look next to it first.
+    roots.insert(0, str(Path(pinocchio.__file__).resolve().parents[4].parent))
+    for root in roots:
+        candidate = Path(root) / "cmeel.prefix" / "share" / "example-robot-data" / "robots"
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError(
+        "example-robot-data is not installed in this environment "
+        "(pip install example-robot-data)"
+    )
+
+
+def robot_names() -> list[str]:
+    """Names accepted by :func:`load_robot`."""
+    return sorted(ROBOTS)
+
+
+def robot_urdf(name: str) -> Path:
+    """Path of the URDF of a robot of example-robot-data, by name."""
+    if not isinstance(name, str) or name not in ROBOTS:
+        raise ValueError(_unknown_key_message("robot", str(name), robot_names()))
+    return robots_dir() / ROBOTS[name][0]
+
+
+def load_robot(name: str, floating: bool | None = None) -> pinocchio.Model:
+    """The ``pinocchio.Model`` of a robot of example-robot-data (no meshes loaded).
+
+    ``floating`` overrides whether the root gets a free-flyer joint (legged robots and
+    humanoids have one by default).
+    """
+    path = robot_urdf(name)
+    if floating is None:
+        floating = ROBOTS[name][1]
+    if floating:
+        return pinocchio.buildModelFromUrdf(str(path), pinocchio.JointModelFreeFlyer())
+    return pinocchio.buildModelFromUrdf(str(path))

@@ -41,8 +41,8 @@ namespace
   {
     if (v.size() != model.nv)
       throw std::invalid_argument(
-        std::string(name) + " must have model.nv = " + std::to_string(model.nv)
-        + " entries, got " + std::to_string(v.size()));
+        std::string(name) + " must have model.nv = " + std::to_string(model.nv) + " entries, got "
+        + std::to_string(v.size()));
     for (Eigen::Index k = 0; k < v.size(); ++k)
       if (!std::isfinite(v[k]))
         throw std::invalid_argument(
@@ -57,6 +57,7 @@ namespace
     out["status"] = toString(r.status);
     out["steps"] = r.steps;
     out["peaks"] = r.peaks;
+    out["kicks"] = r.kicks;
     out["sim_time"] = r.sim_time;
     out["wall_time"] = r.wall_time;
     out["kinetic_energy"] = r.kinetic_energy;

@@ -23,8 +23,7 @@ namespace pinsettle
       return EnergyMeasure::Exact;
     if (name == "simplified")
       return EnergyMeasure::Simplified;
-    throw std::invalid_argument(
-      "energy must be \"exact\" or \"simplified\", got \"" + name + "\"");
+    throw std::invalid_argument("energy must be \"exact\" or \"simplified\", got \"" + name + "\"");
   }
 
   const char * toString(Status status)

@@ -9,6 +9,7 @@
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <numeric>
@@ -18,7 +19,8 @@
 namespace pinsettle
 {
 
-  void checkConfiguration(const pinocchio::Model & model, const Eigen::VectorXd & q, const char * name)
+  void checkConfiguration(
+    const pinocchio::Model & model, const Eigen::VectorXd & q, const char * name)
   {
     if (q.size() != model.nq)
     {
@@ -35,26 +37,31 @@ namespace pinsettle
         throw std::invalid_argument(msg.str());
       }
     }
-    // Unit-norm parts (quaternions, cos/sin pairs) are where normalize changes q.
-    Eigen::VectorXd qn = q;
-    pinocchio::normalize(model, qn);
+    // Test each joint's unit-norm part (quaternion, cos/sin pair) alone, inside a neutral
+    // configuration, so that the message names the joint at fault.
+    const Eigen::VectorXd neutral = pinocchio::neutral(model);
+    Eigen::VectorXd probe = neutral;
     for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     {
       const int iq = model.idx_qs[j], nq = model.nqs[j];
-      const Eigen::VectorXd seg = q.segment(iq, nq);
-      const Eigen::VectorXd segn = qn.segment(iq, nq);
-      if (!((seg - segn).lpNorm<Eigen::Infinity>() <= 1e-6))
+      probe.segment(iq, nq) = q.segment(iq, nq);
+      if (!pinocchio::isNormalized(model, probe, 1e-6))
       {
-        double sq = 0.;
+        // The unit-norm entries are those that normalize changes in a segment of ones.
+        probe.segment(iq, nq).setOnes();
+        pinocchio::normalize(model, probe);
+        double squared = 0.;
         for (int k = 0; k < nq; ++k)
-          if (seg[k] != segn[k] || seg[k] == 0.)
-            sq += seg[k] * seg[k];
+          if (probe[iq + k] != 1.)
+            squared += q[iq + k] * q[iq + k];
         std::ostringstream msg;
         msg << name << "[" << iq << ":" << iq + nq << "] (joint '" << model.names[j] << "', "
-            << model.joints[j].shortname() << ") holds a rotation of norm " << std::sqrt(sq)
-            << "; it must be 1 within 1e-6 (normalise it, e.g. with pinocchio.normalize)";
+            << model.joints[j].shortname() << ") = [" << q.segment(iq, nq).transpose()
+            << "] holds a quaternion or cos/sin pair of norm " << std::sqrt(squared)
+            << "; it must be 1 within 1e-6 (e.g. pinocchio.normalize)";
         throw std::invalid_argument(msg.str());
       }
+      probe.segment(iq, nq) = neutral.segment(iq, nq);
     }
   }
 
@@ -72,8 +79,7 @@ namespace pinsettle
     forces->computeForces(model, data, q, zero, tau, fext);
     if (forces->hasExternalForces())
       return (pinocchio::rnea(model, data, q, zero, zero, fext) - tau).lpNorm<Eigen::Infinity>();
-    return (pinocchio::computeGeneralizedGravity(model, data, q) - tau)
-      .lpNorm<Eigen::Infinity>();
+    return (pinocchio::computeGeneralizedGravity(model, data, q) - tau).lpNorm<Eigen::Infinity>();
   }
 
   Solver::Solver(const pinocchio::Model & model)
@@ -151,13 +157,18 @@ namespace pinsettle
     std::size_t window_pos = 0, window_count = 0;
 
     std::int64_t trace_stride = settings.trace_every;
-    if (trace_stride > 0)
-      result.trace.reserve(static_cast<std::size_t>(settings.trace_capacity));
+    if (trace_stride > 0) // never more samples than the run can record
+      result.trace.reserve(
+        static_cast<std::size_t>(
+          std::min(settings.trace_capacity, settings.max_steps / trace_stride + 1)));
 
     // e_prev2, e_prev: the two samples before the current one; fresh counts samples since the
     // last damping event (the three-sample rule needs three samples of one undamped stretch).
     double e_prev2 = 0., e_prev = 0.;
     int fresh = 0;
+    // Steps in a row with exactly zero energy: a start at exact rest, where "energy decreasing"
+    // never holds and the stopping rule alone would run to max_steps.
+    std::int64_t still = 0;
     double time = 0.;
     Status status = Status::MaxSteps;
     std::int64_t step = 0;
@@ -233,6 +244,24 @@ namespace pinsettle
           ++step;
           break;
         }
+      }
+
+      // Exact rest for a whole window: the start is an equilibrium, stable or not. Kick the
+      // mechanism with a tiny velocity (energy 10 max_e, a fixed direction that no symmetry
+      // cancels) and go on: it rings down where it is if that is stable, and falls away to
+      // where it would really stay if not.
+      still = e == 0. ? still + 1 : 0;
+      if (still >= settings.ds && max_e > 0.)
+      {
+        for (Eigen::Index k = 0; k < v_.size(); ++k)
+          v_[k] = std::sin(1. + 2.399963 * static_cast<double>(k));
+        const std::pair<double, double> unit = computeKineticEnergies(model, data, q_, v_);
+        const double e_unit = exact ? unit.first : unit.second;
+        v_ *= e_unit > 0. ? std::sqrt(10. * max_e / e_unit) : 0.;
+        ++result.kicks;
+        still = 0;
+        fresh = 0;
+        continue;
       }
 
       // Peak: the middle of the last three samples exceeds both neighbours by more than err

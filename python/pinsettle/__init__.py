@@ -11,8 +11,7 @@ import importlib.metadata as _metadata
 
 import pinocchio  # noqa: F401  (registers the converters that pinsettle._core reads models with)
 
-from ._core import kinetic_energies, static_residual
-from ._solve import Result, Settings, Trace, solve
+from ._solve import Result, Settings, Trace, kinetic_energies, solve, static_residual
 from .robots import load_robot, robot_names, robot_urdf
 
 __version__ = _metadata.version("pinsettle")

@@ -19,9 +19,7 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--max-e", type=float, help="bound on the energy summed over the window")
     group.add_argument("--max-steps", type=int, help="largest number of steps")
     group.add_argument("--max-time", type=float, help="wall-clock budget (s)")
-    group.add_argument(
-        "--backtrack", action="store_true", default=None, help="back up to the peak"
-    )
+    group.add_argument("--backtrack", action="store_true", default=None, help="back up to the peak")
 
 
 def _setting_overrides(args: argparse.Namespace) -> dict:
@@ -42,8 +40,9 @@ def _demo(args: argparse.Namespace) -> int:
     else:
         print(f"{args.robot}: {model.nq} configuration variables, released at rest from neutral")
         print(result.summary(model))
-        independent = np.max(np.abs(pinocchio.computeGeneralizedGravity(model, model.createData(),
-                                                                         result.q)))
+        independent = np.max(
+            np.abs(pinocchio.computeGeneralizedGravity(model, model.createData(), result.q))
+        )
         print(f"check            |g(q)| = {independent:.3e} recomputed with pinocchio")
     return 0 if result.converged else 1
 
@@ -108,6 +107,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, TypeError, FileNotFoundError) as error:
         print(f"pinsettle: error: {error}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into head: not an error
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -31,8 +31,8 @@ SETTING_TYPES: dict[str, str] = {
 
 def _unknown_key_message(kind: str, key: str, known: list[str]) -> str:
     close = difflib.get_close_matches(key, known, n=1)
-    hint = f"; did you mean '{close[0]}'?" if close else ""
-    return f"unknown {kind} '{key}'{hint} Known {kind}s: {', '.join(known)}"
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
+    return f"unknown {kind} '{key}'{hint}; known {kind}s: {', '.join(known)}"
 
 
 class Settings(_core.Settings):
@@ -83,10 +83,16 @@ def set_setting(settings: _core.Settings, key: str, value: Any) -> None:
     """Set one field with a message that names it when the key or the type is wrong."""
     if key not in SETTING_TYPES:
         raise TypeError(_unknown_key_message("setting", key, list(SETTING_TYPES)))
-    if isinstance(value, bool) and SETTING_TYPES[key] != "bool":
-        raise TypeError(f"setting '{key}' expects {SETTING_TYPES[key]}, got bool {value!r}")
-    if SETTING_TYPES[key] == "float" and isinstance(value, (int, np.integer)):
+    kind = SETTING_TYPES[key]
+    is_bool = isinstance(value, (bool, np.bool_))
+    if is_bool != (kind == "bool"):
+        raise TypeError(f"setting '{key}' expects {kind}, got {type(value).__name__} {value!r}")
+    if kind == "int" and isinstance(value, (int, np.integer)) and not -(2**63) <= value < 2**63:
+        raise ValueError(f"setting '{key}' must fit in a 64-bit integer, got {value}")
+    if kind == "float" and isinstance(value, (int, np.integer)):
         value = float(value)
+    if is_bool:
+        value = bool(value)
     try:
         setattr(settings, key, value)
     except TypeError:
@@ -120,6 +126,7 @@ class Result:
     status: str
     steps: int
     peaks: int
+    kicks: int
     sim_time: float
     wall_time: float
     kinetic_energy: float
@@ -137,7 +144,8 @@ class Result:
         lines = [
             f"status           {self.status}",
             f"steps            {self.steps} ({self.peaks} damping events, "
-            f"{self.sim_time:.4g} s simulated)",
+            + (f"{self.kicks} kicks at rest, " if self.kicks else "")
+            + f"{self.sim_time:.4g} s simulated)",
             f"wall time        {self.wall_time * 1e3:.3f} ms",
             f"residual         {self.residual:.3e} (max |net static generalized force|)",
             f"kinetic energy   {self.kinetic_energy:.3e} J",
@@ -190,6 +198,26 @@ def make_settings(settings: Any, overrides: Mapping[str, Any]) -> Settings:
     return out
 
 
+def _check_model(model: Any) -> None:
+    if not isinstance(model, pinocchio.Model):
+        raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+
+
+def kinetic_energies(model: pinocchio.Model, q: Any, v: Any) -> tuple[float, float]:
+    """Both energy measures at the state (q, v): the exact sum 1/2 m|v|^2 + 1/2 w^T I w (J,
+    equal to 1/2 v^T M(q) v) and the simplified sum |v|^2 + |w|^2 over the bodies."""
+    _check_model(model)
+    return _core.kinetic_energies(
+        model, _as_vector(q, "q", model.nq, "model.nq"), _as_vector(v, "v", model.nv, "model.nv")
+    )
+
+
+def static_residual(model: pinocchio.Model, q: Any) -> float:
+    """max |rnea(q, 0, 0)|: the largest net static generalized force under gravity (N m or N)."""
+    _check_model(model)
+    return _core.static_residual(model, _as_vector(q, "q", model.nq, "model.nq"))
+
+
 def solve(
     model: pinocchio.Model,
     q0: Any = None,
@@ -216,8 +244,7 @@ def solve(
         ValueError: a setting out of range, or a ``q0``/``v0`` of the wrong size, with a
             non-finite entry or a non-normalised quaternion; the message names it.
     """
-    if not isinstance(model, pinocchio.Model):
-        raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+    _check_model(model)
     if model.nv == 0:
         raise ValueError("model has no degree of freedom: nothing to settle")
     s = make_settings(settings, overrides)
@@ -229,4 +256,3 @@ def solve(
     raw = _core.solve(model, q, v, s, callback)
     trace = raw.pop("trace")
     return Result(**raw, trace=None if trace is None else Trace(**trace), settings=s)
-

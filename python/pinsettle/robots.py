@@ -55,8 +55,7 @@ def robots_dir() -> Path:
         if candidate.is_dir():
             return candidate
     raise FileNotFoundError(
-        "example-robot-data is not installed in this environment "
-        "(pip install example-robot-data)"
+        "example-robot-data is not installed in this environment (pip install example-robot-data)"
     )
 
 

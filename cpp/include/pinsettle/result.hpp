@@ -58,6 +58,9 @@ namespace pinsettle
     std::int64_t steps = 0;
     /// Detected energy peaks, i.e. damping events.
     std::int64_t peaks = 0;
+    /// Kicks given at exact rest: a start exactly at an equilibrium gets a tiny velocity, so
+    /// that only a stable equilibrium is reported converged.
+    std::int64_t kicks = 0;
     /// Simulated time (s).
     double sim_time = 0.;
     /// Wall-clock time of the solve (s).

@@ -1,0 +1,36 @@
+"""Type stubs of the C++ extension pinsettle._core (see pinsettle._solve for the public API)."""
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio
+
+class Settings:
+    dt: float
+    kt: float
+    err: float
+    ds: int
+    max_e: float
+    max_steps: int
+    max_time: float
+    energy: str
+    backtrack: bool
+    trace_every: int
+    trace_capacity: int
+    check_every: int
+    def __init__(self, other: Settings | None = ...) -> None: ...
+    def check(self) -> None: ...
+
+def solve(
+    model: pinocchio.Model,
+    q0: npt.NDArray[np.float64],
+    v0: npt.NDArray[np.float64],
+    settings: Settings,
+    callback: Callable[[], bool] | None = ...,
+) -> dict[str, Any]: ...
+def kinetic_energies(
+    model: pinocchio.Model, q: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
+) -> tuple[float, float]: ...
+def static_residual(model: pinocchio.Model, q: npt.NDArray[np.float64]) -> float: ...

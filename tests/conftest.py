@@ -1,0 +1,87 @@
+"""Shared fixtures of the pinsettle Python tests: models built once per session.
+
+The solver only reads a model (it is passed by const reference to the C++ core), so the
+session-scoped models below are shared; a test that needs to change a model works on
+``model.copy()``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio
+import pinsettle
+import pytest
+
+PENDULUM_URDF = Path(__file__).parents[1] / "robots" / "pendulum.urdf"
+
+
+@pytest.fixture(scope="session")
+def pendulum() -> pinocchio.Model:
+    """1 kg bob 1 m below a hinge about y; hanging down (q = 0) is the stable equilibrium."""
+    return pinocchio.buildModelFromUrdf(str(PENDULUM_URDF))
+
+
+@pytest.fixture(scope="session")
+def ur5() -> pinocchio.Model:
+    return pinsettle.load_robot("ur5")
+
+
+@pytest.fixture(scope="session")
+def panda() -> pinocchio.Model:
+    """The full Panda: 7 revolute arm joints and 2 free (unlimited) prismatic fingers."""
+    return pinsettle.load_robot("panda")
+
+
+@pytest.fixture(scope="session")
+def panda_arm(panda) -> pinocchio.Model:
+    """The Panda with its two finger joints locked at 0 (see test_solve for why)."""
+    fingers = [panda.getJointId("panda_finger_joint1"), panda.getJointId("panda_finger_joint2")]
+    return pinocchio.buildReducedModel(panda, fingers, pinocchio.neutral(panda))
+
+
+@pytest.fixture(scope="session")
+def double_pendulum() -> pinocchio.Model:
+    return pinsettle.load_robot("double_pendulum")
+
+
+@pytest.fixture(scope="session")
+def solo12() -> pinocchio.Model:
+    """Quadruped whose root is a free-flyer joint (quaternion in q[3:7])."""
+    return pinsettle.load_robot("solo12")
+
+
+@pytest.fixture(scope="session")
+def humanoid() -> pinocchio.Model:
+    """Pinocchio's random humanoid (free-flyer root, random inertias); seeded to be stable."""
+    if not hasattr(pinocchio, "buildSampleModelHumanoidRandom"):
+        pytest.skip("pinocchio.buildSampleModelHumanoidRandom is not available")
+    pinocchio.seed(0)
+    return pinocchio.buildSampleModelHumanoidRandom()
+
+
+def make_chain(n: int, massless: tuple[int, ...] = ()) -> pinocchio.Model:
+    """A planar chain of ``n`` revolute-y links of 1 m, 1 kg at each link's far end.
+
+    Links whose index is in ``massless`` get ``Inertia.Zero()`` (a bare frame, not a body).
+    """
+    model = pinocchio.Model()
+    parent = 0
+    for k in range(n):
+        placement = pinocchio.SE3(np.eye(3), np.array([0.0, 0.0, 0.0 if k == 0 else -1.0]))
+        parent = model.addJoint(parent, pinocchio.JointModelRY(), placement, f"j{k}")
+        if k in massless:
+            inertia = pinocchio.Inertia.Zero()
+        else:
+            inertia = pinocchio.Inertia(
+                1.0, np.array([0.0, 0.0, -1.0]), np.diag([1e-3, 2e-3, 3e-3])
+            )
+        model.appendBodyToJoint(parent, inertia, pinocchio.SE3.Identity())
+    return model
+
+
+@pytest.fixture(scope="session")
+def chain_with_massless_link() -> pinocchio.Model:
+    """Three links, the middle one massless: the simplified energy must skip it."""
+    return make_chain(3, massless=(1,))

@@ -1,0 +1,342 @@
+//
+// Boost.Test cases of the pinsettle C++ core, built against the installed package.
+//
+
+#define BOOST_TEST_MODULE pinsettle_core
+#include <boost/test/unit_test.hpp>
+
+#include <pinsettle/pinsettle.hpp>
+
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/energy.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+
+#include <Eigen/Eigenvalues>
+
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <new>
+#include <string>
+
+// Counts heap allocations, to show that the step loop makes none.
+static std::atomic<long> g_allocations{0};
+void * operator new(std::size_t size)
+{
+  ++g_allocations;
+  if (void * p = std::malloc(size))
+    return p;
+  throw std::bad_alloc();
+}
+void operator delete(void * p) noexcept
+{
+  std::free(p);
+}
+void operator delete(void * p, std::size_t) noexcept
+{
+  std::free(p);
+}
+
+namespace
+{
+  const std::string robots_dir = PINSETTLE_ROBOTS_DIR;
+
+  // A pendulum: a bob of mass m at distance l below a hinge about y (hanging down at q = 0).
+  pinocchio::Model pendulum(double m = 1., double l = 1.)
+  {
+    pinocchio::Model model;
+    const pinocchio::JointIndex j =
+      model.addJoint(0, pinocchio::JointModelRY(), pinocchio::SE3::Identity(), "hinge");
+    model.appendBodyToJoint(
+      j, pinocchio::Inertia(m, Eigen::Vector3d(0., 0., -l), Eigen::Matrix3d::Identity() * 1e-3));
+    return model;
+  }
+
+  // A ball on a spherical joint: q is a quaternion, nq = 4 != nv = 3.
+  pinocchio::Model sphericalPendulum()
+  {
+    pinocchio::Model model;
+    const pinocchio::JointIndex j =
+      model.addJoint(0, pinocchio::JointModelSpherical(), pinocchio::SE3::Identity(), "ball");
+    model.appendBodyToJoint(
+      j, pinocchio::Inertia(2., Eigen::Vector3d(0., 0., -0.5), Eigen::Matrix3d::Identity() * 1e-2));
+    return model;
+  }
+
+  std::vector<pinocchio::Model> robots()
+  {
+    std::vector<pinocchio::Model> models;
+    models.push_back(
+      pinsettle::buildModelFromUrdf(robots_dir + "/ur_description/urdf/ur5_robot.urdf"));
+    models.push_back(
+      pinsettle::buildModelFromUrdf(robots_dir + "/panda_description/urdf/panda.urdf"));
+    models.push_back(
+      pinsettle::buildModelFromUrdf(robots_dir + "/solo_description/robots/solo12.urdf", true));
+    models.push_back(sphericalPendulum());
+    return models;
+  }
+
+  pinsettle::Settings tight()
+  {
+    pinsettle::Settings settings;
+    settings.max_e = 1e-20;
+    return settings;
+  }
+} // namespace
+
+BOOST_AUTO_TEST_CASE(exact_energy_is_half_vT_M_v)
+{
+  std::srand(7);
+  for (const pinocchio::Model & model : robots())
+  {
+    pinocchio::Data data(model), ref(model);
+    const Eigen::VectorXd lower = Eigen::VectorXd::Constant(model.nq, -1.);
+    const Eigen::VectorXd upper = Eigen::VectorXd::Constant(model.nq, 1.);
+    for (int trial = 0; trial < 20; ++trial)
+    {
+      const Eigen::VectorXd q = pinocchio::randomConfiguration(model, lower, upper);
+      const Eigen::VectorXd v = Eigen::VectorXd::Random(model.nv) * 3.;
+      pinocchio::aba(model, data, q, v, Eigen::VectorXd::Zero(model.nv));
+      const double ours = pinsettle::computeBodyKineticEnergy(model, data);
+      const double theirs = pinocchio::computeKineticEnergy(model, ref, q, v);
+      pinocchio::crba(model, ref, q);
+      ref.M.triangularView<Eigen::StrictlyLower>() =
+        ref.M.transpose().triangularView<Eigen::StrictlyLower>();
+      const double quadratic = 0.5 * v.dot(ref.M * v);
+      BOOST_CHECK_CLOSE(ours, theirs, 1e-10);
+      BOOST_CHECK_CLOSE(ours, quadratic, 1e-10);
+      // computeKineticEnergies (forward kinematics path) agrees with the ABA path.
+      BOOST_CHECK_CLOSE(pinsettle::computeKineticEnergies(model, ref, q, v).first, ours, 1e-10);
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(simplified_energy_of_a_pendulum)
+{
+  // One body: |v_com|^2 + |w|^2 = (l w)^2 + w^2 for a bob at distance l.
+  const pinocchio::Model model = pendulum(3., 0.7);
+  pinocchio::Data data(model);
+  const Eigen::VectorXd q = Eigen::VectorXd::Constant(1, 0.4), v = Eigen::VectorXd::Constant(1, 2.);
+  const std::pair<double, double> e = pinsettle::computeKineticEnergies(model, data, q, v);
+  BOOST_CHECK_CLOSE(e.second, (0.7 * 2.) * (0.7 * 2.) + 4., 1e-12);
+  BOOST_CHECK_CLOSE(e.first, 0.5 * (3. * 0.49 + 1e-3) * 4., 1e-12);
+}
+
+BOOST_AUTO_TEST_CASE(pendulum_settles_hanging_down)
+{
+  const pinocchio::Model model = pendulum();
+  for (const pinsettle::EnergyMeasure measure :
+       {pinsettle::EnergyMeasure::Exact, pinsettle::EnergyMeasure::Simplified})
+  {
+    for (const double kt : {0., 0.5, 0.9})
+    {
+      for (const bool backtrack : {false, true})
+      {
+        pinsettle::Settings settings = tight();
+        settings.energy = measure;
+        settings.kt = kt;
+        settings.backtrack = backtrack;
+        pinsettle::Solver solver(model);
+        const pinsettle::Result result = solver.solve(Eigen::VectorXd::Constant(1, 1.), settings);
+        BOOST_TEST_CONTEXT(
+          "energy " << pinsettle::toString(measure) << " kt " << kt << " backtrack " << backtrack)
+        {
+          BOOST_CHECK(result.status == pinsettle::Status::Converged);
+          BOOST_CHECK_LT(std::abs(result.q[0]), 1e-8); // analytic answer: 0
+          BOOST_CHECK_LT(result.residual, 1e-8);
+          pinocchio::Data data(model);
+          BOOST_CHECK_LT(
+            pinocchio::computeGeneralizedGravity(model, data, result.q).lpNorm<Eigen::Infinity>(),
+            1e-8);
+          BOOST_CHECK_GT(result.peaks, 0);
+        }
+      }
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(constant_torque_tilts_the_pendulum)
+{
+  // m g l sin(q*) = tau at the equilibrium; the residual includes the applied effort.
+  const double m = 2., l = 0.5, g = 9.81, tau = 4.;
+  const pinocchio::Model model = pendulum(m, l);
+  const pinsettle::ConstantGeneralizedForce forces(Eigen::VectorXd::Constant(1, tau));
+  pinsettle::Solver solver(model);
+  const pinsettle::Result result = solver.solve(Eigen::VectorXd::Zero(1), tight(), &forces);
+  BOOST_CHECK(result.status == pinsettle::Status::Converged);
+  // With the bob on -z and a hinge about +y, gravity's generalized force is m g l sin(q).
+  BOOST_CHECK_CLOSE(result.q[0], std::asin(tau / (m * g * l)), 1e-6);
+  BOOST_CHECK_LT(result.residual, 1e-8);
+}
+
+BOOST_AUTO_TEST_CASE(spherical_joint_stays_on_its_manifold)
+{
+  const pinocchio::Model model = sphericalPendulum();
+  Eigen::VectorXd q0(4);
+  q0 << std::sin(0.5), 0.3, 0., std::cos(0.5); // (x, y, z, w), normalised below
+  q0.normalize();
+  pinsettle::Solver solver(model);
+  const pinsettle::Result result = solver.solve(q0, tight());
+  BOOST_CHECK(result.status == pinsettle::Status::Converged);
+  BOOST_CHECK_SMALL(result.q.norm() - 1., 1e-12);
+  BOOST_CHECK_LT(result.residual, 1e-8);
+  // Hanging down: the body's z axis is vertical again.
+  pinocchio::Data data(model);
+  pinocchio::forwardKinematics(model, data, result.q);
+  BOOST_CHECK_CLOSE(data.oMi[1].rotation()(2, 2), 1., 1e-12);
+}
+
+BOOST_AUTO_TEST_CASE(ur5_settles_to_a_stable_pose)
+{
+  const pinocchio::Model model =
+    pinsettle::buildModelFromUrdf(robots_dir + "/ur_description/urdf/ur5_robot.urdf");
+  pinsettle::Settings settings;
+  settings.max_e = 1e-16;
+  pinsettle::Solver solver(model);
+  const pinsettle::Result result = solver.solve(pinocchio::neutral(model), settings);
+  BOOST_CHECK(result.status == pinsettle::Status::Converged);
+  pinocchio::Data data(model);
+  const Eigen::VectorXd g = pinocchio::computeGeneralizedGravity(model, data, result.q);
+  BOOST_CHECK_LT(g.lpNorm<Eigen::Infinity>(), 1e-6);
+  BOOST_CHECK_CLOSE(result.residual, g.lpNorm<Eigen::Infinity>(), 1e-6);
+  // Stable: the finite-difference stiffness matrix dg/dq has no negative eigenvalue.
+  Eigen::MatrixXd K(model.nv, model.nv);
+  const double h = 1e-6;
+  for (int k = 0; k < model.nv; ++k)
+  {
+    const Eigen::VectorXd dq = Eigen::VectorXd::Unit(model.nv, k) * h;
+    const Eigen::VectorXd gp =
+      pinocchio::computeGeneralizedGravity(model, data, pinocchio::integrate(model, result.q, dq));
+    const Eigen::VectorXd gm =
+      pinocchio::computeGeneralizedGravity(model, data, pinocchio::integrate(model, result.q, -dq));
+    K.col(k) = (gp - gm) / (2. * h);
+  }
+  const Eigen::MatrixXd Ks = 0.5 * (K + K.transpose());
+  const Eigen::VectorXd eig = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Ks).eigenvalues();
+  BOOST_CHECK_GT(eig.minCoeff(), -1e-6);
+}
+
+BOOST_AUTO_TEST_CASE(step_loop_does_not_allocate)
+{
+  const pinocchio::Model model =
+    pinsettle::buildModelFromUrdf(robots_dir + "/ur_description/urdf/ur5_robot.urdf");
+  pinsettle::Settings settings;
+  settings.max_e = 0.; // never converges: runs exactly max_steps steps
+  settings.trace_every = 7;
+  const Eigen::VectorXd q0 = pinocchio::neutral(model);
+  long counts[2];
+  const long steps[2] = {100, 20000};
+  for (int k = 0; k < 2; ++k)
+  {
+    settings.max_steps = steps[k];
+    pinsettle::Solver solver(model); // a fresh workspace each time, built before counting
+    const long before = g_allocations.load();
+    const pinsettle::Result result = solver.solve(q0, settings);
+    counts[k] = g_allocations.load() - before;
+    BOOST_CHECK_EQUAL(result.steps, steps[k]);
+  }
+  // Allocations depend on the setup only, not on the number of steps.
+  BOOST_CHECK_EQUAL(counts[0], counts[1]);
+}
+
+namespace
+{
+  // Returns NaN after a number of calls: the solver must stop and keep a finite state.
+  struct PoisonAfter : pinsettle::ForceModel
+  {
+    mutable int calls = 0;
+    int limit;
+    explicit PoisonAfter(int n)
+    : limit(n)
+    {
+    }
+    void computeForces(
+      const pinocchio::Model &,
+      pinocchio::Data &,
+      const Eigen::VectorXd &,
+      const Eigen::VectorXd &,
+      Eigen::VectorXd & tau,
+      pinsettle::ForceVector &) const override
+    {
+      if (++calls > limit)
+        tau.setConstant(std::nan(""));
+    }
+  };
+} // namespace
+
+BOOST_AUTO_TEST_CASE(non_finite_values_stop_with_diverged)
+{
+  const pinocchio::Model model = pendulum();
+  const PoisonAfter poison(50);
+  pinsettle::Solver solver(model);
+  const pinsettle::Result result = solver.solve(Eigen::VectorXd::Constant(1, 1.), tight(), &poison);
+  BOOST_CHECK(result.status == pinsettle::Status::Diverged);
+  BOOST_CHECK_EQUAL(result.steps, 51);
+  BOOST_CHECK(result.q.allFinite());
+  BOOST_CHECK(result.v.allFinite());
+}
+
+BOOST_AUTO_TEST_CASE(abort_callback_and_limits)
+{
+  const pinocchio::Model model = pendulum();
+  pinsettle::Solver solver(model);
+  pinsettle::Settings settings = tight();
+  settings.check_every = 10;
+  int calls = 0;
+  const pinsettle::Result aborted = solver.solve(
+    Eigen::VectorXd::Constant(1, 1.), settings, nullptr, [&]() { return ++calls == 3; });
+  BOOST_CHECK(aborted.status == pinsettle::Status::Aborted);
+  BOOST_CHECK_EQUAL(aborted.steps, 30);
+  BOOST_CHECK_GT(std::abs(aborted.q[0]), 0.5); // still swinging: the current state is kept
+
+  settings.max_steps = 5;
+  BOOST_CHECK(
+    solver.solve(Eigen::VectorXd::Constant(1, 1.), settings).status == pinsettle::Status::MaxSteps);
+}
+
+BOOST_AUTO_TEST_CASE(bad_input_is_rejected)
+{
+  const pinocchio::Model model = pendulum();
+  pinsettle::Solver solver(model);
+  const Eigen::VectorXd q0 = Eigen::VectorXd::Zero(1);
+  auto rejects = [&](pinsettle::Settings s) {
+    BOOST_CHECK_THROW(solver.solve(q0, s), std::invalid_argument);
+  };
+  pinsettle::Settings s;
+  s.dt = 0.;
+  rejects(s);
+  s = pinsettle::Settings();
+  s.dt = std::nan("");
+  rejects(s);
+  s = pinsettle::Settings();
+  s.kt = 1.;
+  rejects(s);
+  s = pinsettle::Settings();
+  s.kt = -0.1;
+  rejects(s);
+  s = pinsettle::Settings();
+  s.ds = 0;
+  rejects(s);
+  s = pinsettle::Settings();
+  s.max_e = -1.;
+  rejects(s);
+  BOOST_CHECK_THROW(solver.solve(Eigen::VectorXd::Zero(2)), std::invalid_argument);
+  BOOST_CHECK_THROW(
+    solver.solve(Eigen::VectorXd::Constant(1, std::nan(""))), std::invalid_argument);
+
+  const pinocchio::Model ball = sphericalPendulum();
+  pinsettle::Solver ball_solver(ball);
+  try
+  {
+    ball_solver.solve(Eigen::Vector4d(0., 0., 0., 2.));
+    BOOST_ERROR("a quaternion of norm 2 was accepted");
+  }
+  catch (const std::invalid_argument & e)
+  {
+    BOOST_CHECK_NE(std::string(e.what()).find("'ball'"), std::string::npos);
+  }
+  BOOST_CHECK_THROW(pinsettle::buildModelFromUrdf("/no/such/file.urdf"), std::invalid_argument);
+}

@@ -1,0 +1,133 @@
+"""The ``pinsettle`` command line, run as ``python -m pinsettle`` in a subprocess."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio
+import pinsettle
+import pytest
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pinsettle", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+@pytest.fixture(scope="module")
+def ur5_json() -> tuple[subprocess.CompletedProcess, dict]:
+    proc = run("demo", "ur5", "--json")
+    lines = proc.stdout.strip().splitlines()
+    assert len(lines) == 1, proc.stdout  # exactly one JSON object, nothing else on stdout
+    return proc, json.loads(lines[0])
+
+
+def test_demo_json(ur5_json):
+    proc, out = ur5_json
+    assert proc.returncode == 0, proc.stderr
+    assert out["status"] == "converged" and out["converged"] is True
+    assert out["residual"] < 1e-5
+    assert out["steps"] > 0 and out["peaks"] > 0
+
+
+def test_demo_json_joints_match_q_and_are_an_equilibrium(ur5_json, ur5):
+    _, out = ur5_json
+    names = [ur5.names[j] for j in range(1, ur5.njoints)]
+    assert list(out["joints"]) == names
+    q = np.array(out["q"])
+    assert q.shape == (ur5.nq,)
+    assert [out["joints"][name] for name in names] == out["q"]  # all 1-dof joints
+    # The answer recomputed with pinocchio, outside pinsettle: a static equilibrium.
+    g = pinocchio.computeGeneralizedGravity(ur5, ur5.createData(), q)
+    assert np.max(np.abs(g)) == pytest.approx(out["residual"], rel=1e-9)
+    assert np.max(np.abs(g)) < 1e-5
+
+
+def test_demo_json_free_flyer_joint_is_a_list():
+    # A multi-dof joint appears as the list of its q entries; max-steps keeps this short.
+    proc = run("demo", "solo12", "--json", "--max-steps", "50")
+    assert proc.returncode == 1  # not converged
+    out = json.loads(proc.stdout)
+    assert out["status"] == "max_steps" and out["steps"] == 50
+    root = out["joints"]["root_joint"]
+    assert isinstance(root, list) and len(root) == 7
+    assert root == out["q"][:7]
+
+
+def test_demo_flags_reach_the_solver():
+    proc = run("demo", "double_pendulum", "--json", "--kt", "0", "--max-e", "1e-16")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    # Same answer as the library with the same settings.
+    model = pinsettle.load_robot("double_pendulum")
+    result = pinsettle.solve(model, kt=0.0, max_e=1e-16)
+    assert out["steps"] == result.steps
+    assert out["q"] == pytest.approx(result.q.tolist(), abs=1e-12)
+
+
+def test_demo_text_output():
+    proc = run("demo", "double_pendulum")
+    assert proc.returncode == 0, proc.stderr
+    assert "status           converged" in proc.stdout
+    assert "joint1" in proc.stdout and "joint2" in proc.stdout
+    assert "recomputed with pinocchio" in proc.stdout
+
+
+def test_demo_not_converged_exits_1():
+    proc = run("demo", "ur5", "--max-steps", "5")
+    assert proc.returncode == 1
+    assert "status           max_steps" in proc.stdout
+
+
+def test_demo_unknown_robot_exits_2_without_traceback():
+    proc = run("demo", "nosuchrobot")
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert "unknown robot 'nosuchrobot'" in proc.stderr
+    assert "ur5" in proc.stderr  # lists the known names
+    assert "Traceback" not in proc.stderr
+
+
+def test_demo_bad_setting_exits_2_without_traceback():
+    proc = run("demo", "ur5", "--kt", "1.5")
+    assert proc.returncode == 2
+    assert "kt must be in [0, 1)" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_bad_flag_value_is_an_argparse_error():
+    proc = run("demo", "ur5", "--kt", "abc")
+    assert proc.returncode == 2
+    assert "--kt" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_no_command_is_a_usage_error():
+    proc = run()
+    assert proc.returncode == 2
+    assert "usage:" in proc.stderr
+
+
+def test_robots_lists_the_names():
+    proc = run("robots")
+    assert proc.returncode == 0
+    rows = dict(line.split(None, 1) for line in proc.stdout.strip().splitlines())
+    assert sorted(rows) == pinsettle.robot_names()
+    assert rows["ur5"] == "fixed base"
+    assert rows["solo12"] == "floating base"
+
+
+def test_cmake_dir():
+    proc = run("cmake-dir")
+    assert proc.returncode == 0
+    folder = Path(proc.stdout.strip())
+    assert folder.is_dir()
+    assert (folder / "pinsettleConfig.cmake").is_file()
+    assert str(folder) == pinsettle.get_cmake_dir()

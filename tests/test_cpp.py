@@ -1,0 +1,71 @@
+"""Build the C++ tests and the example against the installed pinsettle package, run them.
+
+This is how `pytest` runs every test, C++ included: tests/cpp/CMakeLists.txt does
+find_package(pinsettle) exactly as a user's project would.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pinsettle
+import pytest
+
+HERE = Path(__file__).resolve().parent
+
+
+def _cmake() -> str:
+    exe = shutil.which("cmake", path=str(Path(sys.executable).parent)) or shutil.which("cmake")
+    if exe is None:
+        pytest.fail("cmake is not installed: pip install '.[test]' brings it")
+    return exe
+
+
+def _run(cmd: list[str], **kwargs) -> subprocess.CompletedProcess:
+    proc = subprocess.run(cmd, capture_output=True, text=True, **kwargs)
+    if proc.returncode != 0:
+        pytest.fail(f"{' '.join(cmd)} failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
+    return proc
+
+
+@pytest.fixture(scope="module")
+def cpp_build(tmp_path_factory) -> Path:
+    import cmeel  # noqa: F401
+
+    prefix = subprocess.run(
+        [sys.executable, "-m", "cmeel", "cmake"], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    build = Path(os.environ.get("PINSETTLE_CPP_TEST_BUILD", tmp_path_factory.mktemp("cpp")))
+    generator = (
+        ["-G", "Ninja"] if shutil.which("ninja", path=str(Path(sys.executable).parent)) else []
+    )
+    _run(
+        [
+            _cmake(),
+            "-S",
+            str(HERE / "cpp"),
+            "-B",
+            str(build),
+            *generator,
+            "-DCMAKE_BUILD_TYPE=Release",
+            f"-DCMAKE_PREFIX_PATH={pinsettle.get_cmake_dir()};{prefix}",
+            f"-DPINSETTLE_ROBOTS_DIR={pinsettle.robots.robots_dir()}",
+        ]
+    )
+    _run([_cmake(), "--build", str(build), "--parallel", str(os.cpu_count() or 2)])
+    return build
+
+
+def test_cpp_core_tests(cpp_build: Path) -> None:
+    proc = _run([str(cpp_build / "test_core"), "--report_level=short"])
+    assert "failed" not in proc.stdout.lower() or "0 failed" in proc.stdout.lower()
+
+
+@pytest.mark.parametrize("name", ["example_ur5", "example_pendulum"])
+def test_cpp_example_against_installed_package(cpp_build: Path, name: str) -> None:
+    proc = _run(["ctest", "--test-dir", str(cpp_build), "-R", f"^{name}$", "--output-on-failure"])
+    assert "100% tests passed" in proc.stdout

@@ -37,18 +37,6 @@ namespace
     return model();
   }
 
-  void checkVelocity(const pinocchio::Model & model, const Eigen::VectorXd & v, const char * name)
-  {
-    if (v.size() != model.nv)
-      throw std::invalid_argument(
-        std::string(name) + " must have model.nv = " + std::to_string(model.nv) + " entries, got "
-        + std::to_string(v.size()));
-    for (Eigen::Index k = 0; k < v.size(); ++k)
-      if (!std::isfinite(v[k]))
-        throw std::invalid_argument(
-          std::string(name) + "[" + std::to_string(k) + "] is not finite; every entry must be");
-  }
-
   py::dict toDict(const Result & r)
   {
     py::dict out;
@@ -97,7 +85,6 @@ namespace
     const py::object & callback)
   {
     const pinocchio::Model & model = modelFrom(model_obj);
-    checkVelocity(model, v0, "v0");
     Solver solver(model);
 
     // Polled with the GIL released in between: Ctrl-C (SIGINT) ends the run as "aborted" and

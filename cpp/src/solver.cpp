@@ -65,6 +65,19 @@ namespace pinsettle
     }
   }
 
+  void checkVelocity(const pinocchio::Model & model, const Eigen::VectorXd & v, const char * name)
+  {
+    std::ostringstream msg;
+    if (v.size() != model.nv)
+      msg << name << " must have model.nv = " << model.nv << " entries, got " << v.size();
+    else
+      for (Eigen::Index k = 0; k < v.size() && msg.tellp() == 0; ++k)
+        if (!std::isfinite(v[k]))
+          msg << name << "[" << k << "] is " << v[k] << "; every entry must be finite";
+    if (msg.tellp() > 0)
+      throw std::invalid_argument(msg.str());
+  }
+
   double computeStaticResidual(
     const pinocchio::Model & model,
     pinocchio::Data & data,
@@ -130,13 +143,7 @@ namespace pinsettle
     if (model_.nv == 0)
       throw std::invalid_argument("model has no degree of freedom: nothing to settle");
     checkConfiguration(model_, q0, "q0");
-    if (v0.size() != model_.nv || !v0.allFinite())
-    {
-      std::ostringstream msg;
-      msg << "v0 must hold model.nv = " << model_.nv << " finite entries, got " << v0.size()
-          << (v0.allFinite() ? "" : " with a non-finite one");
-      throw std::invalid_argument(msg.str());
-    }
+    checkVelocity(model_, v0, "v0");
 
     const pinocchio::Model & model = model_;
     const double dt = settings.dt, kt = settings.kt, err = settings.err;

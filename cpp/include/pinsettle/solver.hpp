@@ -31,6 +31,16 @@ namespace pinsettle
     const pinocchio::Model & model, const Eigen::VectorXd & q, const char * name = "q0");
 
   ///
+  /// \brief Check a joint velocity given by a user.
+  ///
+  /// \param[in] v The joint velocity (dim model.nv).
+  /// \param[in] name How the caller calls it in error messages ("v0").
+  /// \throws std::invalid_argument on a wrong size or a non-finite entry (the index is named).
+  ///
+  void checkVelocity(
+    const pinocchio::Model & model, const Eigen::VectorXd & v, const char * name = "v0");
+
+  ///
   /// \brief Static residual: max |rnea(q, 0, 0) - applied generalized forces at (q, 0)|.
   ///
   /// \param[in] q The joint configuration (dim model.nq).

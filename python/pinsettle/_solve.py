@@ -57,12 +57,7 @@ class Settings(_core.Settings):
 
     def replace(self, **fields: Any) -> Settings:
         """A copy with some fields changed."""
-        out = Settings()
-        for key in SETTING_TYPES:
-            set_setting(out, key, getattr(self, key))
-        for key, value in fields.items():
-            set_setting(out, key, value)
-        return out
+        return make_settings(self, fields)
 
     def to_dict(self) -> dict[str, Any]:
         return {key: getattr(self, key) for key in SETTING_TYPES}

@@ -482,7 +482,7 @@ def test_settings_ints_accept_numpy_integers(pendulum):
 
 def test_result_summary_names_the_joints(ur5):
     result = pinsettle.solve(ur5, max_steps=10)
-    text = result.summary(ur5)
+    text = result.summary()
     assert "status           max_steps" in text
     assert all(ur5.names[j] in text for j in range(1, ur5.njoints))
 

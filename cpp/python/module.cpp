@@ -11,9 +11,11 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
+#include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/solver.hpp"
 
+#include <memory>
 #include <optional>
 #include <sstream>
 
@@ -35,6 +37,45 @@ namespace
       throw py::type_error(msg.str());
     }
     return model();
+  }
+
+  // The force elements of a scene, already resolved to joint and frame indices by the Python
+  // layer (pinsettle/_scene.py), which names them in its messages: a dict of lists of tuples.
+  std::unique_ptr<ForceElements>
+  elementsFrom(const pinocchio::Model & model, const py::object & spec)
+  {
+    if (spec.is_none())
+      return nullptr;
+    auto elements = std::make_unique<ForceElements>(model);
+    const py::dict d = spec.cast<py::dict>();
+    auto list = [&](const char * key) {
+      return d.contains(key) ? d[key].cast<py::list>() : py::list();
+    };
+    for (const py::handle & e : list("joint_springs"))
+    {
+      const auto t = e.cast<std::tuple<std::size_t, double, double, double>>();
+      elements->addJointSpring(std::get<0>(t), std::get<1>(t), std::get<2>(t), std::get<3>(t));
+    }
+    for (const py::handle & e : list("springs"))
+    {
+      const auto t = e.cast<std::tuple<
+        std::size_t, Eigen::Vector3d, std::size_t, Eigen::Vector3d, double, double, double>>();
+      elements->addPointSpring(
+        std::get<0>(t), std::get<1>(t), std::get<2>(t), std::get<3>(t), std::get<4>(t),
+        std::get<5>(t), std::get<6>(t));
+    }
+    for (const py::handle & e : list("joint_loads"))
+    {
+      const auto t = e.cast<std::tuple<std::size_t, Eigen::VectorXd>>();
+      elements->addJointLoad(std::get<0>(t), std::get<1>(t));
+    }
+    for (const py::handle & e : list("point_loads"))
+    {
+      const auto t =
+        e.cast<std::tuple<std::size_t, Eigen::Vector3d, Eigen::Vector3d, Eigen::Vector3d>>();
+      elements->addPointLoad(std::get<0>(t), std::get<1>(t), std::get<2>(t), std::get<3>(t));
+    }
+    return elements;
   }
 
   py::dict toDict(const Result & r)
@@ -82,9 +123,11 @@ namespace
     const Eigen::VectorXd & q0,
     const Eigen::VectorXd & v0,
     const Settings & settings,
-    const py::object & callback)
+    const py::object & callback,
+    const py::object & elements_spec)
   {
     const pinocchio::Model & model = modelFrom(model_obj);
+    const std::unique_ptr<ForceElements> elements = elementsFrom(model, elements_spec);
     Solver solver(model);
 
     // Polled with the GIL released in between: Ctrl-C (SIGINT) ends the run as "aborted" and
@@ -118,7 +161,7 @@ namespace
     Result result;
     {
       py::gil_scoped_release release;
-      result = solver.solve(q0, v0, settings, nullptr, hook);
+      result = solver.solve(q0, v0, settings, elements.get(), hook);
     }
     if (error)
       throw std::move(*error);
@@ -158,7 +201,7 @@ PYBIND11_MODULE(_core, m)
 
   m.def(
     "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
-    py::arg("callback") = py::none());
+    py::arg("callback") = py::none(), py::arg("elements") = py::none());
 
   m.def(
     "kinetic_energies",
@@ -172,12 +215,13 @@ PYBIND11_MODULE(_core, m)
     py::arg("model"), py::arg("q"), py::arg("v"));
 
   m.def(
-    "static_residual",
-    [](const py::object & model_obj, const Eigen::VectorXd & q) {
+    "static_force",
+    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
       const pinocchio::Model & model = modelFrom(model_obj);
       checkConfiguration(model, q, "q");
+      const std::unique_ptr<ForceElements> elements = elementsFrom(model, spec);
       pinocchio::Data data(model);
-      return computeStaticResidual(model, data, q);
+      return Eigen::VectorXd(computeStaticForce(model, data, q, elements.get()));
     },
-    py::arg("model"), py::arg("q"));
+    py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
 }

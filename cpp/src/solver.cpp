@@ -78,21 +78,30 @@ namespace pinsettle
       throw std::invalid_argument(msg.str());
   }
 
+  Eigen::VectorXd computeStaticForce(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    if (!forces || forces->empty())
+      return pinocchio::computeGeneralizedGravity(model, data, q);
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
+    Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
+    ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
+    forces->computeForces(model, data, q, zero, tau, fext);
+    if (forces->hasExternalForces())
+      return pinocchio::rnea(model, data, q, zero, zero, fext) - tau;
+    return pinocchio::computeGeneralizedGravity(model, data, q) - tau;
+  }
+
   double computeStaticResidual(
     const pinocchio::Model & model,
     pinocchio::Data & data,
     const Eigen::VectorXd & q,
     const ForceModel * forces)
   {
-    if (!forces)
-      return pinocchio::computeGeneralizedGravity(model, data, q).lpNorm<Eigen::Infinity>();
-    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
-    Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
-    ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
-    forces->computeForces(model, data, q, zero, tau, fext);
-    if (forces->hasExternalForces())
-      return (pinocchio::rnea(model, data, q, zero, zero, fext) - tau).lpNorm<Eigen::Infinity>();
-    return (pinocchio::computeGeneralizedGravity(model, data, q) - tau).lpNorm<Eigen::Infinity>();
+    return computeStaticForce(model, data, q, forces).lpNorm<Eigen::Infinity>();
   }
 
   Solver::Solver(const pinocchio::Model & model)
@@ -144,6 +153,8 @@ namespace pinsettle
       throw std::invalid_argument("model has no degree of freedom: nothing to settle");
     checkConfiguration(model_, q0, "q0");
     checkVelocity(model_, v0, "v0");
+    if (forces != nullptr && forces->empty())
+      forces = nullptr; // nothing to apply: step exactly like the bare core
 
     const pinocchio::Model & model = model_;
     const double dt = settings.dt, kt = settings.kt, err = settings.err;

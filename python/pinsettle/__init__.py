@@ -11,21 +11,39 @@ import importlib.metadata as _metadata
 
 import pinocchio  # noqa: F401  (registers the converters that pinsettle._core reads models with)
 
-from ._solve import Result, Settings, Trace, kinetic_energies, solve, static_residual
-from .robots import load_robot, robot_names, robot_urdf
+from ._scene import Scene, SceneError, load_scene
+from ._solve import (
+    Result,
+    Settings,
+    Trace,
+    kinetic_energies,
+    solve,
+    static_force,
+    static_residual,
+)
+from .robots import load_robot, load_urdf, robot_names, robot_urdf
+from .scenes import scene_names, scene_path, scenes_dir
 
 __version__ = _metadata.version("pinsettle")
 
 __all__ = [
     "Result",
+    "Scene",
+    "SceneError",
     "Settings",
     "Trace",
     "get_cmake_dir",
     "kinetic_energies",
     "load_robot",
+    "load_scene",
+    "load_urdf",
     "robot_names",
     "robot_urdf",
+    "scene_names",
+    "scene_path",
+    "scenes_dir",
     "solve",
+    "static_force",
     "static_residual",
 ]
 

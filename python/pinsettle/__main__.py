@@ -36,10 +36,10 @@ def _demo(args: argparse.Namespace) -> int:
     q0 = pinocchio.neutral(model)
     result = pinsettle.solve(model, q0, **_setting_overrides(args))
     if args.json:
-        print(json.dumps(_result_json(model, result)))
+        print(json.dumps(result.to_dict()))
     else:
         print(f"{args.robot}: {model.nq} configuration variables, released at rest from neutral")
-        print(result.summary(model))
+        print(result.summary())
         independent = np.max(
             np.abs(pinocchio.computeGeneralizedGravity(model, model.createData(), result.q))
         )
@@ -47,23 +47,52 @@ def _demo(args: argparse.Namespace) -> int:
     return 0 if result.converged else 1
 
 
-def _result_json(model, result) -> dict:
-    joints = {}
-    for j in range(1, model.njoints):
-        iq, nq = model.idx_qs[j], model.nqs[j]
-        values = result.q[iq : iq + nq].tolist()
-        joints[model.names[j]] = values[0] if nq == 1 else values
-    return {
-        "status": result.status,
-        "converged": result.converged,
-        "joints": joints,
-        "q": result.q.tolist(),
-        "steps": result.steps,
-        "peaks": result.peaks,
-        "wall_time_s": result.wall_time,
-        "residual": result.residual,
-        "kinetic_energy": result.kinetic_energy,
-    }
+def _parse_start(items: list[str]) -> dict[str, float | list[float]]:
+    out: dict[str, float | list[float]] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--start expects JOINT=VALUE (e.g. elbow=0.3), got '{item}'")
+        try:
+            values = [float(x) for x in text.split(",")]
+        except ValueError:
+            raise ValueError(
+                f"--start {name}: expected a number or comma-separated numbers, got '{text}'"
+            ) from None
+        out[name] = values[0] if len(values) == 1 else values
+    return out
+
+
+def _solve(args: argparse.Namespace) -> int:
+    import pinsettle
+
+    scene = pinsettle.load_scene(pinsettle.scene_path(args.scene))
+    q0 = None
+    if args.start:
+        try:
+            scene.set_start(_parse_start(args.start))
+        except pinsettle.SceneError as error:
+            raise pinsettle.SceneError(f"--start: {error}") from None
+        q0 = scene.q0()
+    result = pinsettle.solve(scene, q0, **_setting_overrides(args))
+    if args.json:
+        out = {"scene": str(scene.path), **result.to_dict()}
+        print(json.dumps(out))
+    else:
+        title = f"{scene.name}: {scene.description}" if scene.description else scene.name
+        print(title)
+        print(result.summary())
+    return 0 if result.converged else 1
+
+
+def _scenes(args: argparse.Namespace) -> int:
+    import pinsettle
+
+    for name in pinsettle.scene_names():
+        scene_file = pinsettle.scene_path(name)
+        description = pinsettle._scene._description(scene_file)
+        print(f"{name:<28} {description}")
+    return 0
 
 
 def _robots(args: argparse.Namespace) -> int:
@@ -93,6 +122,22 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--json", action="store_true", help="print one JSON object")
     _add_setting_flags(demo)
     demo.set_defaults(func=_demo)
+    solve = sub.add_parser(
+        "solve", help="settle a scene file (a path, or a scene name of `pinsettle scenes`)"
+    )
+    solve.add_argument("scene", help="scene file (.toml) or scene name")
+    solve.add_argument("--json", action="store_true", help="print one JSON object")
+    solve.add_argument(
+        "--start",
+        action="append",
+        default=[],
+        metavar="JOINT=VALUE",
+        help="override a start value (repeatable; comma-separated for a multi-DoF joint)",
+    )
+    _add_setting_flags(solve)
+    solve.set_defaults(func=_solve)
+    scenes = sub.add_parser("scenes", help="list the scenes of the library with a description")
+    scenes.set_defaults(func=_scenes)
     robots = sub.add_parser("robots", help="list the robot names")
     robots.set_defaults(func=_robots)
     cmake = sub.add_parser("cmake-dir", help="print the folder of pinsettleConfig.cmake")
@@ -104,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, TypeError, FileNotFoundError) as error:
+    except (ValueError, TypeError, FileNotFoundError, IsADirectoryError) as error:
         print(f"pinsettle: error: {error}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into head: not an error

@@ -111,9 +111,11 @@ class Trace:
 class Result:
     """Outcome of a solve.
 
-    ``q`` (dim model.nq) and ``v`` (dim model.nv) are the final state; ``status`` is one of
-    'converged', 'max_steps', 'time_limit', 'aborted', 'diverged'; ``residual`` is
-    max |rnea(q, 0, 0) - applied efforts| in N m or N; energies are those of the final state.
+    ``q`` (dim model.nq) and ``v`` (dim model.nv) are the final state (of the full model for a
+    scene, locked joints included); ``status`` is one of 'converged', 'max_steps',
+    'time_limit', 'aborted', 'diverged'; ``residual`` is max |rnea(q, 0, 0) - applied efforts|
+    over the free joints in N m or N; energies are those of the final state; ``joints`` maps
+    each joint name to its final value (a number for a 1-DoF joint, a list otherwise).
     """
 
     q: np.ndarray
@@ -129,13 +131,14 @@ class Result:
     residual: float
     trace: Trace | None = None
     settings: Settings = field(default_factory=Settings, repr=False)
+    joints: dict[str, float | list[float]] = field(default_factory=dict, repr=False)
 
     @property
     def converged(self) -> bool:
         return self.status == "converged"
 
-    def summary(self, model: pinocchio.Model | None = None) -> str:
-        """A readable report; with the model, the final joint values by name."""
+    def summary(self) -> str:
+        """A readable report with the final joint values by name."""
         lines = [
             f"status           {self.status}",
             f"steps            {self.steps} ({self.peaks} damping events, "
@@ -145,13 +148,30 @@ class Result:
             f"residual         {self.residual:.3e} (max |net static generalized force|)",
             f"kinetic energy   {self.kinetic_energy:.3e} J",
         ]
-        if model is not None:
+        if self.joints:
             lines.append("joints")
-            for j in range(1, model.njoints):
-                iq, nq = model.idx_qs[j], model.nqs[j]
-                values = " ".join(f"{x: .9f}" for x in self.q[iq : iq + nq])
-                lines.append(f"  {model.names[j]:<28} {values}")
+            for name, value in self.joints.items():
+                values = value if isinstance(value, list) else [value]
+                lines.append(f"  {name:<28} " + " ".join(f"{x: .9f}" for x in values))
         return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as plain JSON-ready values (the ``pinsettle solve --json`` object)."""
+        return {
+            "status": self.status,
+            "converged": self.converged,
+            "joints": self.joints,
+            "q": self.q.tolist(),
+            "steps": self.steps,
+            "peaks": self.peaks,
+            "kicks": self.kicks,
+            "sim_time_s": self.sim_time,
+            "wall_time_s": self.wall_time,
+            "residual": self.residual,
+            "kinetic_energy": self.kinetic_energy,
+            "simplified_kinetic_energy": self.simplified_kinetic_energy,
+            "stability": None,
+        }
 
 
 def _as_vector(value: Any, name: str, size: int, size_name: str) -> np.ndarray:
@@ -207,14 +227,25 @@ def kinetic_energies(model: pinocchio.Model, q: Any, v: Any) -> tuple[float, flo
     )
 
 
-def static_residual(model: pinocchio.Model, q: Any) -> float:
-    """max |rnea(q, 0, 0)|: the largest net static generalized force under gravity (N m or N)."""
+def static_force(model: pinocchio.Model, q: Any) -> np.ndarray:
+    """rnea(q, 0, 0): the net static generalized force under gravity (dim model.nv, N m or N).
+    For a scene, ``scene.static_force(q)`` includes its springs and loads."""
     _check_model(model)
-    return _core.static_residual(model, _as_vector(q, "q", model.nq, "model.nq"))
+    return _core.static_force(model, _as_vector(q, "q", model.nq, "model.nq"))
+
+
+def static_residual(model: Any, q: Any) -> float:
+    """max |net static generalized force| (N m or N) of a model under gravity or of a scene."""
+    from ._scene import Scene
+
+    if isinstance(model, Scene):
+        return model.residual(q)
+    force = static_force(model, q)
+    return float(np.max(np.abs(force)))
 
 
 def solve(
-    model: pinocchio.Model,
+    model: Any,
     q0: Any = None,
     settings: Settings | Mapping[str, Any] | None = None,
     *,
@@ -225,29 +256,66 @@ def solve(
     """Settle a mechanism by kinetic damping and return where it comes to rest.
 
     Args:
-        model: a ``pinocchio.Model`` (from the ``pin`` package).
-        q0: start configuration (dim model.nq); the neutral configuration when None.
-        settings: a ``Settings`` (or a dict of fields); never modified.
+        model: a ``pinocchio.Model`` (from the ``pin`` package) or a ``pinsettle.Scene``.
+        q0: start configuration (dim model.nq, the full model for a scene); the neutral
+            configuration (a scene's start) when None.
+        settings: a ``Settings`` (or a dict of fields); never modified. For a scene, its
+            ``[solver]`` settings when None.
         v0: start joint velocity (dim model.nv); zero when None.
         callback: called every ``check_every`` steps without arguments; returning True stops the
             run with status 'aborted'. Ctrl-C does the same.
         **overrides: any ``Settings`` field, e.g. ``kt=0.3``.
 
     Raises:
-        TypeError: ``model`` is not a ``pinocchio.Model``; an unknown setting or a value of the
-            wrong type.
+        TypeError: ``model`` is neither a ``pinocchio.Model`` nor a ``Scene``; an unknown
+            setting or a value of the wrong type.
         ValueError: a setting out of range, or a ``q0``/``v0`` of the wrong size, with a
             non-finite entry or a non-normalised quaternion; the message names it.
     """
-    _check_model(model)
-    if model.nv == 0:
-        raise ValueError("model has no degree of freedom: nothing to settle")
-    s = make_settings(settings, overrides)
-    s.check()
-    q = pinocchio.neutral(model) if q0 is None else _as_vector(q0, "q0", model.nq, "model.nq")
-    v = np.zeros(model.nv) if v0 is None else _as_vector(v0, "v0", model.nv, "model.nv")
+    from ._scene import Scene, joint_values
+
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
-    raw = _core.solve(model, q, v, s, callback)
+    if isinstance(model, Scene):
+        scene = model
+        full = scene.model
+        s = make_settings(scene.settings if settings is None else settings, overrides)
+        s.check()
+        if q0 is None:
+            q_full = scene.q0()
+            compiled = scene.compile()
+        else:
+            q_full = _as_vector(q0, "q0", full.nq, "model.nq")
+            compiled = scene.compile(q_full) if scene.locked else scene.compile()
+        v_full = np.zeros(full.nv) if v0 is None else _as_vector(v0, "v0", full.nv, "model.nv")
+        locked_v = np.delete(v_full, compiled.v_index)
+        if np.any(locked_v != 0.0):
+            raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
+        raw = _core.solve(
+            compiled.model,
+            q_full[compiled.q_index],
+            v_full[compiled.v_index],
+            s,
+            callback,
+            compiled.elements,
+        )
+        raw["q"] = compiled.full_q(raw["q"])
+        raw["v"] = compiled.full_v(raw["v"], full.nv)
+        naming = full
+    else:
+        _check_model(model)
+        if model.nv == 0:
+            raise ValueError("model has no degree of freedom: nothing to settle")
+        s = make_settings(settings, overrides)
+        s.check()
+        q = pinocchio.neutral(model) if q0 is None else _as_vector(q0, "q0", model.nq, "model.nq")
+        v = np.zeros(model.nv) if v0 is None else _as_vector(v0, "v0", model.nv, "model.nv")
+        raw = _core.solve(model, q, v, s, callback)
+        naming = model
     trace = raw.pop("trace")
-    return Result(**raw, trace=None if trace is None else Trace(**trace), settings=s)
+    return Result(
+        **raw,
+        trace=None if trace is None else Trace(**trace),
+        settings=s,
+        joints=joint_values(naming, raw["q"]),
+    )

@@ -80,6 +80,22 @@ def load_robot(name: str, floating: bool | None = None) -> pinocchio.Model:
     path = robot_urdf(name)
     if floating is None:
         floating = ROBOTS[name][1]
-    if floating:
-        return pinocchio.buildModelFromUrdf(str(path), pinocchio.JointModelFreeFlyer())
-    return pinocchio.buildModelFromUrdf(str(path))
+    return load_urdf(path, floating=floating)
+
+
+def load_urdf(path: str | Path, floating: bool = False) -> pinocchio.Model:
+    """The ``pinocchio.Model`` of a URDF file (meshes are not loaded).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the URDF does not parse; the message names the file and the parser's reason.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"URDF file not found: {path}")
+    try:
+        if floating:
+            return pinocchio.buildModelFromUrdf(str(path), pinocchio.JointModelFreeFlyer())
+        return pinocchio.buildModelFromUrdf(str(path))
+    except (RuntimeError, ValueError) as error:
+        raise ValueError(f"{path}: the URDF does not parse: {error}") from None

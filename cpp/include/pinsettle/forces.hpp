@@ -31,6 +31,12 @@ namespace pinsettle
       return false;
     }
 
+    /// \brief Whether the model applies nothing; the solver then skips it altogether.
+    virtual bool empty() const
+    {
+      return false;
+    }
+
     ///
     /// \brief Add the applied efforts at the state (q, v).
     ///

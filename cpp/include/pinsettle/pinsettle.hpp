@@ -5,6 +5,7 @@
 #ifndef __pinsettle_pinsettle_hpp__
 #define __pinsettle_pinsettle_hpp__
 
+#include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/forces.hpp"
 #include "pinsettle/result.hpp"

@@ -1,0 +1,243 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#include "pinsettle/elements.hpp"
+
+#include <pinocchio/algorithm/kinematics.hpp>
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace pinsettle
+{
+
+  namespace
+  {
+    void checkCoefficient(double value, const char * name, const char * element)
+    {
+      if (!(std::isfinite(value) && value >= 0.))
+      {
+        std::ostringstream msg;
+        msg << element << ": " << name << " must be finite and >= 0, got " << value;
+        throw std::invalid_argument(msg.str());
+      }
+    }
+
+    void checkFinite(const Eigen::VectorXd & x, const char * name, const char * element)
+    {
+      if (!x.allFinite())
+      {
+        std::ostringstream msg;
+        msg << element << ": every entry of " << name << " must be finite, got ["
+            << x.transpose() << "]";
+        throw std::invalid_argument(msg.str());
+      }
+    }
+
+    // World position of a point and, when wanted, its world velocity, from the kinematics of a
+    // forwardKinematics pass (data.oMi, and data.v in local frames when with_velocity).
+    Eigen::Vector3d worldPoint(const pinocchio::Data & data, const Attachment & at)
+    {
+      return data.oMi[at.joint].act(at.point);
+    }
+
+    Eigen::Vector3d worldPointVelocity(const pinocchio::Data & data, const Attachment & at)
+    {
+      if (at.joint == 0)
+        return Eigen::Vector3d::Zero();
+      const pinocchio::Motion & vi = data.v[at.joint];
+      return data.oMi[at.joint].rotation() * (vi.linear() + vi.angular().cross(at.point));
+    }
+
+    // A world-aligned force (N) and torque (N m) at a point, as the spatial force on the joint,
+    // in the joint's frame (the convention of the fext argument of aba and rnea).
+    void addWorldForce(
+      const pinocchio::Data & data,
+      const Attachment & at,
+      const Eigen::Vector3d & force,
+      const Eigen::Vector3d & torque,
+      ForceVector & fext)
+    {
+      if (at.joint == 0)
+        return; // the world takes any force
+      const Eigen::Matrix3d & R = data.oMi[at.joint].rotation();
+      const Eigen::Vector3d f = R.transpose() * force;
+      fext[at.joint].linear() += f;
+      fext[at.joint].angular() += R.transpose() * torque + at.point.cross(f);
+    }
+  } // namespace
+
+  ForceElements::ForceElements(const pinocchio::Model & model)
+  : model_(model)
+  , joint_loads_(Eigen::VectorXd::Zero(model.nv))
+  {
+  }
+
+  Attachment ForceElements::attach(
+    pinocchio::FrameIndex frame, const Eigen::Vector3d & point, const char * what) const
+  {
+    if (frame >= model_.frames.size())
+    {
+      std::ostringstream msg;
+      msg << what << ": frame index " << frame << " is out of range (the model has "
+          << model_.frames.size() << " frames)";
+      throw std::invalid_argument(msg.str());
+    }
+    checkFinite(point, "point", what);
+    const pinocchio::Frame & f = model_.frames[frame];
+    // Frames of a fixed link (or of a joint removed by buildReducedModel) sit on their parent
+    // joint at a fixed placement.
+    return Attachment{f.parentJoint, f.placement.act(point)};
+  }
+
+  void ForceElements::addJointSpring(
+    pinocchio::JointIndex joint, double stiffness, double rest, double damping)
+  {
+    const char * what = "joint spring";
+    if (joint == 0 || joint >= static_cast<pinocchio::JointIndex>(model_.njoints))
+    {
+      std::ostringstream msg;
+      msg << what << ": joint index " << joint << " is not a joint of the model (1 to "
+          << model_.njoints - 1 << ")";
+      throw std::invalid_argument(msg.str());
+    }
+    if (model_.nvs[joint] != 1)
+    {
+      std::ostringstream msg;
+      msg << what << ": joint '" << model_.names[joint] << "' is a "
+          << model_.joints[joint].shortname() << " with " << model_.nvs[joint]
+          << " degrees of freedom; a joint spring needs a 1-DoF joint (revolute, continuous, "
+             "prismatic)";
+      throw std::invalid_argument(msg.str());
+    }
+    checkCoefficient(stiffness, "stiffness", what);
+    checkCoefficient(damping, "damping", what);
+    if (!std::isfinite(rest))
+      throw std::invalid_argument("joint spring: rest must be finite");
+    joint_springs_.push_back(JointSpring{joint, stiffness, rest, damping});
+  }
+
+  void ForceElements::addPointSpring(
+    pinocchio::FrameIndex frame_a,
+    const Eigen::Vector3d & point_a,
+    pinocchio::FrameIndex frame_b,
+    const Eigen::Vector3d & point_b,
+    double stiffness,
+    double rest_length,
+    double damping)
+  {
+    const char * what = "spring";
+    const Attachment a = attach(frame_a, point_a, what), b = attach(frame_b, point_b, what);
+    checkCoefficient(stiffness, "stiffness", what);
+    checkCoefficient(rest_length, "rest_length", what);
+    checkCoefficient(damping, "damping", what);
+    if (a.joint == b.joint)
+      throw std::invalid_argument(
+        "spring: both ends are on the same rigid body (joint '" + model_.names[a.joint]
+        + "'); such a spring exerts no net effort");
+    point_springs_.push_back(PointSpring{a, b, stiffness, rest_length, damping});
+    spring_damping_ = spring_damping_ || damping > 0.;
+  }
+
+  void ForceElements::addJointLoad(pinocchio::JointIndex joint, const Eigen::VectorXd & effort)
+  {
+    const char * what = "joint load";
+    if (joint == 0 || joint >= static_cast<pinocchio::JointIndex>(model_.njoints))
+    {
+      std::ostringstream msg;
+      msg << what << ": joint index " << joint << " is not a joint of the model (1 to "
+          << model_.njoints - 1 << ")";
+      throw std::invalid_argument(msg.str());
+    }
+    if (effort.size() != model_.nvs[joint])
+    {
+      std::ostringstream msg;
+      msg << what << ": joint '" << model_.names[joint] << "' has " << model_.nvs[joint]
+          << " degrees of freedom, the effort has " << effort.size() << " entries";
+      throw std::invalid_argument(msg.str());
+    }
+    checkFinite(effort, "effort", what);
+    joint_loads_.segment(model_.idx_vs[joint], model_.nvs[joint]) += effort;
+    has_joint_loads_ = true;
+  }
+
+  void ForceElements::addPointLoad(
+    pinocchio::FrameIndex frame,
+    const Eigen::Vector3d & point,
+    const Eigen::Vector3d & force,
+    const Eigen::Vector3d & torque)
+  {
+    const char * what = "load";
+    const Attachment at = attach(frame, point, what);
+    checkFinite(force, "force", what);
+    checkFinite(torque, "torque", what);
+    if (at.joint == 0)
+      throw std::invalid_argument("load: the frame is fixed to the world; the load does nothing");
+    point_loads_.push_back(PointLoad{at, force, torque});
+  }
+
+  void ForceElements::computeForces(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & v,
+    Eigen::VectorXd & tau,
+    ForceVector & fext) const
+  {
+    if (model.nv != model_.nv || model.njoints != model_.njoints)
+      throw std::invalid_argument(
+        "ForceElements: called with a model other than the one they were built for");
+
+    if (has_joint_loads_)
+      tau += joint_loads_;
+
+    for (const JointSpring & s : joint_springs_)
+    {
+      const int iq = model.idx_qs[s.joint], iv = model.idx_vs[s.joint];
+      double stretch;
+      if (model.nqs[s.joint] == 2) // continuous joint: (cos, sin)
+      {
+        stretch = std::atan2(q[iq + 1], q[iq]) - s.rest;
+        stretch = std::remainder(stretch, 2. * M_PI);
+      }
+      else
+        stretch = q[iq] - s.rest;
+      tau[iv] -= s.stiffness * stretch + s.damping * v[iv];
+    }
+
+    if (!hasExternalForces())
+      return;
+    if (spring_damping_)
+      pinocchio::forwardKinematics(model, data, q, v);
+    else
+      pinocchio::forwardKinematics(model, data, q);
+
+    const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
+    for (const PointSpring & s : point_springs_)
+    {
+      const Eigen::Vector3d d = worldPoint(data, s.b) - worldPoint(data, s.a);
+      const double length = d.norm();
+      Eigen::Vector3d force_on_a;
+      if (length > 0.)
+      {
+        const Eigen::Vector3d u = d / length;
+        double tension = s.stiffness * (length - s.rest_length);
+        if (s.damping > 0.)
+          tension += s.damping * u.dot(worldPointVelocity(data, s.b) - worldPointVelocity(data, s.a));
+        force_on_a = tension * u;
+      }
+      else
+        // Coincident ends: a zero-length spring pulls with k d = 0; with a rest length the
+        // direction is undefined and the force is taken as zero.
+        force_on_a.setZero();
+      addWorldForce(data, s.a, force_on_a, zero, fext);
+      addWorldForce(data, s.b, -force_on_a, zero, fext);
+    }
+
+    for (const PointLoad & l : point_loads_)
+      addWorldForce(data, l.at, l.force, l.torque, fext);
+  }
+
+} // namespace pinsettle

@@ -1,0 +1,713 @@
+"""Scenes: a mechanism with its force elements, locked joints, gravity and start pose.
+
+A scene is built in code (``Scene(model)``, ``add_joint_spring``, ``add_spring``, ``add_load``,
+``lock``) or read from a TOML file (``load_scene``). Names are resolved and every value is
+checked when it is added, so that a mistake is reported where it is made.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio
+
+from . import _core
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+from ._solve import SETTING_TYPES, Settings, _unknown_key_message, make_settings, set_setting
+
+
+class SceneError(ValueError):
+    """A scene that cannot be built: the message names the file, the key and what was wrong."""
+
+
+# --- force elements, by name (resolved against the model when a scene is solved) -----------
+
+
+@dataclass(frozen=True)
+class JointSpring:
+    """tau = -stiffness (q - rest) - damping qdot on a 1-DoF joint."""
+
+    joint: str
+    stiffness: float
+    rest: float = 0.0
+    damping: float = 0.0
+
+
+@dataclass(frozen=True)
+class Spring:
+    """A straight spring-damper from ``a_point`` of ``a_frame`` to ``b_point`` of ``b_frame``."""
+
+    a_frame: str
+    a_point: tuple[float, float, float]
+    b_frame: str
+    b_point: tuple[float, float, float]
+    stiffness: float
+    rest_length: float = 0.0
+    damping: float = 0.0
+
+
+@dataclass(frozen=True)
+class JointLoad:
+    """A constant effort on a joint (N m or N; one entry per degree of freedom)."""
+
+    joint: str
+    effort: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class PointLoad:
+    """A constant world-aligned force (N) and torque (N m) at a point (m) of a frame."""
+
+    frame: str
+    point: tuple[float, float, float]
+    force: tuple[float, float, float]
+    torque: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+# --- value checks with messages that name the parameter --------------------------------------
+
+
+def _number(value: Any, name: str, *, nonnegative: bool = False) -> float:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
+        raise SceneError(f"{name} must be a number, got {type(value).__name__} {value!r}")
+    x = float(value)
+    if not math.isfinite(x):
+        raise SceneError(f"{name} must be finite, got {x}")
+    if nonnegative and x < 0:
+        raise SceneError(f"{name} must be >= 0, got {x}")
+    return x
+
+
+def _vector(value: Any, name: str, size: int) -> tuple[float, ...]:
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (Sequence, np.ndarray)):
+        raise SceneError(
+            f"{name} must be a list of {size} numbers, got {type(value).__name__} {value!r}"
+        )
+    if len(value) != size:
+        raise SceneError(f"{name} must have {size} entries, got {len(value)}: {list(value)!r}")
+    return tuple(_number(x, f"{name}[{k}]") for k, x in enumerate(value))
+
+
+def _close(name: str, known: Sequence[str], kind: str) -> str:
+    close = difflib.get_close_matches(name, known, n=1)
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
+    return f"unknown {kind} '{name}'{hint}; {kind}s: {', '.join(known)}"
+
+
+def _joint_kind(model: pinocchio.Model, j: int) -> str:
+    return model.joints[j].shortname()
+
+
+def _is_angle_pair(model: pinocchio.Model, j: int) -> bool:
+    """A continuous (unbounded revolute) joint: one DoF stored as (cos, sin)."""
+    return model.nvs[j] == 1 and model.nqs[j] == 2
+
+
+# --- the scene --------------------------------------------------------------------------------
+
+
+class Scene:
+    """A mechanism to settle: a ``pinocchio.Model`` plus gravity, start pose, locked joints,
+    springs and loads.
+
+    The scene owns a copy of the model (gravity is set on it). Joint names are the model's
+    joint names; frame names are its frame names (URDF link names); ``"universe"`` is the
+    world. ``pinsettle.solve(scene)`` settles it; results are in the full configuration.
+    """
+
+    def __init__(
+        self,
+        model: pinocchio.Model,
+        *,
+        gravity: Any = None,
+        settings: Settings | Mapping[str, Any] | None = None,
+        name: str = "scene",
+        description: str = "",
+    ) -> None:
+        if not isinstance(model, pinocchio.Model):
+            raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+        self.model = pinocchio.Model(model)
+        self.name = name
+        self.description = description
+        self.path: Path | None = None
+        self.settings = make_settings(settings, {})
+        self.joint_springs: list[JointSpring] = []
+        self.springs: list[Spring] = []
+        self.loads: list[JointLoad | PointLoad] = []
+        self.locked: list[str] = []
+        self._start: dict[str, Any] = {}
+        if gravity is not None:
+            self.gravity = gravity
+        self._compiled: _Compiled | None = None
+
+    # -- construction -------------------------------------------------------------------------
+
+    @classmethod
+    def from_urdf(cls, path: str | Path, *, floating: bool = False, **kwargs: Any) -> Scene:
+        """A scene of the mechanism in a URDF file (meshes are not loaded)."""
+        from .robots import load_urdf
+
+        return cls(load_urdf(path, floating=floating), **kwargs)
+
+    @classmethod
+    def from_robot(cls, name: str, *, floating: bool = False, **kwargs: Any) -> Scene:
+        """A scene of a robot shipped by example-robot-data (see ``pinsettle.robot_names()``)."""
+        from .robots import load_robot
+
+        return cls(load_robot(name, floating=floating), **kwargs)
+
+    @property
+    def gravity(self) -> np.ndarray:
+        """Gravity acceleration (m/s^2, world axes)."""
+        return np.array(self.model.gravity.linear)
+
+    @gravity.setter
+    def gravity(self, value: Any) -> None:
+        g = np.array(_vector(value, "gravity", 3))
+        self.model.gravity = pinocchio.Motion(g, np.zeros(3))
+        self._compiled = None
+
+    def _joint_id(self, joint: Any, name: str) -> int:
+        if not isinstance(joint, str):
+            raise SceneError(f"{name} must be a joint name (str), got {type(joint).__name__}")
+        known = list(self.model.names)[1:]
+        if joint not in known:
+            raise SceneError(f"{name}: " + _close(joint, known, "joint"))
+        return self.model.getJointId(joint)
+
+    def _frame_name(self, frame: Any, name: str) -> str:
+        if not isinstance(frame, str):
+            raise SceneError(f"{name} must be a frame name (str), got {type(frame).__name__}")
+        known = list(dict.fromkeys(f.name for f in self.model.frames))
+        if frame not in known:
+            raise SceneError(f"{name}: " + _close(frame, known, "frame"))
+        return frame
+
+    def _changed(self) -> None:
+        self._compiled = None
+
+    def set_start(self, values: Mapping[str, Any] | None = None, **kwargs: Any) -> Scene:
+        """Start values by joint name: a number (rad or m) for a 1-DoF joint, a list of its
+        configuration entries for a multi-DoF joint. Joints not named start at neutral."""
+        for joint, value in {**(values or {}), **kwargs}.items():
+            j = self._joint_id(joint, f"start '{joint}'")
+            self._start[joint] = self._joint_start(j, value, f"start '{joint}'")
+        self._changed()
+        return self
+
+    @property
+    def start(self) -> dict[str, Any]:
+        return dict(self._start)
+
+    def _joint_start(self, j: int, value: Any, name: str) -> np.ndarray:
+        model = self.model
+        nq = model.nqs[j]
+        if model.nvs[j] == 1:
+            if isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str):
+                raise SceneError(
+                    f"{name}: joint '{model.names[j]}' ({_joint_kind(model, j)}) has one degree "
+                    f"of freedom: give one number (rad or m), got {value!r}"
+                )
+            x = _number(value, name)
+            return np.array([math.cos(x), math.sin(x)]) if nq == 2 else np.array([x])
+        if not isinstance(value, (Sequence, np.ndarray)) or isinstance(value, str):
+            raise SceneError(
+                f"{name}: joint '{model.names[j]}' ({_joint_kind(model, j)}) has {nq} "
+                f"configuration entries: give a list of {nq} numbers, got {value!r}"
+            )
+        return np.array(_vector(value, name, nq))
+
+    def lock(self, *joints: str) -> Scene:
+        """Hold joints at their start value and leave them out of the solve."""
+        for joint in joints:
+            self._joint_id(joint, "locked joint")
+            if joint not in self.locked:
+                self.locked.append(joint)
+        self._changed()
+        return self
+
+    def add_joint_spring(
+        self, joint: str, stiffness: float, rest: float = 0.0, damping: float = 0.0
+    ) -> Scene:
+        """A spring-damper tau = -stiffness (q - rest) - damping qdot on a 1-DoF joint
+        (stiffness in N m/rad or N/m; for a continuous joint q - rest is wrapped to
+        [-pi, pi])."""
+        j = self._joint_id(joint, "joint")
+        if self.model.nvs[j] != 1:
+            raise SceneError(
+                f"joint: '{joint}' is a {_joint_kind(self.model, j)} with {self.model.nvs[j]} "
+                "degrees of freedom; a joint spring needs a 1-DoF joint (revolute, continuous, "
+                "prismatic)"
+            )
+        self.joint_springs.append(
+            JointSpring(
+                joint,
+                _number(stiffness, "stiffness", nonnegative=True),
+                _number(rest, "rest"),
+                _number(damping, "damping", nonnegative=True),
+            )
+        )
+        self._changed()
+        return self
+
+    def _end(self, end: Any, name: str) -> tuple[str, tuple[float, float, float]]:
+        if isinstance(end, str):
+            return self._frame_name(end, name), (0.0, 0.0, 0.0)
+        if isinstance(end, Mapping):
+            unknown = [k for k in end if k not in ("frame", "point")]
+            if unknown:
+                raise SceneError(
+                    f"{name}: " + _unknown_key_message("key", unknown[0], ["frame", "point"])
+                )
+            if "frame" not in end:
+                raise SceneError(f"{name}: missing key 'frame'")
+            frame = self._frame_name(end["frame"], f"{name}.frame")
+            point = _vector(end.get("point", (0.0, 0.0, 0.0)), f"{name}.point", 3)
+            return frame, point  # type: ignore[return-value]
+        if isinstance(end, Sequence) and len(end) == 2:
+            frame = self._frame_name(end[0], f"{name} frame")
+            return frame, _vector(end[1], f"{name} point", 3)  # type: ignore[return-value]
+        raise SceneError(
+            f"{name} must be a frame name, (frame, point) or {{frame, point}}, got {end!r}"
+        )
+
+    def add_spring(
+        self,
+        a: Any,
+        b: Any,
+        stiffness: float,
+        rest_length: float = 0.0,
+        damping: float = 0.0,
+    ) -> Scene:
+        """A straight spring-damper between two points, each given as a frame name, a
+        ``(frame, point)`` pair or ``{"frame": ..., "point": [x, y, z]}`` (point in the frame,
+        m; ``"universe"`` is the world). Tension: stiffness (|d| - rest_length) plus damping
+        times the rate of change of the length (N/m, m, N s/m)."""
+        a_frame, a_point = self._end(a, "a")
+        b_frame, b_point = self._end(b, "b")
+        self.springs.append(
+            Spring(
+                a_frame,
+                a_point,
+                b_frame,
+                b_point,
+                _number(stiffness, "stiffness", nonnegative=True),
+                _number(rest_length, "rest_length", nonnegative=True),
+                _number(damping, "damping", nonnegative=True),
+            )
+        )
+        self._changed()
+        return self
+
+    def add_load(
+        self,
+        joint: str | None = None,
+        effort: Any = None,
+        *,
+        frame: str | None = None,
+        point: Any = (0.0, 0.0, 0.0),
+        force: Any = (0.0, 0.0, 0.0),
+        torque: Any = (0.0, 0.0, 0.0),
+    ) -> Scene:
+        """A constant load: ``add_load(joint, effort)`` (N m or N; a list for a multi-DoF
+        joint) or ``add_load(frame=..., point=..., force=..., torque=...)`` (world-aligned N
+        and N m at a point of the frame, m)."""
+        if (joint is None) == (frame is None):
+            raise SceneError("a load needs either 'joint' (with 'effort') or 'frame', not both")
+        if joint is not None:
+            j = self._joint_id(joint, "joint")
+            if effort is None:
+                raise SceneError(f"load on joint '{joint}': missing 'effort'")
+            nv = self.model.nvs[j]
+            if nv == 1:
+                value = (_number(effort, "effort"),)
+            else:
+                value = _vector(effort, "effort", nv)
+            self.loads.append(JointLoad(joint, value))
+        else:
+            if effort is not None:
+                raise SceneError(
+                    "'effort' belongs to a joint load; a load at a frame takes force and torque"
+                )
+            name = self._frame_name(frame, "frame")
+            if name == "universe":
+                raise SceneError("frame: a load on 'universe' (the world) does nothing")
+            self.loads.append(
+                PointLoad(
+                    name,
+                    _vector(point, "point", 3),  # type: ignore[arg-type]
+                    _vector(force, "force", 3),  # type: ignore[arg-type]
+                    _vector(torque, "torque", 3),  # type: ignore[arg-type]
+                )
+            )
+        self._changed()
+        return self
+
+    # -- what the solver sees -----------------------------------------------------------------
+
+    def q0(self) -> np.ndarray:
+        """The start configuration of the full model (dim model.nq)."""
+        q = pinocchio.neutral(self.model)
+        for joint, value in self._start.items():
+            j = self.model.getJointId(joint)
+            q[self.model.idx_qs[j] : self.model.idx_qs[j] + self.model.nqs[j]] = value
+        return q
+
+    @property
+    def has_elements(self) -> bool:
+        return bool(self.joint_springs or self.springs or self.loads)
+
+    def compile(self, q_locked: np.ndarray | None = None) -> _Compiled:
+        """The reduced model (locked joints removed at their value in ``q_locked``, the start
+        configuration by default) and the force elements resolved to its indices."""
+        if q_locked is None and self._compiled is not None:
+            return self._compiled
+        compiled = _Compiled(self, self.q0() if q_locked is None else q_locked)
+        if q_locked is None:
+            self._compiled = compiled
+        return compiled
+
+    def joint_values(self, q: Any) -> dict[str, float | list[float]]:
+        """Joint values by name from a full configuration: a number (rad or m) for a 1-DoF
+        joint (the angle of a continuous one), a list for a multi-DoF joint."""
+        return joint_values(self.model, q)
+
+    def static_force(self, q: Any) -> np.ndarray:
+        """Net static generalized force on the free (unlocked) joints at the full
+        configuration q: gravity minus springs and loads (dim of the reduced model's nv)."""
+        from ._solve import _as_vector
+
+        q = _as_vector(q, "q", self.model.nq, "model.nq")
+        compiled = self.compile(q) if self.locked else self.compile()
+        return _core.static_force(compiled.model, q[compiled.q_index], compiled.elements)
+
+    def residual(self, q: Any) -> float:
+        """max |static_force(q)| (N m or N)."""
+        force = self.static_force(q)
+        return float(np.max(np.abs(force))) if force.size else 0.0
+
+    def __repr__(self) -> str:
+        parts = [f"'{self.name}'", f"nq={self.model.nq}"]
+        for label, items in (
+            ("locked", self.locked),
+            ("joint_springs", self.joint_springs),
+            ("springs", self.springs),
+            ("loads", self.loads),
+        ):
+            if items:
+                parts.append(f"{len(items)} {label}")
+        return f"Scene({', '.join(parts)})"
+
+
+class _Compiled:
+    """A scene as the solver sees it: the reduced model and index-resolved elements."""
+
+    def __init__(self, scene: Scene, q_ref: np.ndarray) -> None:
+        full = scene.model
+        locked_ids = [full.getJointId(name) for name in scene.locked]
+        for kind, items in (("joint spring", scene.joint_springs), ("load", scene.loads)):
+            for item in items:
+                joint = getattr(item, "joint", None)
+                if joint in scene.locked:
+                    raise SceneError(
+                        f"{kind} on joint '{joint}': the joint is locked, so it would do nothing"
+                    )
+        if locked_ids:
+            model = pinocchio.buildReducedModel(full, sorted(locked_ids), q_ref)
+        else:
+            model = full
+        if model.nv == 0:
+            raise SceneError("every joint is locked: nothing to settle")
+        self.model = model
+        kept = [j for j in range(1, full.njoints) if j not in locked_ids]
+        # Reduced coordinates are the kept joints' segments, in the same order.
+        self.q_index = np.concatenate(
+            [np.arange(full.idx_qs[j], full.idx_qs[j] + full.nqs[j]) for j in kept]
+        ).astype(int)
+        self.v_index = np.concatenate(
+            [np.arange(full.idx_vs[j], full.idx_vs[j] + full.nvs[j]) for j in kept]
+        ).astype(int)
+        assert self.q_index.size == model.nq and self.v_index.size == model.nv
+        self.q_ref = np.array(q_ref, dtype=float)
+
+        def frame(name: str) -> int:
+            for kind in (pinocchio.FrameType.BODY, None):
+                for i, f in enumerate(model.frames):
+                    if f.name == name and (kind is None or f.type == kind):
+                        return i
+            raise SceneError(f"frame '{name}' is missing from the reduced model")
+
+        spec: dict[str, list] = {
+            "joint_springs": [
+                (model.getJointId(s.joint), s.stiffness, s.rest, s.damping)
+                for s in scene.joint_springs
+            ],
+            "springs": [
+                (
+                    frame(s.a_frame),
+                    np.array(s.a_point),
+                    frame(s.b_frame),
+                    np.array(s.b_point),
+                    s.stiffness,
+                    s.rest_length,
+                    s.damping,
+                )
+                for s in scene.springs
+            ],
+            "joint_loads": [
+                (model.getJointId(load.joint), np.array(load.effort))
+                for load in scene.loads
+                if isinstance(load, JointLoad)
+            ],
+            "point_loads": [
+                (
+                    frame(load.frame),
+                    np.array(load.point),
+                    np.array(load.force),
+                    np.array(load.torque),
+                )
+                for load in scene.loads
+                if isinstance(load, PointLoad)
+            ],
+        }
+        # No elements: the solver runs the bare core.
+        self.elements = spec if any(spec.values()) else None
+        try:
+            _core.static_force(model, pinocchio.neutral(model), self.elements)
+        except ValueError as error:  # e.g. both ends of a spring on one rigid body
+            raise SceneError(str(error)) from None
+
+    def full_q(self, q: np.ndarray) -> np.ndarray:
+        out = self.q_ref.copy()
+        out[self.q_index] = q
+        return out
+
+    def full_v(self, v: np.ndarray, nv: int) -> np.ndarray:
+        out = np.zeros(nv)
+        out[self.v_index] = v
+        return out
+
+
+def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | list[float]]:
+    """Joint values by name: a number for a 1-DoF joint (the angle of a continuous joint), a
+    list of configuration entries for a multi-DoF joint."""
+    out: dict[str, float | list[float]] = {}
+    for j in range(1, model.njoints):
+        iq, nq = model.idx_qs[j], model.nqs[j]
+        segment = q[iq : iq + nq]
+        if model.nvs[j] == 1 and nq == 2:
+            out[model.names[j]] = math.atan2(segment[1], segment[0])
+        elif nq == 1:
+            out[model.names[j]] = float(segment[0])
+        else:
+            out[model.names[j]] = [float(x) for x in segment]
+    return out
+
+
+# --- the scene file ----------------------------------------------------------------------------
+
+_TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "solver"]
+_MODEL_KEYS = ["urdf", "robot", "floating", "locked", "gravity"]
+_JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
+_SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
+_LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
+
+
+def _check_keys(table: Mapping[str, Any], known: list[str], where: str) -> None:
+    for key in table:
+        if key not in known:
+            raise SceneError(f"{where}: " + _unknown_key_message("key", key, known))
+
+
+def _table(data: Mapping[str, Any], key: str, where: str) -> dict[str, Any]:
+    value = data.get(key, {})
+    if not isinstance(value, dict):
+        raise SceneError(f"{where} must be a table ([{key}]), got {type(value).__name__}")
+    return value
+
+
+def _tables(data: Mapping[str, Any], key: str) -> list[dict[str, Any]]:
+    value = data.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(x, dict) for x in value):
+        raise SceneError(f"'{key}' must be an array of tables ([[{key}]]), got {value!r}")
+    return value
+
+
+def _required(table: Mapping[str, Any], key: str, where: str) -> Any:
+    if key not in table:
+        raise SceneError(f"{where}: missing key '{key}'")
+    return table[key]
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read a scene file (TOML; the format is documented in the README).
+
+    Raises:
+        FileNotFoundError: no such file.
+        SceneError (a ValueError): a syntax error (with its line), an unknown key, name or
+            robot, a value of the wrong type, shape or sign; the message names the file and key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"scene file not found: {path}")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{path}: TOML syntax error: {error}") from None
+    except UnicodeDecodeError as error:
+        raise SceneError(f"{path}: not a UTF-8 text file ({error})") from None
+    try:
+        return _scene_from_dict(data, path)
+    except SceneError as error:
+        raise SceneError(f"{path}: {error}") from None
+
+
+def _description(path: Path) -> str:
+    """The scene's one-line description: its first comment line."""
+    try:
+        for line in path.read_text(encoding="utf-8").splitlines():
+            stripped = line.strip()
+            if stripped.startswith("#"):
+                return stripped.lstrip("#").strip()
+            if stripped:
+                break
+    except (OSError, UnicodeDecodeError):
+        pass
+    return ""
+
+
+def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
+    _check_keys(data, _TOP_KEYS, "top level")
+    if "model" not in data:
+        raise SceneError("missing table [model] (with 'urdf' or 'robot')")
+    m = _table(data, "model", "[model]")
+    _check_keys(m, _MODEL_KEYS, "[model]")
+    floating = m.get("floating", False)
+    if not isinstance(floating, bool):
+        raise SceneError(f"[model] floating must be true or false, got {floating!r}")
+    if ("urdf" in m) == ("robot" in m):
+        raise SceneError(
+            "[model] needs exactly one of 'urdf' (a file) or 'robot' (an example-robot-data "
+            "name), got " + ("both" if "urdf" in m else "neither")
+        )
+    if "urdf" in m:
+        urdf = m["urdf"]
+        if not isinstance(urdf, str):
+            raise SceneError(f"[model] urdf must be a path (str), got {urdf!r}")
+        from .robots import load_urdf
+
+        try:
+            model = load_urdf(path.parent / urdf, floating=floating)
+        except (FileNotFoundError, ValueError) as error:
+            raise SceneError(f"[model] urdf: {error}") from None
+    else:
+        robot = m["robot"]
+        if not isinstance(robot, str):
+            raise SceneError(f"[model] robot must be a name (str), got {robot!r}")
+        from .robots import load_robot
+
+        try:
+            model = load_robot(robot, floating=floating)
+        except (KeyError, ValueError, FileNotFoundError) as error:
+            message = error.args[0] if error.args else str(error)
+            raise SceneError(f"[model] robot: {message}") from None
+
+    scene = Scene(model, name=path.stem, description=_description(path))
+    scene.path = path
+
+    def at(where: str, fn: Any, *args: Any, **kwargs: Any) -> None:
+        try:
+            fn(*args, **kwargs)
+        except SceneError as error:
+            raise SceneError(f"{where}: {error}") from None
+
+    if "gravity" in m:
+        at("[model]", setattr, scene, "gravity", m["gravity"])
+    locked = m.get("locked", [])
+    if not isinstance(locked, list):
+        raise SceneError(f"[model] locked must be a list of joint names, got {locked!r}")
+    at("[model] locked", scene.lock, *locked)
+
+    start = _table(data, "start", "[start]")
+    for joint, value in start.items():
+        at("[start]", scene.set_start, {joint: value})
+
+    for k, s in enumerate(_tables(data, "joint_spring"), start=1):
+        where = f"[[joint_spring]] #{k}"
+        _check_keys(s, _JOINT_SPRING_KEYS, where)
+        at(
+            where,
+            scene.add_joint_spring,
+            _required(s, "joint", where),
+            _required(s, "stiffness", where),
+            s.get("rest", 0.0),
+            s.get("damping", 0.0),
+        )
+    for k, s in enumerate(_tables(data, "spring"), start=1):
+        where = f"[[spring]] #{k}"
+        _check_keys(s, _SPRING_KEYS, where)
+        for end in ("a", "b"):
+            if not isinstance(_required(s, end, where), dict):
+                raise SceneError(
+                    f"{where}: {end} must be an inline table {{ frame = ..., point = [x, y, z] }}"
+                    f", got {s[end]!r}"
+                )
+        at(
+            where,
+            scene.add_spring,
+            s["a"],
+            s["b"],
+            _required(s, "stiffness", where),
+            s.get("rest_length", 0.0),
+            s.get("damping", 0.0),
+        )
+    for k, s in enumerate(_tables(data, "load"), start=1):
+        where = f"[[load]] #{k}"
+        _check_keys(s, _LOAD_KEYS, where)
+        if "joint" in s:
+            extra = [key for key in ("frame", "point", "force", "torque") if key in s]
+            if extra:
+                raise SceneError(
+                    f"{where}: a joint load takes 'joint' and 'effort' only, got also '{extra[0]}'"
+                )
+            at(where, scene.add_load, s["joint"], _required(s, "effort", where))
+        elif "frame" in s:
+            if "effort" in s:
+                raise SceneError(f"{where}: 'effort' belongs to a joint load, not a frame load")
+            at(
+                where,
+                scene.add_load,
+                frame=s["frame"],
+                point=s.get("point", (0.0, 0.0, 0.0)),
+                force=_required(s, "force", where),
+                torque=s.get("torque", (0.0, 0.0, 0.0)),
+            )
+        else:
+            raise SceneError(f"{where}: needs 'joint' (with 'effort') or 'frame' (with 'force')")
+
+    solver = _table(data, "solver", "[solver]")
+    for key, value in solver.items():
+        if key not in SETTING_TYPES:
+            raise SceneError("[solver]: " + _unknown_key_message("key", key, list(SETTING_TYPES)))
+        try:
+            set_setting(scene.settings, key, value)
+        except (TypeError, ValueError) as error:
+            raise SceneError(f"[solver]: {error}") from None
+    try:
+        scene.settings.check()
+    except ValueError as error:
+        raise SceneError(f"[solver]: {error}") from None
+
+    scene.compile()  # locked joints and elements resolve now, not at the first solve
+    return scene

@@ -1,6 +1,8 @@
 //
 // Cost of one kinetic-damping step against a bare pinocchio::aba + pinocchio::integrate step on
-// the same model, in the same run: the loop's overhead as a ratio (median of repeats).
+// the same model, in the same run: the loop's overhead as a ratio (median of repeats). Also the
+// cost of the force elements: a scene without any (which must step as fast as the bare core),
+// joint springs on every joint, and one point spring from the last body to the world.
 //
 //   step_cost ROBOT.urdf [steps] [repeats]
 //
@@ -48,14 +50,18 @@ namespace
     return seconds / static_cast<double>(steps);
   }
 
-  double settleStep(const pinocchio::Model & model, long steps, pinsettle::EnergyMeasure measure)
+  double settleStep(
+    const pinocchio::Model & model,
+    long steps,
+    pinsettle::EnergyMeasure measure,
+    const pinsettle::ForceModel * forces = nullptr)
   {
     pinsettle::Settings settings;
     settings.max_e = 0.; // never stops early: exactly `steps` steps
     settings.max_steps = steps;
     settings.energy = measure;
     pinsettle::Solver solver(model);
-    const pinsettle::Result result = solver.solve(pinocchio::neutral(model), settings);
+    const pinsettle::Result result = solver.solve(pinocchio::neutral(model), settings, forces);
     return result.wall_time / static_cast<double>(result.steps);
   }
 } // namespace
@@ -71,18 +77,35 @@ int main(int argc, char ** argv)
   const long steps = argc > 2 ? std::atol(argv[2]) : 20000;
   const int repeats = argc > 3 ? std::atoi(argv[3]) : 11;
 
-  std::vector<double> bare, exact, simplified;
-  for (int r = 0; r < repeats; ++r) // interleaved, so that machine noise hits all three alike
+  pinsettle::ForceElements none(model), joint_springs(model), point_spring(model);
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    if (model.nvs[j] == 1)
+      joint_springs.addJointSpring(j, 10., 0.1, 0.);
+  point_spring.addPointSpring(
+    model.frames.size() - 1, Eigen::Vector3d::Zero(), 0, Eigen::Vector3d(0.3, 0.2, 0.5), 100.);
+
+  std::vector<double> bare, exact, simplified, empty, springs, point;
+  for (int r = 0; r < repeats; ++r) // interleaved, so that machine noise hits all alike
   {
     bare.push_back(bareStep(model, steps, 1e-3));
     exact.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact));
     simplified.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Simplified));
+    empty.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &none));
+    springs.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &joint_springs));
+    point.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &point_spring));
   }
-  const double b = median(bare), e = median(exact), s = median(simplified);
+  const double b = median(bare);
+  auto row = [&](const char * name, const std::vector<double> & t) {
+    const double m = median(t);
+    std::cout << name << m * 1e9 << " ns/step  ratio " << m / b << "\n";
+  };
   std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << steps
             << " steps, median of " << repeats << "\n"
-            << "bare aba+integrate  " << b * 1e9 << " ns/step\n"
-            << "pinsettle (exact)   " << e * 1e9 << " ns/step  ratio " << e / b << "\n"
-            << "pinsettle (simpl.)  " << s * 1e9 << " ns/step  ratio " << s / b << "\n";
+            << "bare aba+integrate         " << b * 1e9 << " ns/step\n";
+  row("pinsettle (exact)          ", exact);
+  row("pinsettle (simplified)     ", simplified);
+  row("scene without elements     ", empty);
+  row("joint springs on all joints", springs);
+  row("one point spring           ", point);
   return 0;
 }

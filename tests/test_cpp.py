@@ -60,8 +60,9 @@ def cpp_build(tmp_path_factory) -> Path:
     return build
 
 
-def test_cpp_core_tests(cpp_build: Path) -> None:
-    proc = _run([str(cpp_build / "test_core"), "--report_level=short"])
+@pytest.mark.parametrize("suite", ["test_core", "test_elements"])
+def test_cpp_boost_tests(cpp_build: Path, suite: str) -> None:
+    proc = _run([str(cpp_build / suite), "--report_level=short"])
     assert "failed" not in proc.stdout.lower() or "0 failed" in proc.stdout.lower()
 
 

@@ -1,0 +1,263 @@
+//
+// Boost.Test cases of the force elements (springs and loads), built against the installed
+// package. The static force is checked against finite differences of the potential energy,
+// which is computed here independently of the elements' fext path.
+//
+
+#define BOOST_TEST_MODULE pinsettle_elements
+#include <boost/test/unit_test.hpp>
+
+#include <pinsettle/pinsettle.hpp>
+
+#include <pinocchio/algorithm/energy.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+
+#include <cmath>
+#include <string>
+
+namespace
+{
+  const std::string robots_dir = PINSETTLE_ROBOTS_DIR;
+
+  pinocchio::Model ur5()
+  {
+    return pinsettle::buildModelFromUrdf(robots_dir + "/ur_description/urdf/ur5_robot.urdf");
+  }
+
+  // A 1 kg bob 1 m below a hinge about y; q = 0 hangs down.
+  pinocchio::Model pendulum()
+  {
+    pinocchio::Model model;
+    const pinocchio::JointIndex j =
+      model.addJoint(0, pinocchio::JointModelRY(), pinocchio::SE3::Identity(), "hinge");
+    model.appendBodyToJoint(
+      j, pinocchio::Inertia(1., Eigen::Vector3d(0., 0., -1.), Eigen::Matrix3d::Identity() * 1e-3));
+    model.addJointFrame(j);
+    model.addBodyFrame("arm", j);
+    return model;
+  }
+
+  Eigen::Vector3d worldPoint(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    pinocchio::FrameIndex frame,
+    const Eigen::Vector3d & point)
+  {
+    pinocchio::forwardKinematics(model, data, q);
+    return pinocchio::updateFramePlacement(model, data, frame).act(point);
+  }
+} // namespace
+
+BOOST_AUTO_TEST_CASE(static_force_is_the_gradient_of_the_potential)
+{
+  const pinocchio::Model model = ur5();
+  pinocchio::Data data(model), ref(model);
+  const pinocchio::FrameIndex tool = model.getFrameId("tool0");
+  const pinocchio::FrameIndex forearm = model.getFrameId("forearm_link");
+  const pinocchio::JointIndex elbow = model.getJointId("elbow_joint");
+  const pinocchio::JointIndex wrist = model.getJointId("wrist_2_joint");
+  const Eigen::Vector3d pa(0.01, 0.02, 0.03), anchor(0.4, 0.2, 0.6), pl(0., 0.1, 0.);
+  const Eigen::Vector3d force(3., -2., -10.);
+
+  pinsettle::ForceElements elements(model);
+  elements.addPointSpring(tool, pa, 0, anchor, 200., 0.1);
+  elements.addPointSpring(forearm, Eigen::Vector3d(0.1, 0., 0.), tool, pa, 50., 0.3);
+  elements.addJointSpring(elbow, 20., 0.4);
+  elements.addJointLoad(wrist, Eigen::VectorXd::Constant(1, 1.5));
+  elements.addPointLoad(forearm, pl, force);
+  BOOST_CHECK(elements.hasExternalForces());
+
+  // V = gravity + springs - work of the constant loads.
+  auto potential = [&](const Eigen::VectorXd & q) {
+    double v = pinocchio::computePotentialEnergy(model, ref, q);
+    const Eigen::Vector3d a = worldPoint(model, ref, q, tool, pa);
+    const double l1 = (anchor - a).norm();
+    const double l2 = (a - worldPoint(model, ref, q, forearm, Eigen::Vector3d(0.1, 0., 0.))).norm();
+    v += 0.5 * 200. * (l1 - 0.1) * (l1 - 0.1) + 0.5 * 50. * (l2 - 0.3) * (l2 - 0.3);
+    const double e = q[model.idx_qs[elbow]] - 0.4;
+    v += 0.5 * 20. * e * e;
+    v -= 1.5 * q[model.idx_qs[wrist]];
+    v -= force.dot(worldPoint(model, ref, q, forearm, pl));
+    return v;
+  };
+
+  std::srand(3);
+  for (int trial = 0; trial < 10; ++trial)
+  {
+    const Eigen::VectorXd q = pinocchio::randomConfiguration(model);
+    const Eigen::VectorXd ours = pinsettle::computeStaticForce(model, data, q, &elements);
+    Eigen::VectorXd fd(model.nv);
+    const double h = 1e-6;
+    for (int k = 0; k < model.nv; ++k)
+    {
+      Eigen::VectorXd dq = Eigen::VectorXd::Zero(model.nv);
+      dq[k] = h;
+      fd[k] = (potential(pinocchio::integrate(model, q, dq))
+               - potential(pinocchio::integrate(model, q, -dq)))
+              / (2. * h);
+    }
+    BOOST_CHECK_SMALL((ours - fd).lpNorm<Eigen::Infinity>(), 1e-5 * (1. + fd.norm()));
+    BOOST_CHECK_CLOSE(
+      pinsettle::computeStaticResidual(model, data, q, &elements), ours.lpNorm<Eigen::Infinity>(),
+      1e-12);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(point_torque_acts_about_the_world_axis)
+{
+  const pinocchio::Model model = pendulum();
+  pinocchio::Data data(model);
+  pinsettle::ForceElements elements(model);
+  // A torque about world y at the bob turns the hinge (axis y) whatever the point.
+  elements.addPointLoad(
+    model.getFrameId("arm"), Eigen::Vector3d(0., 0., -1.), Eigen::Vector3d::Zero(),
+    Eigen::Vector3d(0., 2.5, 0.));
+  for (double angle : {-1., 0., 0.3, 2.})
+  {
+    const Eigen::VectorXd q = Eigen::VectorXd::Constant(1, angle);
+    const double with = pinsettle::computeStaticForce(model, data, q, &elements)[0];
+    const double without = pinsettle::computeStaticForce(model, data, q)[0];
+    BOOST_CHECK_CLOSE(without - with, 2.5, 1e-10);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(spring_damping_dissipates_c_times_rate_squared)
+{
+  const pinocchio::Model model = ur5();
+  pinocchio::Data data(model), ref(model);
+  const pinocchio::FrameIndex tool = model.getFrameId("tool0");
+  const Eigen::Vector3d anchor(0.3, -0.2, 0.5);
+  const double c = 7.;
+  pinsettle::ForceElements damped(model), plain(model);
+  damped.addPointSpring(tool, Eigen::Vector3d::Zero(), 0, anchor, 100., 0.05, c);
+  plain.addPointSpring(tool, Eigen::Vector3d::Zero(), 0, anchor, 100., 0.05, 0.);
+  damped.addJointSpring(1, 10., 0., 3.);
+  plain.addJointSpring(1, 10., 0., 0.);
+
+  std::srand(5);
+  const Eigen::VectorXd q = pinocchio::randomConfiguration(model);
+  const Eigen::VectorXd v = Eigen::VectorXd::Random(model.nv);
+  auto generalized = [&](const pinsettle::ForceElements & elements) {
+    Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
+    pinsettle::ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
+    elements.computeForces(model, data, q, v, tau, fext);
+    // Spatial forces to generalized forces: rnea(q, 0, 0) - rnea(q, 0, 0, fext) = J^T fext.
+    // (rnea returns a reference to ref.tau: copy each result before the next call.)
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
+    const Eigen::VectorXd gravity = pinocchio::rnea(model, ref, q, zero, zero);
+    const Eigen::VectorXd with_fext = pinocchio::rnea(model, ref, q, zero, zero, fext);
+    return Eigen::VectorXd(tau + gravity - with_fext);
+  };
+  const double power = (generalized(damped) - generalized(plain)).dot(v);
+  // Rate of the spring length along v, by finite differences.
+  const double h = 1e-7;
+  auto length = [&](double t) {
+    return (anchor
+            - worldPoint(
+              model, ref, pinocchio::integrate(model, q, t * v), tool, Eigen::Vector3d::Zero()))
+      .norm();
+  };
+  const double rate = (length(h) - length(-h)) / (2. * h);
+  const double joint_rate = v[model.idx_vs[1]];
+  BOOST_CHECK_CLOSE(power, -c * rate * rate - 3. * joint_rate * joint_rate, 1e-5);
+}
+
+BOOST_AUTO_TEST_CASE(continuous_joint_spring_wraps_the_angle)
+{
+  pinocchio::Model model;
+  const pinocchio::JointIndex j =
+    model.addJoint(0, pinocchio::JointModelRUBY(), pinocchio::SE3::Identity(), "wheel");
+  model.appendBodyToJoint(j, pinocchio::Inertia::Identity());
+  model.gravity.setZero();
+  pinocchio::Data data(model);
+  pinsettle::ForceElements elements(model);
+  elements.addJointSpring(j, 2., 3.); // rest near pi
+  // At angle -3 the shortest way to the rest angle 3 is through pi: stretch 2 pi - 6.
+  const Eigen::Vector2d q(std::cos(-3.), std::sin(-3.));
+  const double force = pinsettle::computeStaticForce(model, data, q, &elements)[0];
+  BOOST_CHECK_CLOSE(force, 2. * (-6. + 2. * M_PI), 1e-9);
+}
+
+BOOST_AUTO_TEST_CASE(empty_elements_step_exactly_like_the_bare_core)
+{
+  const pinocchio::Model model = ur5();
+  pinsettle::ForceElements none(model);
+  BOOST_CHECK(none.empty());
+  pinsettle::Solver a(model), b(model);
+  const Eigen::VectorXd q0 = pinocchio::neutral(model);
+  const pinsettle::Result bare = a.solve(q0);
+  const pinsettle::Result with = b.solve(q0, pinsettle::Settings(), &none);
+  BOOST_CHECK_EQUAL(bare.steps, with.steps);
+  BOOST_CHECK(bare.q == with.q);
+}
+
+BOOST_AUTO_TEST_CASE(bistable_pendulum_settles_on_either_side)
+{
+  // A compressed spring from the bob to a point 1 m below it pushes the bob off the bottom.
+  const pinocchio::Model model = pendulum();
+  pinsettle::ForceElements elements(model);
+  elements.addPointSpring(
+    model.getFrameId("arm"), Eigen::Vector3d(0., 0., -1.), 0, Eigen::Vector3d(0., 0., -2.), 40.,
+    1.5);
+  pinsettle::Solver solver(model);
+  pinsettle::Settings settings;
+  settings.max_e = 1e-20;
+  const pinsettle::Result right =
+    solver.solve(Eigen::VectorXd::Constant(1, 0.2), settings, &elements);
+  const pinsettle::Result left =
+    solver.solve(Eigen::VectorXd::Constant(1, -0.2), settings, &elements);
+  BOOST_CHECK(right.status == pinsettle::Status::Converged);
+  BOOST_CHECK(left.status == pinsettle::Status::Converged);
+  BOOST_CHECK_GT(right.q[0], 0.5);
+  BOOST_CHECK_CLOSE(right.q[0], -left.q[0], 1e-6);
+  BOOST_CHECK_SMALL(right.residual, 1e-6);
+  // Independent: dV/dq = m g l sin q + k (d - L0) dd/dq with d^2 = 5 - 4 cos q.
+  const double t = right.q[0], d = std::sqrt(5. - 4. * std::cos(t));
+  BOOST_CHECK_SMALL(9.81 * std::sin(t) + 40. * (d - 1.5) * 2. * std::sin(t) / d, 1e-6);
+}
+
+BOOST_AUTO_TEST_CASE(bad_elements_are_rejected)
+{
+  const pinocchio::Model model = ur5();
+  pinsettle::ForceElements elements(model);
+  auto rejects = [](const std::function<void()> & f, const std::string & fragment) {
+    try
+    {
+      f();
+      BOOST_ERROR("accepted; expected a message with '" + fragment + "'");
+    }
+    catch (const std::invalid_argument & e)
+    {
+      BOOST_CHECK_MESSAGE(
+        std::string(e.what()).find(fragment) != std::string::npos,
+        "message '" << e.what() << "' lacks '" << fragment << "'");
+    }
+  };
+  const pinocchio::FrameIndex tool = model.getFrameId("tool0");
+  rejects([&] { elements.addJointSpring(1, -1.); }, "stiffness");
+  rejects([&] { elements.addJointSpring(1, 1., 0., -2.); }, "damping");
+  rejects([&] { elements.addJointSpring(99, 1.); }, "joint index 99");
+  rejects(
+    [&] { elements.addPointSpring(tool, Eigen::Vector3d::Zero(), 0, {0., 0., 0.}, 1., -1.); },
+    "rest_length");
+  rejects(
+    [&] { elements.addPointSpring(9999, Eigen::Vector3d::Zero(), 0, {0., 0., 0.}, 1.); },
+    "frame index 9999");
+  rejects(
+    [&] { elements.addPointSpring(tool, Eigen::Vector3d::Zero(), tool, {0., 0., 1.}, 1.); },
+    "same rigid body");
+  rejects([&] { elements.addJointLoad(1, Eigen::VectorXd::Zero(2)); }, "degrees of freedom");
+  rejects(
+    [&] { elements.addPointLoad(tool, Eigen::Vector3d::Zero(), Eigen::Vector3d::Constant(NAN)); },
+    "force");
+
+  pinocchio::Model ball;
+  ball.addJoint(0, pinocchio::JointModelSpherical(), pinocchio::SE3::Identity(), "ball");
+  pinsettle::ForceElements on_ball(ball);
+  rejects([&] { on_ball.addJointSpring(1, 1.); }, "1-DoF");
+  BOOST_CHECK(elements.empty());
+}

@@ -97,11 +97,11 @@ int main(int argc, char ** argv)
   const double b = median(bare);
   auto row = [&](const char * name, const std::vector<double> & t) {
     const double m = median(t);
-    std::cout << name << m * 1e9 << " ns/step  ratio " << m / b << "\n";
+    std::cout << name << " " << m * 1e9 << " ns/step  ratio " << m / b << "\n";
   };
   std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << steps
             << " steps, median of " << repeats << "\n"
-            << "bare aba+integrate         " << b * 1e9 << " ns/step\n";
+            << "bare aba+integrate          " << b * 1e9 << " ns/step\n";
   row("pinsettle (exact)          ", exact);
   row("pinsettle (simplified)     ", simplified);
   row("scene without elements     ", empty);

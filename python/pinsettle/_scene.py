@@ -81,7 +81,10 @@ class PointLoad:
 def _number(value: Any, name: str, *, nonnegative: bool = False) -> float:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
         raise SceneError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-    x = float(value)
+    try:
+        x = float(value)
+    except OverflowError:
+        raise SceneError(f"{name} is too large for a float: {value}") from None
     if not math.isfinite(x):
         raise SceneError(f"{name} must be finite, got {x}")
     if nonnegative and x < 0:
@@ -416,12 +419,13 @@ class _Compiled:
     def __init__(self, scene: Scene, q_ref: np.ndarray) -> None:
         full = scene.model
         locked_ids = [full.getJointId(name) for name in scene.locked]
-        for kind, items in (("joint spring", scene.joint_springs), ("load", scene.loads)):
-            for item in items:
+        for kind, items in (("joint_spring", scene.joint_springs), ("load", scene.loads)):
+            for k, item in enumerate(items, start=1):
                 joint = getattr(item, "joint", None)
                 if joint in scene.locked:
                     raise SceneError(
-                        f"{kind} on joint '{joint}': the joint is locked, so it would do nothing"
+                        f"[[{kind}]] #{k} on joint '{joint}': the joint is locked, so it would "
+                        "do nothing"
                     )
         if locked_ids:
             model = pinocchio.buildReducedModel(full, sorted(locked_ids), q_ref)
@@ -447,6 +451,18 @@ class _Compiled:
                     if f.name == name and (kind is None or f.type == kind):
                         return i
             raise SceneError(f"frame '{name}' is missing from the reduced model")
+
+        for k, s in enumerate(scene.springs, start=1):
+            ja = model.frames[frame(s.a_frame)].parentJoint
+            jb = model.frames[frame(s.b_frame)].parentJoint
+            if ja == jb:
+                body = "the world" if ja == 0 else f"the body of joint '{model.names[ja]}'"
+                raise SceneError(
+                    f"[[spring]] #{k}: both ends ('{s.a_frame}' and '{s.b_frame}') are on "
+                    f"{body}"
+                    + (" once the locked joints are removed" if locked_ids else "")
+                    + "; such a spring exerts no net effort"
+                )
 
         spec: dict[str, list] = {
             "joint_springs": [

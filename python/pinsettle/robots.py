@@ -5,8 +5,10 @@ Only the kinematic and inertial model is built: meshes are never loaded for solv
 
 from __future__ import annotations
 
+import os
 import site
 import sys
+import tempfile
 from pathlib import Path
 
 import pinocchio
@@ -93,9 +95,33 @@ def load_urdf(path: str | Path, floating: bool = False) -> pinocchio.Model:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"URDF file not found: {path}")
-    try:
-        if floating:
-            return pinocchio.buildModelFromUrdf(str(path), pinocchio.JointModelFreeFlyer())
-        return pinocchio.buildModelFromUrdf(str(path))
-    except (RuntimeError, ValueError) as error:
-        raise ValueError(f"{path}: the URDF does not parse: {error}") from None
+    # The URDF parser (urdfdom, C++) prints its reasons on the process's stderr: capture them,
+    # to put them in the message on failure, and pass them on (warnings) on success.
+    with tempfile.TemporaryFile(mode="w+b") as captured:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(captured.fileno(), 2)
+        try:
+            if floating:
+                model = pinocchio.buildModelFromUrdf(str(path), pinocchio.JointModelFreeFlyer())
+            else:
+                model = pinocchio.buildModelFromUrdf(str(path))
+            error = None
+        except (RuntimeError, ValueError) as e:
+            error = e
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        parser_says = captured.read().decode(errors="replace").strip()
+    if error is not None:
+        reasons = [
+            line.strip()
+            for line in parser_says.splitlines()
+            if line.strip() and not line.strip().startswith("at line")
+        ]
+        detail = "; ".join(reasons) if reasons else str(error)
+        raise ValueError(f"{path}: the URDF does not parse: {detail}")
+    if parser_says:
+        print(parser_says, file=sys.stderr)
+    return model

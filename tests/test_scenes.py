@@ -1,0 +1,1087 @@
+"""The scene library (robots/*.toml) and Scene built in code, checked independently.
+
+Every scene file states its expected outcome in its comment header. Here each one is solved
+with ``pinsettle.solve`` and the answer is checked against a reference written in this module
+with pinocchio and numpy only: the scene file is read again with tomllib, the model is built
+again with ``pinocchio.buildModelFromUrdf`` (and ``buildReducedModel`` for locked joints), and
+the net static generalized force of gravity, springs and loads is recomputed from Jacobians.
+pinsettle's own ``static_force``/``residual`` serve only as something to cross-check against.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio
+import pinsettle
+import pytest
+from scipy.optimize import brentq, fsolve
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+ROBOTS = Path(__file__).parents[1] / "robots"
+SCENES = sorted(p.stem for p in ROBOTS.glob("*.toml"))
+PENDULUM_URDF = ROBOTS / "pendulum.urdf"
+SLIDER_URDF = ROBOTS / "slider.urdf"
+PLANAR_URDF = ROBOTS / "planar_3link.urdf"
+DISK_URDF = ROBOTS / "torque_disk.urdf"
+
+# Largest acceptable net static force at a converged answer (N m or N).
+MAX_RESIDUAL = 1e-5
+
+
+# --- the reference: scene physics re-implemented with pinocchio -------------------------------
+
+
+def wrap(angle: float) -> float:
+    """An angle difference wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def skew(r: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+
+
+@dataclass
+class Reference:
+    """A scene as plain data plus its static force, potential and stiffness.
+
+    ``full`` is the whole model (gravity set); joints named in ``locked`` are removed with
+    ``pinocchio.buildReducedModel`` at their value in the full configuration. Springs are
+    ``(frame_a, point_a, frame_b, point_b, stiffness, rest_length)``; joint springs
+    ``(joint, stiffness, rest)``; joint loads ``(joint, effort)``; point loads
+    ``(frame, point, force, torque)``.
+    """
+
+    full: pinocchio.Model
+    locked: list[str] = field(default_factory=list)
+    joint_springs: list[tuple] = field(default_factory=list)
+    springs: list[tuple] = field(default_factory=list)
+    joint_loads: list[tuple] = field(default_factory=list)
+    point_loads: list[tuple] = field(default_factory=list)
+    start: dict = field(default_factory=dict)
+    _reduced: dict = field(default_factory=dict, repr=False)
+
+    # -- construction --
+
+    @classmethod
+    def from_toml(cls, path: Path) -> Reference:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        m = data["model"]
+        if "urdf" in m:
+            urdf = path.parent / m["urdf"]
+        else:
+            urdf = pinsettle.robot_urdf(m["robot"])  # only the path of the shipped URDF
+        if m.get("floating", False):
+            full = pinocchio.buildModelFromUrdf(str(urdf), pinocchio.JointModelFreeFlyer())
+        else:
+            full = pinocchio.buildModelFromUrdf(str(urdf))
+        if "gravity" in m:
+            full.gravity = pinocchio.Motion(np.array(m["gravity"], float), np.zeros(3))
+
+        def end(e):
+            return e["frame"], np.array(e.get("point", [0.0, 0.0, 0.0]), float)
+
+        ref = cls(full, locked=list(m.get("locked", [])), start=dict(data.get("start", {})))
+        for s in data.get("joint_spring", []):
+            ref.joint_springs.append((s["joint"], s["stiffness"], s.get("rest", 0.0)))
+        for s in data.get("spring", []):
+            ref.springs.append(
+                (*end(s["a"]), *end(s["b"]), s["stiffness"], s.get("rest_length", 0.0))
+            )
+        for s in data.get("load", []):
+            if "joint" in s:
+                ref.joint_loads.append((s["joint"], np.atleast_1d(np.array(s["effort"], float))))
+            else:
+                ref.point_loads.append(
+                    (
+                        s["frame"],
+                        np.array(s.get("point", [0.0, 0.0, 0.0]), float),
+                        np.array(s["force"], float),
+                        np.array(s.get("torque", [0.0, 0.0, 0.0]), float),
+                    )
+                )
+        return ref
+
+    def q_start(self) -> np.ndarray:
+        q = pinocchio.neutral(self.full)
+        for name, value in self.start.items():
+            j = self.full.getJointId(name)
+            iq, nq = self.full.idx_qs[j], self.full.nqs[j]
+            if nq == 2 and self.full.nvs[j] == 1:
+                q[iq : iq + 2] = [math.cos(value), math.sin(value)]
+            else:
+                q[iq : iq + nq] = value
+        return q
+
+    # -- full <-> reduced configurations, by joint name --
+
+    def reduced(self, q_full: np.ndarray) -> pinocchio.Model:
+        """The model with the locked joints removed at their value in q_full."""
+        if not self.locked:
+            return self.full
+        ids = sorted(self.full.getJointId(name) for name in self.locked)
+        key = tuple(
+            float(x)
+            for j in ids
+            for x in q_full[self.full.idx_qs[j] : self.full.idx_qs[j] + self.full.nqs[j]]
+        )
+        if key not in self._reduced:
+            self._reduced[key] = pinocchio.buildReducedModel(self.full, ids, q_full)
+        return self._reduced[key]
+
+    def to_reduced(self, model: pinocchio.Model, q_full: np.ndarray) -> np.ndarray:
+        q = np.zeros(model.nq)
+        for j in range(1, model.njoints):
+            jf = self.full.getJointId(model.names[j])
+            q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]] = q_full[
+                self.full.idx_qs[jf] : self.full.idx_qs[jf] + self.full.nqs[jf]
+            ]
+        return q
+
+    def to_full(self, model: pinocchio.Model, q: np.ndarray, q_full: np.ndarray) -> np.ndarray:
+        out = np.array(q_full, float)
+        for j in range(1, model.njoints):
+            jf = self.full.getJointId(model.names[j])
+            out[self.full.idx_qs[jf] : self.full.idx_qs[jf] + self.full.nqs[jf]] = q[
+                model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]
+            ]
+        return out
+
+    # -- physics on the reduced model --
+
+    @staticmethod
+    def _frame(model: pinocchio.Model, name: str) -> int:
+        bodies = [
+            i
+            for i, f in enumerate(model.frames)
+            if f.name == name and f.type == pinocchio.FrameType.BODY
+        ]
+        if bodies:
+            return bodies[0]
+        return [i for i, f in enumerate(model.frames) if f.name == name][0]
+
+    @staticmethod
+    def _point(model, data, name, point):
+        """World position and world-aligned (linear, angular) Jacobians of a frame's point."""
+        fid = Reference._frame(model, name)
+        placement = data.oMf[fid]
+        p = placement.act(np.asarray(point, float))
+        jac = pinocchio.getFrameJacobian(model, data, fid, pinocchio.LOCAL_WORLD_ALIGNED)
+        j_ang = jac[3:]
+        j_lin = jac[:3] - skew(p - placement.translation) @ j_ang
+        return p, j_lin, j_ang
+
+    def _kinematics(self, model, q):
+        data = model.createData()
+        pinocchio.computeJointJacobians(model, data, q)  # also the forward kinematics
+        pinocchio.updateFramePlacements(model, data)
+        return data
+
+    def _joint_delta(self, model, q, name, rest):
+        j = model.getJointId(name)
+        iq = model.idx_qs[j]
+        if model.nqs[j] == 2:  # continuous joint: (cos, sin)
+            return model.idx_vs[j], wrap(math.atan2(q[iq + 1], q[iq]) - rest)
+        return model.idx_vs[j], q[iq] - rest
+
+    def force_reduced(self, model: pinocchio.Model, q: np.ndarray) -> np.ndarray:
+        """g(q) + joint springs - J^T (spring forces) - loads, on the reduced model."""
+        f = pinocchio.computeGeneralizedGravity(model, model.createData(), q).copy()
+        for name, k, rest in self.joint_springs:
+            iv, delta = self._joint_delta(model, q, name, rest)
+            f[iv] += k * delta
+        data = self._kinematics(model, q)
+        for fa, pa, fb, pb, k, rest_length in self.springs:
+            a, ja, _ = self._point(model, data, fa, pa)
+            b, jb, _ = self._point(model, data, fb, pb)
+            d = b - a
+            length = np.linalg.norm(d)
+            force_a = k * (length - rest_length) * d / length
+            f -= ja.T @ force_a + jb.T @ (-force_a)
+        for name, effort in self.joint_loads:
+            j = model.getJointId(name)
+            f[model.idx_vs[j] : model.idx_vs[j] + model.nvs[j]] -= effort
+        for name, point, force, torque in self.point_loads:
+            _, j_lin, j_ang = self._point(model, data, name, point)
+            f -= j_lin.T @ force + j_ang.T @ torque
+        return f
+
+    def potential_reduced(self, model: pinocchio.Model, q: np.ndarray) -> float:
+        """Gravity potential plus spring energies (no loads)."""
+        data = model.createData()
+        com = pinocchio.centerOfMass(model, data, q)
+        v = -data.mass[0] * float(np.dot(model.gravity.linear, com))
+        for name, k, rest in self.joint_springs:
+            v += 0.5 * k * self._joint_delta(model, q, name, rest)[1] ** 2
+        data = self._kinematics(model, q)
+        for fa, pa, fb, pb, k, rest_length in self.springs:
+            a = self._point(model, data, fa, pa)[0]
+            b = self._point(model, data, fb, pb)[0]
+            v += 0.5 * k * (np.linalg.norm(b - a) - rest_length) ** 2
+        return v
+
+    def stiffness_reduced(self, model, q, h=1e-6) -> np.ndarray:
+        """K = d(force)/dq by central differences along the tangent (pinocchio.integrate)."""
+        k = np.zeros((model.nv, model.nv))
+        for i in range(model.nv):
+            step = np.zeros(model.nv)
+            step[i] = h
+            plus = self.force_reduced(model, pinocchio.integrate(model, q, step))
+            minus = self.force_reduced(model, pinocchio.integrate(model, q, -step))
+            k[:, i] = (plus - minus) / (2 * h)
+        return k
+
+    # -- the same on full configurations --
+
+    def force(self, q_full: np.ndarray) -> np.ndarray:
+        model = self.reduced(q_full)
+        return self.force_reduced(model, self.to_reduced(model, q_full))
+
+    def residual(self, q_full: np.ndarray) -> float:
+        return float(np.max(np.abs(self.force(q_full))))
+
+    def eigenvalues(self, q_full: np.ndarray) -> np.ndarray:
+        """Eigenvalues of the symmetric part of the stiffness (ascending)."""
+        model = self.reduced(q_full)
+        k = self.stiffness_reduced(model, self.to_reduced(model, q_full))
+        return np.linalg.eigvalsh(0.5 * (k + k.T))
+
+    def random_configuration(self, rng: np.random.Generator, scale: float = 2.0) -> np.ndarray:
+        """A random full configuration; locked joints keep their start value."""
+        q_start = self.q_start()
+        model = self.reduced(q_start)
+        q = pinocchio.integrate(
+            model, self.to_reduced(model, q_start), rng.uniform(-scale, scale, model.nv)
+        )
+        return self.to_full(model, q, q_start)
+
+
+def pair(
+    model: pinocchio.Model,
+    *,
+    gravity=None,
+    start=None,
+    locked=(),
+    joint_springs=(),
+    springs=(),
+    joint_loads=(),
+    point_loads=(),
+) -> tuple[pinsettle.Scene, Reference]:
+    """The same elements given to a pinsettle.Scene (through its API) and to a Reference."""
+    scene = pinsettle.Scene(model, gravity=gravity)
+    full = pinocchio.Model(model)
+    if gravity is not None:
+        full.gravity = pinocchio.Motion(np.array(gravity, float), np.zeros(3))
+    ref = Reference(full, locked=list(locked), start=dict(start or {}))
+    scene.set_start(start or {})
+    scene.lock(*locked)
+    for joint, k, rest in joint_springs:
+        scene.add_joint_spring(joint, k, rest)
+        ref.joint_springs.append((joint, k, rest))
+    for fa, pa, fb, pb, k, rest_length in springs:
+        scene.add_spring((fa, pa), {"frame": fb, "point": pb}, k, rest_length)
+        ref.springs.append((fa, np.array(pa, float), fb, np.array(pb, float), k, rest_length))
+    for joint, effort in joint_loads:
+        scene.add_load(joint, effort)
+        ref.joint_loads.append((joint, np.atleast_1d(np.array(effort, float))))
+    for frame, point, force, torque in point_loads:
+        scene.add_load(frame=frame, point=point, force=force, torque=torque)
+        ref.point_loads.append(
+            (frame, np.array(point, float), np.array(force, float), np.array(torque, float))
+        )
+    return scene, ref
+
+
+# --- what each scene file says it does (numbers copied from its comment header) --------------
+
+
+@dataclass(frozen=True)
+class Expected:
+    """Joint values and stiffness eigenvalues as written in a scene's comment header.
+
+    ``neutral`` joints can take any value at an equilibrium; their numbers are those of the
+    run the comment describes. ``eigen_range`` is (smallest, largest) where the comment gives
+    only those.
+    """
+
+    joints: dict[str, str] = field(default_factory=dict)
+    eigenvalues: tuple[str, ...] = ()
+    eigen_range: tuple[str, str] | None = None
+    neutral: tuple[str, ...] = ()
+    stable: bool = True  # False: stable-or-neutral (zero eigenvalues along ``neutral``)
+
+
+EXPECTED = {
+    "pendulum": Expected({"hinge": "0"}, ("9.81",)),
+    "bistable_pendulum": Expected({"hinge": "0.637354"}, ("35.63",)),
+    "chain20": Expected({f"joint{i}": "0" for i in range(1, 21)}, eigen_range=("0.0336", "108.0")),
+    "double_pendulum_springs": Expected(
+        {"joint1": "0.738965", "joint2": "-0.105215"}, ("0.645", "1.514")
+    ),
+    "panda_fingers_locked": Expected(
+        {
+            "panda_joint1": "-0.95959",
+            "panda_joint2": "3.36194",
+            "panda_joint3": "3.11784",
+            "panda_joint4": "5.78567",
+            "panda_joint5": "0.72484",
+            "panda_joint6": "-3.86920",
+            "panda_joint7": "-0.89934",
+            "panda_finger_joint1": "0.02",
+            "panda_finger_joint2": "0.02",
+        },
+        ("0", "0.0258", "0.156", "2.27", "3.16", "11.5", "69.2"),
+        neutral=("panda_joint1",),
+        stable=False,
+    ),
+    "planar_3link_spring": Expected(
+        {"joint1": "-0.138592", "joint2": "-0.144181", "joint3": "-1.566479"},
+        ("2.00", "8.83", "180.06"),
+    ),
+    "slider_spring": Expected({"slider": "-0.03924"}, ("500",)),
+    "ur5": Expected(
+        {
+            "shoulder_pan_joint": "-0.32297",
+            "shoulder_lift_joint": "1.570796",
+            "elbow_joint": "0",
+            "wrist_1_joint": "-1.570796",
+            "wrist_2_joint": "-0.32365",
+            "wrist_3_joint": "0.00253",
+        },
+        ("0", "0", "0", "0.1725", "10.69", "64.52"),
+        neutral=("shoulder_pan_joint", "wrist_2_joint", "wrist_3_joint"),
+        stable=False,
+    ),
+    "ur5_tool_spring": Expected(
+        {
+            "shoulder_pan_joint": "0.150114",
+            "shoulder_lift_joint": "1.065076",
+            "elbow_joint": "-2.293533",
+            "wrist_1_joint": "3.818607",
+            "wrist_2_joint": "-1.487249",
+            "wrist_3_joint": "-3.4233",
+        },
+        ("0", "3.76", "5.97", "21.5", "36.7", "129.0"),
+        neutral=("wrist_3_joint",),
+        stable=False,
+    ),
+}
+EQUILIBRIUM_SCENES = sorted(EXPECTED)
+
+# Points named in the comments: (scene, frame, point in the frame, world position as written).
+POSITIONS = [
+    ("bistable_pendulum", "arm", (0.0, 0.0, -1.0), ("-0.5951", None, "-0.8037")),
+    ("planar_3link_spring", "link3", (0.0, 0.0, -0.5), ("0.6893", "0", "-0.8379")),
+    ("ur5", "tool0", (0.0, 0.0, 0.0), (None, None, "-0.823")),
+    ("panda_fingers_locked", "panda_hand_tcp", (0.0, 0.0, 0.0), (None, None, "-0.578")),
+    ("ur5_tool_spring", "tool0", (0.0, 0.0, 0.0), ("0.3365", "0.1682", "0.2104")),
+]
+
+
+def rounding(text: str) -> float:
+    """Half a unit of the last digit written: the rounding error of a number in a comment (a
+    number written without a decimal point, like 0 or 500, is exact)."""
+    if "." not in text:
+        return 0.0
+    return 0.5 * 10.0 ** -len(text.split(".")[1])
+
+
+def header(name: str) -> str:
+    """The comment header of a scene file."""
+    lines = (ROBOTS / f"{name}.toml").read_text(encoding="utf-8").splitlines()
+    return "\n".join(line for line in lines if line.startswith("#"))
+
+
+@pytest.fixture(scope="module")
+def solved():
+    """Each library scene loaded, solved with its own settings, and its Reference: once."""
+    cache: dict[str, tuple[pinsettle.Scene, pinsettle.Result, Reference]] = {}
+
+    def get(name: str):
+        if name not in cache:
+            path = ROBOTS / f"{name}.toml"
+            scene = pinsettle.load_scene(path)
+            cache[name] = (scene, pinsettle.solve(scene), Reference.from_toml(path))
+        return cache[name]
+
+    return get
+
+
+def independent_root(ref: Reference, q_full: np.ndarray, neutral=()) -> np.ndarray:
+    """An equilibrium found by scipy's fsolve on the Reference force, started at q_full, with
+    the neutral joints held at their value there (their stiffness is zero)."""
+    model = ref.reduced(q_full)
+    q0 = ref.to_reduced(model, q_full)
+    fixed = {model.idx_vs[model.getJointId(name)] for name in neutral}
+    free = [i for i in range(model.nv) if i not in fixed]
+
+    def q_of(x):
+        dv = np.zeros(model.nv)
+        dv[free] = x
+        return pinocchio.integrate(model, q0, dv)
+
+    x = fsolve(
+        lambda x: ref.force_reduced(model, q_of(x))[free],
+        np.zeros(len(free)),
+        xtol=1e-14,
+        full_output=True,  # no warning when it cannot improve on round-off; checked by callers
+    )[0]
+    return ref.to_full(model, q_of(x), q_full)
+
+
+# --- the reference itself is right -----------------------------------------------------------
+
+
+def test_the_library_is_covered():
+    # Every scene file has a header with its expectation, and this module checks all of them.
+    assert SCENES == sorted([*EXPECTED, "torque_disk"])
+    for name in SCENES:
+        assert "Expected:" in header(name), name
+    assert pinsettle.scene_names() == SCENES  # the installed library is this folder
+
+
+@pytest.mark.parametrize("name", EQUILIBRIUM_SCENES)
+def test_expected_numbers_are_those_of_the_header(name):
+    # The numbers in EXPECTED were copied from the comments: they must still be there.
+    text = header(name)
+    for value in [*EXPECTED[name].joints.values(), *EXPECTED[name].eigenvalues]:
+        assert value.lstrip("-") in text, (name, value)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_reference_agrees_with_scene_static_force(name, solved):
+    scene, result, ref = solved(name)
+    assert np.array_equal(ref.q_start(), scene.q0())
+    rng = np.random.default_rng(sum(map(ord, name)))
+    configurations = [scene.q0(), result.q] + [ref.random_configuration(rng) for _ in range(6)]
+    for q in configurations:
+        expected = ref.force(q)
+        got = scene.static_force(q)
+        assert got.shape == expected.shape
+        scale = max(1.0, np.max(np.abs(expected)))
+        assert np.allclose(got, expected, rtol=1e-9, atol=1e-9 * scale), (q, got, expected)
+        assert scene.residual(q) == pytest.approx(np.max(np.abs(expected)), rel=1e-9, abs=1e-12)
+
+
+def mixed_scenes():
+    """Scenes built in code with every kind of element, on several joint types."""
+    ur5 = pinsettle.load_robot("ur5")
+    yield pair(
+        ur5,
+        joint_springs=[("elbow_joint", 15.0, 0.4)],
+        springs=[
+            ("forearm_link", (0.1, 0.0, 0.2), "upper_arm_link", (0.0, 0.05, 0.3), 80.0, 0.1),
+            ("tool0", (0.0, 0.0, 0.1), "universe", (0.3, -0.2, 0.5), 50.0, 0.0),
+        ],
+        joint_loads=[("wrist_1_joint", 0.7)],
+        point_loads=[("forearm_link", (0.0, 0.1, 0.2), (3.0, -2.0, 5.0), (0.4, 0.2, -0.3))],
+    )
+    panda = pinsettle.load_robot("panda")
+    yield pair(
+        panda,
+        gravity=[1.0, -2.0, -9.0],
+        start={"panda_finger_joint1": 0.03, "panda_finger_joint2": 0.01, "panda_joint4": -1.5},
+        locked=["panda_finger_joint1", "panda_finger_joint2"],
+        springs=[("panda_leftfinger", (0.0, 0.01, 0.04), "universe", (0.5, 0.0, 0.3), 30.0, 0.05)],
+        point_loads=[("panda_rightfinger", (0.0, 0.0, 0.02), (0.0, 4.0, 0.0), (0.0, 0.0, 0.5))],
+        joint_loads=[("panda_joint2", -1.0)],
+    )
+    # Continuous joints, stored as (cos, sin): springs with a rest near pi wrap around.
+    continuous = pinsettle.load_robot("double_pendulum_continuous")
+    names = [continuous.names[1], continuous.names[2]]
+    yield pair(
+        continuous,
+        joint_springs=[(names[0], 2.0, math.pi - 0.1), (names[1], 1.0, -3.0)],
+        joint_loads=[(names[1], 0.2)],
+    )
+    # A free-flyer root (quaternion) with a spring to the world and loads on the root.
+    floating = pinsettle.load_urdf(PENDULUM_URDF, floating=True)
+    yield pair(
+        floating,
+        start={"root_joint": [0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 1.0], "hinge": 0.5},
+        springs=[("arm", (0.0, 0.0, -1.0), "universe", (1.0, 0.0, 0.0), 20.0, 0.3)],
+        joint_loads=[("root_joint", [1.0, 0.0, -2.0, 0.1, 0.2, 0.0])],
+        point_loads=[("base", (0.1, 0.0, 0.0), (0.0, 0.0, 5.0), (0.0, 0.3, 0.0))],
+    )
+
+
+@pytest.mark.parametrize("index", range(4), ids=["ur5", "panda-locked", "continuous", "floating"])
+def test_reference_agrees_with_scene_static_force_for_every_element(index):
+    scene, ref = list(mixed_scenes())[index]
+    rng = np.random.default_rng(index)
+    for _ in range(6):
+        q = ref.random_configuration(rng)
+        expected = ref.force(q)
+        scale = max(1.0, np.max(np.abs(expected)))
+        assert np.allclose(scene.static_force(q), expected, rtol=1e-9, atol=1e-9 * scale)
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["bistable_pendulum", "planar_3link_spring", "double_pendulum_springs", "ur5_tool_spring"],
+)
+def test_static_force_is_the_gradient_of_the_potential(name, solved):
+    # V = gravity potential + spring energies; its gradient along each tangent direction,
+    # by central differences, is the static force of the reference and of the scene.
+    scene, _, ref = solved(name)
+    model = ref.full
+    rng = np.random.default_rng(1)
+    h = 1e-6
+    for _ in range(4):
+        q = ref.random_configuration(rng)
+        gradient = np.zeros(model.nv)
+        for i in range(model.nv):
+            step = np.zeros(model.nv)
+            step[i] = h
+            plus = ref.potential_reduced(model, pinocchio.integrate(model, q, step))
+            minus = ref.potential_reduced(model, pinocchio.integrate(model, q, -step))
+            gradient[i] = (plus - minus) / (2 * h)
+        scale = max(1.0, np.max(np.abs(gradient)))
+        assert np.allclose(ref.force(q), gradient, rtol=0.0, atol=1e-6 * scale)
+        assert np.allclose(scene.static_force(q), gradient, rtol=0.0, atol=1e-6 * scale)
+
+
+def test_continuous_potential_gradient_with_wrapped_springs():
+    scene, ref = list(mixed_scenes())[2]
+    model = ref.full
+    h = 1e-6
+    rng = np.random.default_rng(5)
+    for _ in range(6):
+        q = ref.random_configuration(rng, scale=3.0)
+        gradient = np.zeros(model.nv)
+        for i in range(model.nv):
+            step = np.zeros(model.nv)
+            step[i] = h
+            plus = ref.potential_reduced(model, pinocchio.integrate(model, q, step))
+            minus = ref.potential_reduced(model, pinocchio.integrate(model, q, -step))
+            gradient[i] = (plus - minus) / (2 * h)
+        # Loads are not in the potential: remove the joint load from the force.
+        force = scene.static_force(q)
+        force[1] += 0.2
+        assert np.allclose(force, gradient, rtol=0.0, atol=1e-6)
+
+
+# --- every scene of the library gives its stated outcome --------------------------------------
+
+
+@pytest.mark.parametrize("name", EQUILIBRIUM_SCENES)
+def test_scene_converges_to_an_equilibrium(name, solved):
+    scene, result, ref = solved(name)
+    assert result.status == "converged" and result.converged
+    assert result.q.shape == (scene.model.nq,)
+    residual = ref.residual(result.q)
+    assert residual < MAX_RESIDUAL
+    # The residual reported is the one recomputed independently.
+    assert result.residual == pytest.approx(residual, rel=1e-9, abs=1e-15)
+    # At rest: the stopping rule bounds the energy of the final state.
+    assert result.kinetic_energy <= result.settings.max_e
+    assert result.joints == scene.joint_values(result.q)
+
+
+@pytest.mark.parametrize("name", EQUILIBRIUM_SCENES)
+def test_scene_joint_values_are_the_stated_ones(name, solved):
+    scene, result, ref = solved(name)
+    expected = EXPECTED[name]
+    root = independent_root(ref, result.q, expected.neutral)
+    assert ref.residual(root) < 1e-10
+    eigenvalues = ref.eigenvalues(result.q)
+    smallest = min(e for e in eigenvalues if e > 1e-6)
+    # How far the solver may be from the exact equilibrium, given its residual.
+    solver_tol = 1e-6 + 3.0 * result.residual * math.sqrt(len(eigenvalues)) / smallest
+    assert np.max(np.abs(root - result.q)) <= solver_tol
+    root_values = scene.joint_values(root)
+    assert list(result.joints) == [scene.model.names[j] for j in range(1, scene.model.njoints)]
+    for joint, text in expected.joints.items():
+        value = float(text)
+        assert result.joints[joint] == pytest.approx(value, abs=rounding(text) + solver_tol)
+        if joint not in expected.neutral:
+            # The exact equilibrium (scipy) matches the comment to its last digit or 1e-6.
+            assert abs(root_values[joint] - value) <= max(rounding(text), 1e-6), joint
+
+
+@pytest.mark.parametrize("name", EQUILIBRIUM_SCENES)
+def test_scene_stiffness_eigenvalues_are_the_stated_ones(name, solved):
+    scene, result, ref = solved(name)
+    expected = EXPECTED[name]
+    model = ref.reduced(result.q)
+    q = ref.to_reduced(model, result.q)
+    k = ref.stiffness_reduced(model, q)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (k + k.T))
+    top = max(1.0, np.max(np.abs(eigenvalues)))
+    # Stable or neutral: no direction of negative stiffness beyond round-off.
+    assert eigenvalues.min() > -1e-6 * top, eigenvalues
+    neutral = np.abs(eigenvalues) <= 1e-6 * top
+    assert neutral.sum() == len(expected.neutral), eigenvalues
+    if expected.stable:
+        assert eigenvalues.min() > 1e-2, eigenvalues
+    else:
+        # The zero stiffness is along the neutral joints: moving one of them alone costs
+        # nothing (its column of K vanishes); every other direction is stiff.
+        for joint in expected.neutral:
+            column = k[:, model.idx_vs[model.getJointId(joint)]]
+            assert np.max(np.abs(column)) <= 1e-6 * top, (joint, column)
+        assert eigenvalues[~neutral].min() > 1e-2
+    if expected.eigenvalues:
+        assert len(eigenvalues) == len(expected.eigenvalues)
+        for got, text in zip(eigenvalues, expected.eigenvalues, strict=True):
+            tol = max(rounding(text), 1e-3 * abs(float(text))) if float(text) else 1e-6 * top
+            assert abs(got - float(text)) <= tol, (got, text)
+    if expected.eigen_range:
+        low, high = expected.eigen_range
+        assert eigenvalues[0] == pytest.approx(float(low), abs=rounding(low))
+        assert eigenvalues[-1] == pytest.approx(float(high), abs=rounding(high))
+
+
+@pytest.mark.parametrize("name, frame, point, xyz", POSITIONS, ids=[p[0] for p in POSITIONS])
+def test_scene_points_end_where_stated(name, frame, point, xyz, solved):
+    _, result, ref = solved(name)
+    model = ref.full
+    data = model.createData()
+    pinocchio.framesForwardKinematics(model, data, result.q)
+    position = data.oMf[Reference._frame(model, frame)].act(np.array(point))
+    for got, text in zip(position, xyz, strict=True):
+        if text is not None:
+            assert abs(got - float(text)) <= rounding(text) + 1e-6, (position, xyz)
+
+
+# --- particular scenes ------------------------------------------------------------------------
+
+
+def pendulum_constants(model: pinocchio.Model) -> tuple[float, float, float]:
+    """(m, g, l) of the pendulum: bob mass, gravity magnitude, distance of the bob below the
+    hinge, read from the model."""
+    inertia = model.inertias[model.getJointId("hinge")]
+    return inertia.mass, float(np.linalg.norm(model.gravity.linear)), -inertia.lever[2]
+
+
+def bistable_angle(m, g, arm, k, rest_length, h) -> float:
+    """theta* of the bistable pendulum from dV/dtheta = 0 (see the scene's header)."""
+    d = k * rest_length * h / (k * h + m * g)
+    return math.acos((arm**2 + h**2 - d**2) / (2 * arm * h))
+
+
+def test_pendulum_hangs_straight_down(solved):
+    scene, result, ref = solved("pendulum")
+    assert np.array_equal(scene.q0(), [1.0])
+    assert abs(result.joints["hinge"]) < 1e-6
+    m, g, arm = pendulum_constants(ref.full)
+    assert ref.eigenvalues(result.q) == pytest.approx([m * g * arm], rel=1e-6)  # 9.81
+
+
+def test_slider_sags_by_m_g_over_k(solved):
+    _, result, ref = solved("slider_spring")
+    m = ref.full.inertias[ref.full.getJointId("slider")].mass
+    g = -ref.full.gravity.linear[2]
+    k = ref.joint_springs[0][1]
+    assert (m, g, k) == (2.0, 9.81, 500.0)
+    assert result.joints["slider"] == pytest.approx(-m * g / k, abs=1e-8)
+    assert ref.eigenvalues(result.q) == pytest.approx([k], rel=1e-6)
+
+
+@pytest.fixture(scope="module")
+def bistable_theta() -> float:
+    ref = Reference.from_toml(ROBOTS / "bistable_pendulum.toml")
+    m, g, arm = pendulum_constants(ref.full)
+    (frame_a, point_a, frame_b, point_b, k, rest_length) = ref.springs[0]
+    assert (frame_a, frame_b) == ("arm", "universe") and point_a[2] == -arm
+    theta = bistable_angle(m, g, arm, k, rest_length, h=-point_b[2])
+    # The reference equilibrium by bracketing: the same angle.
+    root = brentq(lambda t: ref.force(np.array([t]))[0], 0.1, 1.5, xtol=1e-14)
+    assert root == pytest.approx(theta, abs=1e-10)
+    assert theta == pytest.approx(0.637354, abs=5e-7)
+    return theta
+
+
+@pytest.mark.parametrize("start", [0.2, -0.2, 1e-3, -1e-3])
+def test_bistable_pendulum_goes_to_the_side_it_starts_on(start, bistable_theta):
+    scene = pinsettle.load_scene(ROBOTS / "bistable_pendulum.toml")
+    ref = Reference.from_toml(ROBOTS / "bistable_pendulum.toml")
+    scene.set_start(hinge=start)
+    result = pinsettle.solve(scene)
+    assert result.converged
+    assert result.joints["hinge"] == pytest.approx(math.copysign(bistable_theta, start), abs=1e-6)
+    assert ref.residual(result.q) < MAX_RESIDUAL
+    (eigenvalue,) = ref.eigenvalues(result.q)
+    assert eigenvalue == pytest.approx(35.63, abs=0.005)  # stable, both sides alike
+    # The same through q0 (the scene's own start stays +0.2 then).
+    scene.set_start(hinge=0.2)
+    again = pinsettle.solve(scene, [start])
+    assert np.array_equal(again.q, result.q)
+
+
+def test_bistable_pendulum_hanging_down_is_an_unstable_equilibrium(bistable_theta):
+    scene = pinsettle.load_scene(ROBOTS / "bistable_pendulum.toml")
+    ref = Reference.from_toml(ROBOTS / "bistable_pendulum.toml")
+    down = np.zeros(1)
+    assert ref.residual(down) < 1e-12  # an equilibrium ...
+    (eigenvalue,) = ref.eigenvalues(down)
+    assert eigenvalue == pytest.approx(-30.19, abs=0.005)  # ... with negative stiffness
+    m, g, arm = pendulum_constants(ref.full)
+    _, _, _, anchor, k, rest_length = ref.springs[0]
+    h = -anchor[2]
+    d = h - arm  # the spring's length there: 1 m, 0.5 m short of its rest length
+    assert eigenvalue == pytest.approx(m * g * arm + k * (d - rest_length) * arm * h / d, rel=1e-6)
+    # Released exactly there, the solver gives it a kick and it falls to one side.
+    result = pinsettle.solve(scene, down)
+    assert result.converged and result.kicks >= 1
+    assert abs(result.joints["hinge"]) == pytest.approx(bistable_theta, abs=1e-6)
+
+
+@pytest.mark.parametrize("energy", ["exact", "simplified"])
+@pytest.mark.parametrize("kt", [0.0, 0.5])
+def test_each_energy_measure_and_kt(energy, kt, bistable_theta):
+    slider = pinsettle.load_scene(ROBOTS / "slider_spring.toml")
+    result = pinsettle.solve(slider, energy=energy, kt=kt)
+    assert result.converged
+    assert (result.settings.energy, result.settings.kt) == (energy, kt)
+    assert result.joints["slider"] == pytest.approx(-2.0 * 9.81 / 500.0, abs=1e-8)
+    assert slider.settings == pinsettle.Settings()  # overrides do not stick to the scene
+    bistable = pinsettle.load_scene(ROBOTS / "bistable_pendulum.toml")
+    ref = Reference.from_toml(ROBOTS / "bistable_pendulum.toml")
+    for start in (0.2, -0.2):
+        result = pinsettle.solve(bistable, [start], energy=energy, kt=kt)
+        assert result.converged
+        assert ref.residual(result.q) < MAX_RESIDUAL
+        assert result.joints["hinge"] == pytest.approx(
+            math.copysign(bistable_theta, start), abs=1e-6
+        )
+
+
+def test_torque_disk_never_settles(solved):
+    scene, result, ref = solved("torque_disk")
+    assert result.status == "max_steps" and not result.converged
+    assert result.steps == scene.settings.max_steps == 20000
+    assert result.peaks == 0  # the energy never stops growing
+    # Balanced: gravity does nothing, the net static force is the effort, everywhere.
+    assert ref.residual(result.q) == pytest.approx(1.0, rel=1e-12)
+    assert result.residual == pytest.approx(1.0, rel=1e-12)
+    # Uniform acceleration 1 N m / 0.02 kg m^2 = 50 rad/s^2 from rest.
+    inertia = ref.full.inertias[1].inertia[1, 1]
+    assert inertia == pytest.approx(0.02)
+    speed = result.sim_time / inertia
+    assert result.sim_time == pytest.approx(20000 * scene.settings.dt, rel=1e-9)
+    assert result.v[0] == pytest.approx(speed, rel=1e-9)
+    assert result.kinetic_energy == pytest.approx(0.5 * inertia * speed**2, rel=1e-9)
+    traced = pinsettle.solve(scene, trace_every=100)
+    assert np.array_equal(traced.q, result.q)
+    energy = traced.trace.kinetic_energy
+    assert len(energy) > 100 and np.all(np.diff(energy) > 0)
+    assert energy[-1] <= result.kinetic_energy
+
+
+def test_panda_locked_fingers_stay_exactly_where_they_start(solved):
+    scene, result, ref = solved("panda_fingers_locked")
+    full = scene.model
+    assert full.nq == 9 and result.q.shape == (9,) and result.v.shape == (9,)
+    assert scene.compile().model.nv == 7  # the fingers are out of the solve
+    for finger in ("panda_finger_joint1", "panda_finger_joint2"):
+        j = full.getJointId(finger)
+        assert result.q[full.idx_qs[j]] == 0.02  # exactly: never integrated
+        assert result.v[full.idx_vs[j]] == 0.0
+        assert result.joints[finger] == 0.02
+    # Locked elsewhere through q0: they stay at that value instead.
+    q0 = scene.q0()
+    q0[full.idx_qs[full.getJointId("panda_finger_joint1")]] = 0.035
+    other = pinsettle.solve(scene, q0, max_steps=2000)
+    assert other.joints["panda_finger_joint1"] == 0.035
+    assert other.joints["panda_finger_joint2"] == 0.02
+
+
+def test_chain20_hangs_straight_down(solved):
+    _, result, ref = solved("chain20")
+    assert len(result.joints) == 20
+    assert max(abs(wrap(value)) for value in result.joints.values()) < 1e-5
+    assert ref.eigenvalues(result.q).min() > 0.03
+
+
+def test_ur5_base_rotation_is_neutral_without_the_spring(solved):
+    _, result, ref = solved("ur5")
+    assert ref.residual(result.q) < MAX_RESIDUAL
+    turned = result.q.copy()
+    turned[0] += 1.0  # shoulder_pan_joint: a vertical axis
+    assert ref.residual(turned) < MAX_RESIDUAL
+    # With the spring to an anchor off the axis, turning the base is not free any more.
+    _, result, ref = solved("ur5_tool_spring")
+    turned = result.q.copy()
+    turned[0] += 0.1
+    assert ref.residual(turned) > 1.0
+
+
+def test_ur5_tool_spring_tension_and_the_other_pose(solved):
+    _, result, ref = solved("ur5_tool_spring")
+    model = ref.full
+    data = model.createData()
+    pinocchio.framesForwardKinematics(model, data, result.q)
+    tool = data.oMf[model.getFrameId("tool0")].translation
+    anchor = ref.springs[0][3]
+    length = np.linalg.norm(anchor - tool)
+    assert length == pytest.approx(0.396, abs=5e-4)
+    assert ref.springs[0][4] * length == pytest.approx(79.2, abs=0.05)
+    assert ref.potential_reduced(model, result.q) == pytest.approx(7.423, abs=5e-4)
+    # The wrist-flipped pose of the comment: an equilibrium too, stable, of lower potential.
+    flipped = result.q.copy()
+    flipped[3:5] = [-1.0118, 1.4887]
+    flipped = independent_root(ref, flipped, neutral=("wrist_3_joint",))
+    assert ref.residual(flipped) < 1e-10
+    assert ref.eigenvalues(flipped)[1:].min() > 1.0
+    assert ref.potential_reduced(model, flipped) == pytest.approx(7.384, abs=5e-4)
+    assert np.max(np.abs(np.delete(flipped - result.q, [3, 4, 5]))) < 0.006
+
+
+# --- scenes built in code ---------------------------------------------------------------------
+
+
+def test_gravity_per_scene():
+    model = pinsettle.load_urdf(SLIDER_URDF)
+    default = np.array(model.gravity.linear)
+    sag = {}
+    for gz in (-10.0, -20.0):
+        scene = pinsettle.Scene(model, gravity=[0.0, 0.0, gz]).add_joint_spring("slider", 500.0)
+        assert np.array_equal(scene.gravity, [0.0, 0.0, gz])
+        result = pinsettle.solve(scene)
+        assert result.converged
+        sag[gz] = result.joints["slider"]
+    assert sag[-20.0] == pytest.approx(-2.0 * 20.0 / 500.0, abs=1e-8)
+    assert sag[-20.0] == pytest.approx(2.0 * sag[-10.0], rel=1e-6)
+    assert np.array_equal(model.gravity.linear, default)  # the scene has its own copy
+
+
+def test_gravity_from_a_scene_file(tmp_path):
+    text = (ROBOTS / "slider_spring.toml").read_text(encoding="utf-8")
+    text = text.replace('urdf = "slider.urdf"', f'urdf = "{SLIDER_URDF}"\ngravity = [0, 0, -20]')
+    path = tmp_path / "heavy.toml"
+    path.write_text(text, encoding="utf-8")
+    result = pinsettle.solve(pinsettle.load_scene(path))
+    assert result.joints["slider"] == pytest.approx(-2.0 * 20.0 / 500.0, abs=1e-8)
+    assert Reference.from_toml(path).residual(result.q) < MAX_RESIDUAL
+
+
+def test_sideways_gravity():
+    # Gravity along +x: the bob (at x = -sin(hinge)) hangs towards +x, at hinge = -pi/2.
+    scene, ref = pair(pinsettle.load_urdf(PENDULUM_URDF), gravity=[9.81, 0.0, 0.0])
+    result = pinsettle.solve(scene)
+    assert result.converged
+    assert result.joints["hinge"] == pytest.approx(-math.pi / 2, abs=1e-6)
+    assert ref.residual(result.q) < MAX_RESIDUAL
+    assert ref.eigenvalues(result.q).min() > 9.0
+
+
+CODE_VS_FILE = {
+    "pendulum": (
+        lambda: (
+            pinsettle.Scene.from_urdf(PENDULUM_URDF, settings={"kt": 0.3})
+            .set_start(hinge=0.3)
+            .add_joint_spring("hinge", 5.0, rest=0.2, damping=0.1)
+            .add_spring({"frame": "arm", "point": [0, 0, -1]}, ("universe", [1, 0, -1]), 20.0, 0.5)
+            .add_load("hinge", 0.4)
+            .add_load(frame="arm", point=[0, 0, -0.5], force=[0, 0, -3], torque=[0, 0.1, 0])
+        ),
+        f"""
+        [model]
+        urdf = "{PENDULUM_URDF}"
+        [start]
+        hinge = 0.3
+        [[joint_spring]]
+        joint = "hinge"
+        stiffness = 5.0
+        rest = 0.2
+        damping = 0.1
+        [[spring]]
+        a = {{ frame = "arm", point = [0.0, 0.0, -1.0] }}
+        b = {{ frame = "universe", point = [1.0, 0.0, -1.0] }}
+        stiffness = 20.0
+        rest_length = 0.5
+        [[load]]
+        joint = "hinge"
+        effort = 0.4
+        [[load]]
+        frame = "arm"
+        point = [0.0, 0.0, -0.5]
+        force = [0.0, 0.0, -3.0]
+        torque = [0.0, 0.1, 0.0]
+        [solver]
+        kt = 0.3
+        """,
+    ),
+    "planar-locked": (
+        lambda: (
+            pinsettle.Scene.from_urdf(PLANAR_URDF)
+            .set_start(joint1=-0.2, joint2=0.4)
+            .lock("joint2")
+            .add_joint_spring("joint3", 3.0, rest=0.5)
+            .add_spring(("link3", [0, 0, -0.5]), ("link1", [0.05, 0, -0.25]), 40.0, rest_length=0.1)
+            .add_load(frame="link3", point=[0, 0, -0.5], force=[2, 0, 0])
+            .add_load("joint1", -0.5)
+        ),
+        f"""
+        [model]
+        urdf = "{PLANAR_URDF}"
+        locked = ["joint2"]
+        [start]
+        joint1 = -0.2
+        joint2 = 0.4
+        [[joint_spring]]
+        joint = "joint3"
+        stiffness = 3.0
+        rest = 0.5
+        [[spring]]
+        a = {{ frame = "link3", point = [0, 0, -0.5] }}
+        b = {{ frame = "link1", point = [0.05, 0, -0.25] }}
+        stiffness = 40.0
+        rest_length = 0.1
+        [[load]]
+        frame = "link3"
+        point = [0, 0, -0.5]
+        force = [2, 0, 0]
+        [[load]]
+        joint = "joint1"
+        effort = -0.5
+        """,
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CODE_VS_FILE))
+def test_scene_in_code_is_the_scene_file(case, tmp_path):
+    build, text = CODE_VS_FILE[case]
+    path = tmp_path / f"{case}.toml"
+    path.write_text("\n".join(line.strip() for line in text.splitlines()), encoding="utf-8")
+    from_file = pinsettle.load_scene(path)
+    in_code = build()
+    assert in_code.settings == from_file.settings
+    assert in_code.locked == from_file.locked
+    assert np.array_equal(in_code.q0(), from_file.q0())
+    a, b = pinsettle.solve(in_code), pinsettle.solve(from_file)
+    assert a.converged
+    assert np.array_equal(a.q, b.q) and a.steps == b.steps
+    ref = Reference.from_toml(path)
+    assert ref.residual(a.q) < MAX_RESIDUAL
+    assert ref.eigenvalues(a.q).min() > 0.0
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        q = ref.random_configuration(rng)
+        assert np.allclose(in_code.static_force(q), ref.force(q), rtol=1e-9, atol=1e-9)
+        assert np.array_equal(in_code.static_force(q), from_file.static_force(q))
+
+
+def bob_x_sign(model: pinocchio.Model) -> float:
+    """d(x of the bob)/d(hinge) at 0, by pinocchio's forward kinematics: -1 for this URDF."""
+    data = model.createData()
+    xs = []
+    for angle in (-1e-3, 1e-3):
+        pinocchio.framesForwardKinematics(model, data, np.array([angle]))
+        xs.append(data.oMf[model.getFrameId("arm")].act(np.array([0.0, 0.0, -1.0]))[0])
+    return math.copysign(1.0, xs[1] - xs[0])
+
+
+@pytest.mark.parametrize("force", [5.0, -3.0, 20.0])
+def test_point_load_on_the_pendulum(force):
+    model = pinsettle.load_urdf(PENDULUM_URDF)
+    m, g, arm = pendulum_constants(model)
+    scene, ref = pair(model, point_loads=[("arm", (0.0, 0.0, -1.0), (force, 0.0, 0.0), (0, 0, 0))])
+    result = pinsettle.solve(scene)
+    assert result.converged
+    # V = m g l (1 - cos t) - F x(t), x = s l sin(t): tan(t) = s F / (m g).
+    expected = math.atan2(bob_x_sign(model) * force, m * g)
+    assert result.joints["hinge"] == pytest.approx(expected, abs=1e-6)
+    assert math.copysign(1.0, result.joints["hinge"]) == -math.copysign(1.0, force)
+    assert ref.residual(result.q) < MAX_RESIDUAL
+
+
+@pytest.mark.parametrize("effort, kt", [(3.0, 0.5), (-3.0, 0.5), (6.0, 0.5), (9.0, 0.0)])
+def test_joint_load_on_the_pendulum(effort, kt):
+    # (With 9 N m, close to m g l = 9.81, the first swing goes over the top; with kt = 0.5
+    # the pendulum then keeps spinning round and never settles, so that case runs with kt = 0.)
+    model = pinsettle.load_urdf(PENDULUM_URDF)
+    m, g, arm = pendulum_constants(model)
+    joint, ref = pair(model, joint_loads=[("hinge", effort)])
+    # The same moment as a torque about the hinge axis (y), applied at a point of the arm.
+    point, _ = pair(model, point_loads=[("arm", (0.0, 0.0, -0.5), (0, 0, 0), (0, effort, 0))])
+    a, b = pinsettle.solve(joint, kt=kt), pinsettle.solve(point, kt=kt)
+    assert a.converged and b.converged
+    # V = m g l (1 - cos t) - tau t: sin(t) = tau / (m g l), on the side the effort pushes.
+    assert a.joints["hinge"] == pytest.approx(math.asin(effort / (m * g * arm)), abs=1e-6)
+    assert b.joints["hinge"] == pytest.approx(a.joints["hinge"], abs=1e-6)
+    assert ref.residual(a.q) < MAX_RESIDUAL
+
+
+@pytest.mark.parametrize("kind", ["spring", "joint_spring"])
+def test_damping_changes_the_motion_not_the_equilibrium(kind):
+    def build(damping):
+        if kind == "spring":
+            return (
+                pinsettle.Scene.from_urdf(PENDULUM_URDF)
+                .set_start(hinge=0.2)
+                .add_spring(("arm", [0, 0, -1]), ("universe", [0, 0, -2]), 40.0, 1.5, damping)
+            )
+        return pinsettle.Scene.from_urdf(SLIDER_URDF).add_joint_spring(
+            "slider", 500.0, 0.0, damping
+        )
+
+    undamped, damped = pinsettle.solve(build(0.0)), pinsettle.solve(build(5.0))
+    assert undamped.converged and damped.converged
+    assert damped.q == pytest.approx(undamped.q, abs=1e-6)
+    assert build(5.0).residual(damped.q) < MAX_RESIDUAL
+    assert damped.steps != undamped.steps
+    # The damper acts during the motion: same start, different states after a few steps.
+    early_a = pinsettle.solve(build(0.0), max_steps=50)
+    early_b = pinsettle.solve(build(5.0), max_steps=50)
+    assert not np.allclose(early_a.v, early_b.v, rtol=1e-6, atol=0.0)
+    # ... and does not enter the static force.
+    q = np.array([0.1]) if kind == "spring" else np.array([0.01])
+    assert np.array_equal(build(0.0).static_force(q), build(5.0).static_force(q))
+
+
+def test_continuous_joint_spring_wraps_around():
+    # A balanced disk (continuous joint: q = (cos, sin)) on a spring with rest 3.0 rad, pushed
+    # on by 0.5 N m: the spring stretches by 0.5 rad across +-pi, to 3.5 rad = 3.5 - 2 pi.
+    model = pinsettle.load_urdf(DISK_URDF)
+    assert model.nq == 2 and model.nv == 1
+    scene, ref = pair(
+        model,
+        start={"wheel": -3.0},
+        joint_springs=[("wheel", 1.0, 3.0)],
+        joint_loads=[("wheel", 0.5)],
+    )
+
+    def at(angle):
+        return np.array([math.cos(angle), math.sin(angle)])
+
+    # At -3.0 the wrapped stretch is -3.0 - 3.0 + 2 pi = 0.283 rad, not -6.
+    assert scene.static_force(at(-3.0)) == pytest.approx([2 * math.pi - 6.0 - 0.5], abs=1e-12)
+    assert ref.force(at(-3.0)) == pytest.approx(scene.static_force(at(-3.0)), abs=1e-12)
+    result = pinsettle.solve(scene)
+    assert result.converged
+    root = brentq(lambda t: ref.force(at(t))[0], -3.1, -2.5, xtol=1e-14)
+    assert root == pytest.approx(3.5 - 2 * math.pi, abs=1e-12)
+    assert result.joints["wheel"] == pytest.approx(root, abs=1e-6)
+    assert ref.eigenvalues(result.q) == pytest.approx([1.0], rel=1e-6)
+    assert np.linalg.norm(result.q) == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("source", ["code", "file"])
+def test_scene_without_elements_is_the_bare_solve(source):
+    if source == "code":
+        scene = pinsettle.Scene.from_urdf(PENDULUM_URDF).set_start(hinge=1.0)
+    else:
+        scene = pinsettle.load_scene(ROBOTS / "pendulum.toml")
+    assert not scene.has_elements
+    a = pinsettle.solve(scene)
+    b = pinsettle.solve(scene.model, scene.q0())
+    assert a.converged
+    assert np.array_equal(a.q, b.q) and np.array_equal(a.v, b.v)
+    assert (a.steps, a.peaks, a.residual) == (b.steps, b.peaks, b.residual)
+
+
+def test_ur5_scene_is_the_bare_ur5(solved):
+    _, result, _ = solved("ur5")
+    bare = pinsettle.solve(pinsettle.load_robot("ur5"))
+    assert np.array_equal(result.q, bare.q) and result.steps == bare.steps

@@ -487,27 +487,36 @@ def test_result_summary_names_the_joints(ur5):
     assert all(ur5.names[j] in text for j in range(1, ur5.njoints))
 
 
-# --- Known package bugs (see the reasons) --------------------------------------------------
+# --- Rest on an equilibrium: the stability verdict decides ---------------------------------
 
 
-def test_released_at_an_equilibrium_converges(pendulum):
-    # q = 0 is an exact equilibrium: the energy stays exactly 0, so the solver kicks it with a
-    # tiny velocity; it rings down where it is, being stable.
+def test_released_at_a_stable_equilibrium_converges_at_once(pendulum):
+    # q = 0 is an exact equilibrium: the energy stays exactly 0 for a window; the stiffness
+    # there is positive, so that rest is accepted without a push.
     result = pinsettle.solve(pendulum, [0.0], max_e=1e-20, max_steps=50000)
     assert result.status == "converged"
-    assert result.kicks == 1
-    assert abs(result.q[0]) < 1e-8
-    assert result.residual < 1e-8
+    assert result.pushes == 0
+    assert result.stability == "stable"
+    assert result.steps <= result.settings.ds + 1
+    assert result.q[0] == 0.0
+    assert result.min_stiffness_eigenvalue == pytest.approx(9.81, rel=1e-9)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Neutral everywhere (no gravity): the rest kick sets it drifting; recognising "
-    "neutral equilibria is the robustness issue's stability verdict",
-)
-def test_without_gravity_converges_at_once(ur5):
+def test_released_upright_is_pushed_off_and_hangs_down(pendulum):
+    # q = pi is an equilibrium too, but a maximum: it must not be reported converged there.
+    result = pinsettle.solve(pendulum, [np.pi], max_e=1e-20, max_steps=200000)
+    assert result.status == "converged"
+    assert result.pushes >= 1
+    assert result.stability == "stable"
+    assert abs(np.sin(result.q[0])) < 1e-8 and np.cos(result.q[0]) > 0
+
+
+def test_without_gravity_converges_at_once_as_neutral(ur5):
     model = ur5.copy()
     model.gravity = pinocchio.Motion.Zero()
     result = pinsettle.solve(model, max_steps=5000)
     assert result.residual == 0.0
     assert result.status == "converged"
+    assert result.stability == "neutral"
+    assert result.neutral_directions == model.nv
+    assert result.pushes == 0

@@ -14,6 +14,7 @@
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/solver.hpp"
+#include "pinsettle/stability.hpp"
 
 #include <memory>
 #include <optional>
@@ -41,8 +42,8 @@ namespace
 
   // The force elements of a scene, already resolved to joint and frame indices by the Python
   // layer (pinsettle/_scene.py), which names them in its messages: a dict of lists of tuples.
-  std::unique_ptr<ForceElements>
-  elementsFrom(const pinocchio::Model & model, const py::object & spec)
+  std::unique_ptr<ForceElements> elementsFrom(
+    const pinocchio::Model & model, const py::object & spec)
   {
     if (spec.is_none())
       return nullptr;
@@ -86,7 +87,10 @@ namespace
     out["status"] = toString(r.status);
     out["steps"] = r.steps;
     out["peaks"] = r.peaks;
-    out["kicks"] = r.kicks;
+    out["pushes"] = r.pushes;
+    out["stability"] = toString(r.stability);
+    out["min_stiffness_eigenvalue"] = r.min_stiffness_eigenvalue;
+    out["neutral_directions"] = r.neutral_directions;
     out["sim_time"] = r.sim_time;
     out["wall_time"] = r.wall_time;
     out["kinetic_energy"] = r.kinetic_energy;
@@ -213,6 +217,26 @@ PYBIND11_MODULE(_core, m)
       return computeKineticEnergies(model, data, q, v);
     },
     py::arg("model"), py::arg("q"), py::arg("v"));
+
+  m.def(
+    "stiffness",
+    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
+      const pinocchio::Model & model = modelFrom(model_obj);
+      checkConfiguration(model, q, "q");
+      const std::unique_ptr<ForceElements> elements = elementsFrom(model, spec);
+      pinocchio::Data data(model);
+      const StabilityReport report = assessStability(model, data, q, elements.get());
+      py::dict out;
+      out["stiffness_matrix"] = computeStiffnessMatrix(model, data, q, elements.get());
+      out["verdict"] = toString(report.verdict);
+      out["min_eigenvalue"] = report.min_eigenvalue;
+      out["neutral_directions"] = report.neutral_directions;
+      out["tolerance"] = report.tolerance;
+      out["eigenvalues"] = report.eigenvalues;
+      out["softest_direction"] = report.softest_direction;
+      return out;
+    },
+    py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
 
   m.def(
     "static_force",

@@ -30,8 +30,8 @@ namespace pinsettle
       if (!x.allFinite())
       {
         std::ostringstream msg;
-        msg << element << ": every entry of " << name << " must be finite, got ["
-            << x.transpose() << "]";
+        msg << element << ": every entry of " << name << " must be finite, got [" << x.transpose()
+            << "]";
         throw std::invalid_argument(msg.str());
       }
     }
@@ -225,7 +225,8 @@ namespace pinsettle
         const Eigen::Vector3d u = d / length;
         double tension = s.stiffness * (length - s.rest_length);
         if (s.damping > 0.)
-          tension += s.damping * u.dot(worldPointVelocity(data, s.b) - worldPointVelocity(data, s.a));
+          tension +=
+            s.damping * u.dot(worldPointVelocity(data, s.b) - worldPointVelocity(data, s.a));
         force_on_a = tension * u;
       }
       else

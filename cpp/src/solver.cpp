@@ -4,6 +4,7 @@
 
 #include "pinsettle/solver.hpp"
 #include "pinsettle/energy.hpp"
+#include "pinsettle/stability.hpp"
 
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
@@ -187,9 +188,12 @@ namespace pinsettle
     // Steps in a row with exactly zero energy: a start at exact rest, where "energy decreasing"
     // never holds and the stopping rule alone would run to max_steps.
     std::int64_t still = 0;
+    // Step of the last stability assessment.
+    std::int64_t last_assessed = 0;
     double time = 0.;
     Status status = Status::MaxSteps;
     std::int64_t step = 0;
+    StabilityReport report;
 
     for (; step < settings.max_steps; ++step)
     {
@@ -253,33 +257,44 @@ namespace pinsettle
       const bool decreasing = fresh >= 1 && e < e_prev;
       // e <= max_e is necessary for the sum to be; the exact sum is only formed then, since a
       // running sum would keep the round-off of the early, large energies.
-      if (decreasing && window_count == ds && e <= max_e)
+      const bool quiet = window_count == ds && e <= max_e
+                         && std::accumulate(window_.begin(), window_.end(), 0.) <= max_e;
+      // Exact rest for a whole window: the start is an equilibrium (stable or not), where
+      // "energy decreasing" never holds.
+      still = e == 0. ? still + 1 : 0;
+      const bool exact_rest = still >= settings.ds;
+      // Creeping: quiet but still rising, as on a start at rest a round-off away from a saddle
+      // or a maximum; checked once a window, since a stable rest soon turns to decreasing.
+      const bool creeping = quiet && !decreasing && step - last_assessed >= settings.ds;
+
+      // At rest: accept a stable or neutral rest; from an unstable one (a saddle or a maximum)
+      // push the mechanism along the most negative stiffness direction with a tiny energy
+      // (10 max_e) and go on: it falls away to where it would really stay.
+      if ((quiet && decreasing) || exact_rest || creeping)
       {
-        const double sum = std::accumulate(window_.begin(), window_.end(), 0.);
-        if (sum <= max_e)
+        report = assessStability(model, data, q_, forces);
+        report_q_ = q_;
+        last_assessed = step;
+        if (report.verdict != Stability::Unstable && !creeping)
         {
           status = Status::Converged;
           ++step;
           break;
         }
-      }
-
-      // Exact rest for a whole window: the start is an equilibrium, stable or not. Kick the
-      // mechanism with a tiny velocity (energy 10 max_e, a fixed direction that no symmetry
-      // cancels) and go on: it rings down where it is if that is stable, and falls away to
-      // where it would really stay if not.
-      still = e == 0. ? still + 1 : 0;
-      if (still >= settings.ds && max_e > 0.)
-      {
-        for (Eigen::Index k = 0; k < v_.size(); ++k)
-          v_[k] = std::sin(1. + 2.399963 * static_cast<double>(k));
-        const std::pair<double, double> unit = computeKineticEnergies(model, data, q_, v_);
-        const double e_unit = exact ? unit.first : unit.second;
-        v_ *= e_unit > 0. ? std::sqrt(10. * max_e / e_unit) : 0.;
-        ++result.kicks;
-        still = 0;
-        fresh = 0;
-        continue;
+        if (report.verdict == Stability::Unstable)
+        {
+          v_ = report.softest_direction;
+          const std::pair<double, double> unit = computeKineticEnergies(model, data, q_, v_);
+          const double e_unit = exact ? unit.first : unit.second;
+          const double e_push = std::max(10. * max_e, 1e-30);
+          v_ *= e_unit > 0. ? std::sqrt(e_push / e_unit) : 0.;
+          ++result.pushes;
+          still = 0;
+          fresh = 0;
+          window_count = 0;
+          continue;
+        }
+        // Creeping near a stable or neutral rest: not at rest yet, go on.
       }
 
       // Peak: the middle of the last three samples exceeds both neighbours by more than err
@@ -332,6 +347,11 @@ namespace pinsettle
     result.kinetic_energy = energies.first;
     result.simplified_kinetic_energy = energies.second;
     result.residual = computeStaticResidual(model, data, q_, forces);
+    if (report.verdict == Stability::Unknown || report_q_ != q_)
+      report = assessStability(model, data, q_, forces);
+    result.stability = report.verdict;
+    result.min_stiffness_eigenvalue = report.min_eigenvalue;
+    result.neutral_directions = report.neutral_directions;
     result.wall_time = std::chrono::duration<double>(Clock::now() - start).count();
     return result;
   }

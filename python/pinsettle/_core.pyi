@@ -29,8 +29,18 @@ def solve(
     v0: npt.NDArray[np.float64],
     settings: Settings,
     callback: Callable[[], bool] | None = ...,
+    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
 ) -> dict[str, Any]: ...
 def kinetic_energies(
     model: pinocchio.Model, q: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
 ) -> tuple[float, float]: ...
-def static_residual(model: pinocchio.Model, q: npt.NDArray[np.float64]) -> float: ...
+def static_force(
+    model: pinocchio.Model,
+    q: npt.NDArray[np.float64],
+    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+) -> npt.NDArray[np.float64]: ...
+def stiffness(
+    model: pinocchio.Model,
+    q: npt.NDArray[np.float64],
+    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+) -> dict[str, Any]: ...

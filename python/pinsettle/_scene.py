@@ -458,10 +458,10 @@ class _Compiled:
             if ja == jb:
                 body = "the world" if ja == 0 else f"the body of joint '{model.names[ja]}'"
                 raise SceneError(
-                    f"[[spring]] #{k}: both ends ('{s.a_frame}' and '{s.b_frame}') are on "
-                    f"{body}"
-                    + (" once the locked joints are removed" if locked_ids else "")
-                    + "; such a spring exerts no net effort"
+                    f"[[spring]] #{k}: both ends ('{s.a_frame}' and '{s.b_frame}') are on the "
+                    f"same rigid body ({body}"
+                    + (", once the locked joints are removed" if locked_ids else "")
+                    + "); such a spring exerts no net effort"
                 )
 
         spec: dict[str, list] = {
@@ -501,7 +501,7 @@ class _Compiled:
         self.elements = spec if any(spec.values()) else None
         try:
             _core.static_force(model, pinocchio.neutral(model), self.elements)
-        except ValueError as error:  # e.g. both ends of a spring on one rigid body
+        except ValueError as error:  # anything the C++ checks catch that the above did not
             raise SceneError(str(error)) from None
 
     def full_q(self, q: np.ndarray) -> np.ndarray:

@@ -116,6 +116,10 @@ class Result:
     'time_limit', 'aborted', 'diverged'; ``residual`` is max |rnea(q, 0, 0) - applied efforts|
     over the free joints in N m or N; energies are those of the final state; ``joints`` maps
     each joint name to its final value (a number for a 1-DoF joint, a list otherwise).
+    ``stability`` is 'stable', 'neutral' or 'unstable' from the eigenvalues of the stiffness
+    matrix at ``q`` (``min_stiffness_eigenvalue`` the smallest, N m/rad or N/m;
+    ``neutral_directions`` how many are zero within the tolerance); ``pushes`` counts the
+    pushes off an unstable rest (a saddle or a maximum is never reported converged).
     """
 
     q: np.ndarray
@@ -123,12 +127,15 @@ class Result:
     status: str
     steps: int
     peaks: int
-    kicks: int
+    pushes: int
     sim_time: float
     wall_time: float
     kinetic_energy: float
     simplified_kinetic_energy: float
     residual: float
+    stability: str
+    min_stiffness_eigenvalue: float
+    neutral_directions: int
     trace: Trace | None = None
     settings: Settings = field(default_factory=Settings, repr=False)
     joints: dict[str, float | list[float]] = field(default_factory=dict, repr=False)
@@ -139,14 +146,17 @@ class Result:
 
     def summary(self) -> str:
         """A readable report with the final joint values by name."""
+        neutral = f", {self.neutral_directions} neutral" if self.neutral_directions else ""
         lines = [
             f"status           {self.status}",
             f"steps            {self.steps} ({self.peaks} damping events, "
-            + (f"{self.kicks} kicks at rest, " if self.kicks else "")
+            + (f"{self.pushes} pushes off an unstable rest, " if self.pushes else "")
             + f"{self.sim_time:.4g} s simulated)",
             f"wall time        {self.wall_time * 1e3:.3f} ms",
             f"residual         {self.residual:.3e} (max |net static generalized force|)",
             f"kinetic energy   {self.kinetic_energy:.3e} J",
+            f"stability        {self.stability} (smallest stiffness eigenvalue "
+            f"{self.min_stiffness_eigenvalue:.4g}{neutral})",
         ]
         if self.joints:
             lines.append("joints")
@@ -164,13 +174,15 @@ class Result:
             "q": self.q.tolist(),
             "steps": self.steps,
             "peaks": self.peaks,
-            "kicks": self.kicks,
+            "pushes": self.pushes,
             "sim_time_s": self.sim_time,
             "wall_time_s": self.wall_time,
             "residual": self.residual,
             "kinetic_energy": self.kinetic_energy,
             "simplified_kinetic_energy": self.simplified_kinetic_energy,
-            "stability": None,
+            "stability": self.stability,
+            "min_stiffness_eigenvalue": self.min_stiffness_eigenvalue,
+            "neutral_directions": self.neutral_directions,
         }
 
 
@@ -242,6 +254,41 @@ def static_residual(model: Any, q: Any) -> float:
         return model.residual(q)
     force = static_force(model, q)
     return float(np.max(np.abs(force)))
+
+
+@dataclass(frozen=True)
+class StabilityReport:
+    """The stiffness matrix K = d tau_static / dq at a configuration and its verdict.
+
+    ``verdict``: 'stable' (every eigenvalue of the symmetric part of K positive beyond
+    ``tolerance``), 'neutral' (none negative, ``neutral_directions`` zero) or 'unstable' (one
+    negative). ``eigenvalues`` in increasing order (N m/rad or N/m), ``softest_direction`` the
+    unit eigenvector of the smallest (a joint-velocity direction, dim nv).
+    """
+
+    verdict: str
+    min_eigenvalue: float
+    neutral_directions: int
+    tolerance: float
+    eigenvalues: np.ndarray
+    softest_direction: np.ndarray
+    stiffness_matrix: np.ndarray
+
+
+def assess_stability(model: Any, q: Any) -> StabilityReport:
+    """Stability of a rest at ``q`` of a ``pinocchio.Model`` under gravity or of a ``Scene``
+    (all its elements; K on the free joints). Gravity's part of K comes from Pinocchio's
+    analytic derivatives, the elements' part from central finite differences."""
+    from ._scene import Scene
+
+    if isinstance(model, Scene):
+        q = _as_vector(q, "q", model.model.nq, "model.nq")
+        compiled = model.compile(q) if model.locked else model.compile()
+        raw = _core.stiffness(compiled.model, q[compiled.q_index], compiled.elements)
+    else:
+        _check_model(model)
+        raw = _core.stiffness(model, _as_vector(q, "q", model.nq, "model.nq"))
+    return StabilityReport(**raw)
 
 
 def solve(

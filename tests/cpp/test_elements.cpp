@@ -261,3 +261,75 @@ BOOST_AUTO_TEST_CASE(bad_elements_are_rejected)
   rejects([&] { on_ball.addJointSpring(1, 1.); }, "1-DoF");
   BOOST_CHECK(elements.empty());
 }
+
+BOOST_AUTO_TEST_CASE(stiffness_matrix_matches_finite_differences)
+{
+  // Gravity's part is analytic, the elements' part by finite differences inside: compare the
+  // whole with central differences of computeStaticForce taken here.
+  const pinocchio::Model model = ur5();
+  pinocchio::Data data(model);
+  pinsettle::ForceElements elements(model);
+  elements.addPointSpring(
+    model.getFrameId("tool0"), Eigen::Vector3d::Zero(), 0, Eigen::Vector3d(0.4, 0.2, 0.6), 200.);
+  elements.addJointSpring(2, 15., 0.3);
+  std::srand(11);
+  for (const pinsettle::ForceModel * forces :
+       {static_cast<const pinsettle::ForceModel *>(nullptr),
+        static_cast<const pinsettle::ForceModel *>(&elements)})
+  {
+    const Eigen::VectorXd q = pinocchio::randomConfiguration(model);
+    const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model, data, q, forces);
+    Eigen::MatrixXd fd(model.nv, model.nv);
+    for (int k = 0; k < model.nv; ++k)
+    {
+      Eigen::VectorXd dq = Eigen::VectorXd::Zero(model.nv);
+      dq[k] = 1e-6;
+      fd.col(k) =
+        (pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, dq), forces)
+         - pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, -dq), forces))
+        / 2e-6;
+    }
+    BOOST_CHECK_SMALL((K - fd).lpNorm<Eigen::Infinity>(), 1e-5 * (1. + fd.norm()));
+  }
+}
+
+BOOST_AUTO_TEST_CASE(stability_verdicts_of_a_pendulum)
+{
+  // K = m g l cos q: stable hanging down, unstable upright, neutral without gravity.
+  pinocchio::Model model = pendulum();
+  pinocchio::Data data(model);
+  const pinsettle::StabilityReport down =
+    pinsettle::assessStability(model, data, Eigen::VectorXd::Constant(1, 0.));
+  BOOST_CHECK(down.verdict == pinsettle::Stability::Stable);
+  BOOST_CHECK_CLOSE(down.min_eigenvalue, 9.81, 1e-9);
+  const pinsettle::StabilityReport up =
+    pinsettle::assessStability(model, data, Eigen::VectorXd::Constant(1, M_PI));
+  BOOST_CHECK(up.verdict == pinsettle::Stability::Unstable);
+  BOOST_CHECK_CLOSE(up.min_eigenvalue, -9.81, 1e-9);
+  model.gravity.setZero();
+  pinocchio::Data free_data(model);
+  const pinsettle::StabilityReport free =
+    pinsettle::assessStability(model, free_data, Eigen::VectorXd::Constant(1, 1.));
+  BOOST_CHECK(free.verdict == pinsettle::Stability::Neutral);
+  BOOST_CHECK_EQUAL(free.neutral_directions, 1);
+}
+
+BOOST_AUTO_TEST_CASE(released_on_a_saddle_the_ur5_is_pushed_to_a_stable_rest)
+{
+  // The UR5 at [0, pi/2, 0, pi/2, 0, 0] is a saddle (an optimiser's answer from the zero
+  // pose): released there at rest it must not be reported converged there.
+  const pinocchio::Model model = ur5();
+  pinocchio::Data data(model);
+  Eigen::VectorXd q0 = Eigen::VectorXd::Zero(6);
+  q0[1] = q0[3] = M_PI / 2.;
+  BOOST_CHECK(
+    pinsettle::assessStability(model, data, q0).verdict == pinsettle::Stability::Unstable);
+  pinsettle::Solver solver(model);
+  const pinsettle::Result result = solver.solve(q0);
+  BOOST_CHECK(result.status == pinsettle::Status::Converged);
+  BOOST_CHECK_GE(result.pushes, 1);
+  BOOST_CHECK(result.stability != pinsettle::Stability::Unstable);
+  BOOST_CHECK(
+    pinsettle::assessStability(model, data, result.q).verdict != pinsettle::Stability::Unstable);
+  BOOST_CHECK_SMALL(result.residual, 1e-5);
+}

@@ -144,8 +144,8 @@ namespace pinsettle
     }
 
   private:
-    Attachment attach(pinocchio::FrameIndex frame, const Eigen::Vector3d & point, const char * what)
-      const;
+    Attachment attach(
+      pinocchio::FrameIndex frame, const Eigen::Vector3d & point, const char * what) const;
 
     const pinocchio::Model & model_;
     std::vector<JointSpring> joint_springs_;

@@ -11,6 +11,7 @@
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
 #include "pinsettle/solver.hpp"
+#include "pinsettle/stability.hpp"
 #include "pinsettle/urdf.hpp"
 
 #endif // ifndef __pinsettle_pinsettle_hpp__

@@ -5,6 +5,8 @@
 #ifndef __pinsettle_result_hpp__
 #define __pinsettle_result_hpp__
 
+#include "pinsettle/stability.hpp"
+
 #include <Eigen/Core>
 
 #include <cstdint>
@@ -58,9 +60,10 @@ namespace pinsettle
     std::int64_t steps = 0;
     /// Detected energy peaks, i.e. damping events.
     std::int64_t peaks = 0;
-    /// Kicks given at exact rest: a start exactly at an equilibrium gets a tiny velocity, so
-    /// that only a stable equilibrium is reported converged.
-    std::int64_t kicks = 0;
+    /// Pushes off an unstable rest: at rest on a saddle or a maximum the mechanism is pushed
+    /// along the most negative stiffness direction, so that only a stable or neutral rest is
+    /// reported converged.
+    std::int64_t pushes = 0;
     /// Simulated time (s).
     double sim_time = 0.;
     /// Wall-clock time of the solve (s).
@@ -71,6 +74,12 @@ namespace pinsettle
     double simplified_kinetic_energy = 0.;
     /// max |rnea(q, 0, 0) - applied generalized forces| of the final configuration (N m or N).
     double residual = 0.;
+    /// Stability of the final configuration (assessStability).
+    Stability stability = Stability::Unknown;
+    /// Smallest eigenvalue of the symmetric part of the stiffness matrix (N m/rad or N/m).
+    double min_stiffness_eigenvalue = 0.;
+    /// Stiffness eigenvalues within the tolerance of zero (free directions).
+    int neutral_directions = 0;
     /// Samples recorded when Settings::trace_every > 0, in step order.
     std::vector<TraceSample> trace;
     /// Recording stride in force at the end (grows when the trace was decimated).

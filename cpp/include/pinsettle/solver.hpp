@@ -119,7 +119,7 @@ namespace pinsettle
   private:
     const pinocchio::Model & model_;
     // Workspace, sized once for the model.
-    Eigen::VectorXd q_, v_, v_prev_, dq_, q_next_, tau_;
+    Eigen::VectorXd q_, v_, v_prev_, dq_, q_next_, tau_, report_q_;
     ForceVector fext_;
     std::vector<double> window_;
   };

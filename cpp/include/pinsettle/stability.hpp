@@ -1,0 +1,81 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_stability_hpp__
+#define __pinsettle_stability_hpp__
+
+#include "pinsettle/forces.hpp"
+
+namespace pinsettle
+{
+
+  /// \brief The kind of rest found: the sign pattern of the stiffness matrix's eigenvalues.
+  enum class Stability
+  {
+    /// Not assessed.
+    Unknown,
+    /// Every eigenvalue positive beyond the tolerance: a small push comes back.
+    Stable,
+    /// None negative, some zero within the tolerance (e.g. an arm turning freely about a
+    /// vertical axis).
+    Neutral,
+    /// A negative eigenvalue: a saddle or a maximum; a small push falls away.
+    Unstable
+  };
+
+  /// \brief snake_case name: "unknown", "stable", "neutral", "unstable".
+  const char * toString(Stability stability);
+
+  /// \brief The stiffness matrix at a configuration and what its eigenvalues say.
+  struct StabilityReport
+  {
+    Stability verdict = Stability::Unknown;
+    /// Smallest eigenvalue of the symmetric part of K (N m/rad or N/m).
+    double min_eigenvalue = 0.;
+    /// Largest absolute eigenvalue, the scale of the tolerance.
+    double max_abs_eigenvalue = 0.;
+    /// Eigenvalues within the tolerance of zero.
+    int neutral_directions = 0;
+    /// |eigenvalue| <= tolerance counts as zero.
+    double tolerance = 0.;
+    /// Eigenvalues in increasing order (dim model.nv).
+    Eigen::VectorXd eigenvalues;
+    /// Unit eigenvector of the smallest eigenvalue, a tangent direction (dim model.nv).
+    Eigen::VectorXd softest_direction;
+  };
+
+  ///
+  /// \brief Stiffness matrix K = d tau_static / dq, the Jacobian of the net static generalized
+  /// force (computeStaticForce) along the tangent directions of the configuration space.
+  ///
+  /// Gravity comes from Pinocchio's analytic derivatives
+  /// (pinocchio::computeGeneralizedGravityDerivatives); the applied efforts, when there are any,
+  /// by central finite differences of their generalized force (step 1e-6 along each tangent
+  /// direction, through pinocchio::integrate).
+  ///
+  /// \param[in] q The joint configuration (dim model.nq).
+  /// \param[in] forces Applied efforts, or nullptr for gravity alone.
+  /// \return K (dim model.nv x model.nv, N m/rad or N/m).
+  ///
+  Eigen::MatrixXd computeStiffnessMatrix(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces = nullptr);
+
+  ///
+  /// \brief Stability of a rest at q from the eigenvalues of the symmetric part of K.
+  ///
+  /// The tolerance is scale-aware: 1e-9 times the largest absolute eigenvalue with analytic
+  /// derivatives alone, 1e-7 times it when finite differences took part (their error).
+  ///
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces = nullptr);
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_stability_hpp__

@@ -374,12 +374,11 @@ class Scene:
     def compile(self, q_locked: np.ndarray | None = None) -> _Compiled:
         """The reduced model (locked joints removed at their value in ``q_locked``, the start
         configuration by default) and the force elements resolved to its indices."""
-        if q_locked is None and self._compiled is not None:
-            return self._compiled
-        compiled = _Compiled(self, self.q0() if q_locked is None else q_locked)
-        if q_locked is None:
-            self._compiled = compiled
-        return compiled
+        if q_locked is not None and self.locked:  # the locked values come from q_locked
+            return _Compiled(self, q_locked)
+        if self._compiled is None:
+            self._compiled = _Compiled(self, self.q0())
+        return self._compiled
 
     def joint_values(self, q: Any) -> dict[str, float | list[float]]:
         """Joint values by name from a full configuration: a number (rad or m) for a 1-DoF
@@ -392,7 +391,7 @@ class Scene:
         from ._solve import _as_vector
 
         q = _as_vector(q, "q", self.model.nq, "model.nq")
-        compiled = self.compile(q) if self.locked else self.compile()
+        compiled = self.compile(q)
         return _core.static_force(compiled.model, q[compiled.q_index], compiled.elements)
 
     def residual(self, q: Any) -> float:

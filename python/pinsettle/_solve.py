@@ -283,7 +283,7 @@ def assess_stability(model: Any, q: Any) -> StabilityReport:
 
     if isinstance(model, Scene):
         q = _as_vector(q, "q", model.model.nq, "model.nq")
-        compiled = model.compile(q) if model.locked else model.compile()
+        compiled = model.compile(q)
         raw = _core.stiffness(compiled.model, q[compiled.q_index], compiled.elements)
     else:
         _check_model(model)
@@ -328,12 +328,8 @@ def solve(
         full = scene.model
         s = make_settings(scene.settings if settings is None else settings, overrides)
         s.check()
-        if q0 is None:
-            q_full = scene.q0()
-            compiled = scene.compile()
-        else:
-            q_full = _as_vector(q0, "q0", full.nq, "model.nq")
-            compiled = scene.compile(q_full) if scene.locked else scene.compile()
+        q_full = scene.q0() if q0 is None else _as_vector(q0, "q0", full.nq, "model.nq")
+        compiled = scene.compile(None if q0 is None else q_full)
         v_full = np.zeros(full.nv) if v0 is None else _as_vector(v0, "v0", full.nv, "model.nv")
         locked_v = np.delete(v_full, compiled.v_index)
         if np.any(locked_v != 0.0):

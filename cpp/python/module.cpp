@@ -79,6 +79,22 @@ namespace
     return elements;
   }
 
+  // A model read from Python, its force elements and scratch data, for one evaluation at q.
+  struct Evaluation
+  {
+    const pinocchio::Model & model;
+    std::unique_ptr<ForceElements> elements;
+    pinocchio::Data data;
+  };
+
+  Evaluation evaluationAt(
+    const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec)
+  {
+    const pinocchio::Model & model = modelFrom(model_obj);
+    checkConfiguration(model, q, "q");
+    return Evaluation{model, elementsFrom(model, spec), pinocchio::Data(model)};
+  }
+
   py::dict toDict(const Result & r)
   {
     py::dict out;
@@ -221,13 +237,10 @@ PYBIND11_MODULE(_core, m)
   m.def(
     "stiffness",
     [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
-      const pinocchio::Model & model = modelFrom(model_obj);
-      checkConfiguration(model, q, "q");
-      const std::unique_ptr<ForceElements> elements = elementsFrom(model, spec);
-      pinocchio::Data data(model);
-      const StabilityReport report = assessStability(model, data, q, elements.get());
+      Evaluation at = evaluationAt(model_obj, q, spec);
+      const StabilityReport report = assessStability(at.model, at.data, q, at.elements.get());
       py::dict out;
-      out["stiffness_matrix"] = computeStiffnessMatrix(model, data, q, elements.get());
+      out["stiffness_matrix"] = report.stiffness;
       out["verdict"] = toString(report.verdict);
       out["min_eigenvalue"] = report.min_eigenvalue;
       out["neutral_directions"] = report.neutral_directions;
@@ -241,11 +254,8 @@ PYBIND11_MODULE(_core, m)
   m.def(
     "static_force",
     [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
-      const pinocchio::Model & model = modelFrom(model_obj);
-      checkConfiguration(model, q, "q");
-      const std::unique_ptr<ForceElements> elements = elementsFrom(model, spec);
-      pinocchio::Data data(model);
-      return Eigen::VectorXd(computeStaticForce(model, data, q, elements.get()));
+      Evaluation at = evaluationAt(model_obj, q, spec);
+      return Eigen::VectorXd(computeStaticForce(at.model, at.data, q, at.elements.get()));
     },
     py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
 }

@@ -78,10 +78,11 @@ namespace pinsettle
     const Eigen::VectorXd & q,
     const ForceModel * forces)
   {
-    const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
+    StabilityReport report;
+    report.stiffness = computeStiffnessMatrix(model, data, q, forces);
+    const Eigen::MatrixXd & K = report.stiffness;
     const Eigen::MatrixXd symmetric = 0.5 * (K + K.transpose());
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(symmetric);
-    StabilityReport report;
     report.eigenvalues = eig.eigenvalues();
     report.softest_direction = eig.eigenvectors().col(0);
     report.min_eigenvalue = report.eigenvalues[0];

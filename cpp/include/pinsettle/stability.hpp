@@ -43,6 +43,8 @@ namespace pinsettle
     Eigen::VectorXd eigenvalues;
     /// Unit eigenvector of the smallest eigenvalue, a tangent direction (dim model.nv).
     Eigen::VectorXd softest_direction;
+    /// The stiffness matrix K the verdict was drawn from (dim model.nv x model.nv).
+    Eigen::MatrixXd stiffness;
   };
 
   ///

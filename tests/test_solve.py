@@ -439,8 +439,29 @@ def test_settings_defaults():
         "backtrack": False,
         "trace_every": 0,
         "trace_capacity": 10_000,
+        "trace_configurations": False,
         "check_every": 256,
     }
+
+
+def test_trace_records_configurations_and_events_for_playback():
+    scene = pinsettle.load_scene(pinsettle.scene_path("panda_fingers_locked"))
+    plain = pinsettle.solve(scene, trace_every=50)
+    r = pinsettle.solve(scene, trace_every=50, trace_configurations=True)
+    assert plain.trace.q is None
+    # Recording q changes nothing in the run itself.
+    assert r.steps == plain.steps and np.array_equal(r.q, plain.q)
+    t = r.trace
+    assert t.q.shape == (len(t.step), scene.model.nq)  # full model: locked fingers included
+    assert np.allclose(t.q[:, -2:], 0.02)
+    # Each recorded q is the state at its step: the first one is the start.
+    assert np.allclose(t.q[0], scene.q0())
+    # Every damping event is listed, in order, inside the run.
+    assert t.event_kind.count("damping") == r.peaks
+    assert np.all(np.diff(t.event_step) > 0) and t.event_step[-1] < r.steps
+    # A damping event re-evaluates the dynamics without advancing time: one step each.
+    earlier = np.arange(len(t.event_step))
+    assert np.allclose(t.event_time, (t.event_step - earlier) * r.settings.dt, atol=1e-9)
 
 
 def test_settings_repr_replace_to_dict_eq():

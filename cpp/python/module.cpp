@@ -120,6 +120,8 @@ namespace
     const Eigen::Index n = static_cast<Eigen::Index>(r.trace.size());
     Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> step(n);
     Eigen::VectorXd time(n), energy(n), simplified(n);
+    const bool with_q = r.trace.front().q.size() > 0;
+    Eigen::MatrixXd q(with_q ? n : 0, with_q ? r.q.size() : 0);
     for (Eigen::Index k = 0; k < n; ++k)
     {
       const TraceSample & s = r.trace[static_cast<std::size_t>(k)];
@@ -127,6 +129,19 @@ namespace
       time[k] = s.time;
       energy[k] = s.energy;
       simplified[k] = s.simplified_energy;
+      if (with_q)
+        q.row(k) = s.q.transpose();
+    }
+    const Eigen::Index m = static_cast<Eigen::Index>(r.events.size());
+    Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> event_step(m);
+    Eigen::VectorXd event_time(m);
+    py::list event_kind;
+    for (Eigen::Index k = 0; k < m; ++k)
+    {
+      const TraceEvent & e = r.events[static_cast<std::size_t>(k)];
+      event_step[k] = e.step;
+      event_time[k] = e.time;
+      event_kind.append(e.kind == EventKind::Damping ? "damping" : "push");
     }
     py::dict trace;
     trace["step"] = step;
@@ -134,6 +149,10 @@ namespace
     trace["kinetic_energy"] = energy;
     trace["simplified_kinetic_energy"] = simplified;
     trace["stride"] = r.trace_stride;
+    trace["q"] = with_q ? py::object(py::cast(q)) : py::object(py::none());
+    trace["event_step"] = event_step;
+    trace["event_time"] = event_time;
+    trace["event_kind"] = event_kind;
     out["trace"] = trace;
     return out;
   }
@@ -215,6 +234,9 @@ PYBIND11_MODULE(_core, m)
     .def_readwrite(
       "trace_every", &Settings::trace_every, "Trace a sample every N steps; 0: no trace.")
     .def_readwrite("trace_capacity", &Settings::trace_capacity, "Most trace samples kept.")
+    .def_readwrite(
+      "trace_configurations", &Settings::trace_configurations,
+      "Record q in each trace sample (for playback).")
     .def_readwrite(
       "check_every", &Settings::check_every, "Steps between clock and Ctrl-C checks, >= 1.")
     .def("check", &checkSettings, "Raise ValueError naming the first invalid setting.");

@@ -163,6 +163,7 @@ namespace pinsettle
     const bool exact = settings.energy == EnergyMeasure::Exact;
     const bool use_fext = forces != nullptr && forces->hasExternalForces();
     const bool check_clock = std::isfinite(settings.max_time);
+    const bool tracing = settings.trace_every > 0;
 
     Result result;
     q_ = q0;
@@ -246,7 +247,10 @@ namespace pinsettle
           trace_stride *= 2;
         }
         if (step % trace_stride == 0)
-          result.trace.push_back(TraceSample{step, time, e_exact, e_simple});
+          result.trace.push_back(
+            TraceSample{
+              step, time, e_exact, e_simple,
+              settings.trace_configurations ? q_ : Eigen::VectorXd()});
       }
 
       // Stopping rule: energy decreasing and the sum of the last ds samples <= max_e.
@@ -289,6 +293,8 @@ namespace pinsettle
           const double e_push = std::max(10. * max_e, 1e-30);
           v_ *= e_unit > 0. ? std::sqrt(e_push / e_unit) : 0.;
           ++result.pushes;
+          if (tracing)
+            result.events.push_back(TraceEvent{step, time, EventKind::Push});
           still = 0;
           fresh = 0;
           window_count = 0;
@@ -302,6 +308,8 @@ namespace pinsettle
       if (fresh >= 2 && e_prev - e_prev2 > err * e_prev && e_prev - e > err * e_prev)
       {
         ++result.peaks;
+        if (tracing)
+          result.events.push_back(TraceEvent{step, time, EventKind::Damping});
         if (settings.backtrack)
         {
           // Parabola through (-1, e_prev2), (0, e_prev), (1, e): its vertex lies x steps after

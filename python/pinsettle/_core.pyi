@@ -19,6 +19,7 @@ class Settings:
     backtrack: bool
     trace_every: int
     trace_capacity: int
+    trace_configurations: bool
     check_every: int
     def __init__(self, other: Settings | None = ...) -> None: ...
     def check(self) -> None: ...

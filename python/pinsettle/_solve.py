@@ -25,6 +25,7 @@ SETTING_TYPES: dict[str, str] = {
     "backtrack": "bool",
     "trace_every": "int",
     "trace_capacity": "int",
+    "trace_configurations": "bool",
     "check_every": "int",
 }
 
@@ -46,8 +47,9 @@ class Settings(_core.Settings):
     relative peak threshold; ``ds`` stopping window (steps); ``max_e`` bound on the sum of the
     last ``ds`` energy samples (J for the exact measure); ``max_steps``; ``max_time`` (s);
     ``energy`` ('exact' or 'simplified'); ``backtrack`` (back up to the interpolated peak before
-    damping); ``trace_every`` (0: no trace); ``trace_capacity``; ``check_every`` (steps between
-    checks of the clock and Ctrl-C).
+    damping); ``trace_every`` (0: no trace); ``trace_capacity``; ``trace_configurations``
+    (record q in the trace, for playback); ``check_every`` (steps between checks of the clock
+    and Ctrl-C).
     """
 
     def __init__(self, **fields: Any) -> None:
@@ -98,13 +100,22 @@ def set_setting(settings: _core.Settings, key: str, value: Any) -> None:
 
 @dataclass(frozen=True)
 class Trace:
-    """Energy samples recorded every ``stride`` steps (``Settings.trace_every``)."""
+    """Samples recorded every ``stride`` steps (``Settings.trace_every``).
+
+    ``q`` (samples x model.nq) is recorded with ``Settings.trace_configurations``, else None.
+    ``event_step``/``event_time``/``event_kind`` list every velocity change: 'damping' at an
+    energy peak, 'push' off an unstable rest (never decimated).
+    """
 
     step: np.ndarray
     time: np.ndarray
     kinetic_energy: np.ndarray
     simplified_kinetic_energy: np.ndarray
     stride: int
+    q: np.ndarray | None = None
+    event_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    event_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    event_kind: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -344,6 +355,8 @@ def solve(
         )
         raw["q"] = compiled.full_q(raw["q"])
         raw["v"] = compiled.full_v(raw["v"], full.nv)
+        if raw["trace"] is not None and raw["trace"]["q"] is not None:
+            raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
         naming = full
     else:
         _check_model(model)
@@ -356,6 +369,8 @@ def solve(
         raw = _core.solve(model, q, v, s, callback)
         naming = model
     trace = raw.pop("trace")
+    if trace is not None:
+        trace["event_kind"] = tuple(trace["event_kind"])
     return Result(
         **raw,
         trace=None if trace is None else Trace(**trace),

@@ -44,6 +44,27 @@ namespace pinsettle
     double energy;
     /// Simplified energy sum |v|^2 + |w|^2 (m^2/s^2 + rad^2/s^2).
     double simplified_energy;
+    /// Configuration (dim model.nq) when Settings::trace_configurations is set, else empty.
+    Eigen::VectorXd q;
+  };
+
+  /// \brief What the solver did to the velocity at a traced event.
+  enum class EventKind
+  {
+    /// Energy peak: the velocity was scaled by Settings::kt.
+    Damping,
+    /// Rest on an unstable equilibrium: pushed along the most negative stiffness direction.
+    Push
+  };
+
+  /// \brief A velocity change, recorded while tracing (Settings::trace_every > 0).
+  struct TraceEvent
+  {
+    /// Step index at which it happened.
+    std::int64_t step;
+    /// Simulated time (s).
+    double time;
+    EventKind kind;
   };
 
   ///
@@ -84,6 +105,8 @@ namespace pinsettle
     std::vector<TraceSample> trace;
     /// Recording stride in force at the end (grows when the trace was decimated).
     std::int64_t trace_stride = 0;
+    /// Every damping event and push, in step order, when tracing (not decimated).
+    std::vector<TraceEvent> events;
   };
 
 } // namespace pinsettle

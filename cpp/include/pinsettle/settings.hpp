@@ -58,6 +58,9 @@ namespace pinsettle
     /// Largest number of trace samples kept (>= 2); when full, every other sample is dropped
     /// and the recording stride doubles, so the whole run stays covered in bounded memory.
     std::int64_t trace_capacity = 10000;
+    /// Also record the configuration in each trace sample (for playback); costs a copy of q
+    /// per recorded sample.
+    bool trace_configurations = false;
     /// The wall clock and the abort callback are checked every check_every steps (>= 1).
     std::int64_t check_every = 256;
   };

@@ -13,7 +13,8 @@ NAN, INF = math.nan, math.inf
 
 # (override, message pattern naming the field); out of range -> ValueError when solving.
 OUT_OF_RANGE = [
-    ({"dt": 0.0}, r"^dt must be a finite number > 0"),
+    ({"dt": 0.0}, r"^dt must be 'auto' or a finite number > 0"),
+    ({"dt": "fast"}, r"^dt must be 'auto' or a number > 0 \(seconds\), got 'fast'"),
     ({"dt": -1e-3}, r"^dt must be"),
     ({"dt": NAN}, r"^dt must be .*got nan"),
     ({"dt": INF}, r"^dt must be .*got inf"),
@@ -34,6 +35,9 @@ OUT_OF_RANGE = [
     ({"trace_every": -1}, r"^trace_every must be an integer >= 0"),
     ({"trace_capacity": 1}, r"^trace_capacity must be an integer >= 2"),
     ({"check_every": 0}, r"^check_every must be an integer >= 1"),
+    ({"dt_safety": 0.0}, r"^dt_safety must be in \(0, 1\], got 0"),
+    ({"dt_safety": 1.5}, r"^dt_safety must be in \(0, 1\], got 1.5"),
+    ({"dt_safety": NAN}, r"^dt_safety must be in \(0, 1\], got nan"),
 ]
 
 
@@ -41,6 +45,11 @@ OUT_OF_RANGE = [
 def test_setting_out_of_range(pendulum, override, pattern):
     with pytest.raises(ValueError, match=pattern):
         pinsettle.solve(pendulum, [1.0], **override)
+    if "dt" in override:
+        # dt is 'auto' or a step: refused when set, so that no number can mean 'auto'.
+        with pytest.raises(ValueError, match=pattern):
+            pinsettle.Settings(**override)
+        return
     # The same value is accepted by the constructor and caught by check().
     settings = pinsettle.Settings(**override)
     with pytest.raises(ValueError, match=pattern):
@@ -82,7 +91,9 @@ def test_setting_overflowing_int(pendulum):
 
 @pytest.mark.parametrize("key", ["stifness", "kk"])
 def test_unknown_setting_lists_the_known_ones(pendulum, key):
-    with pytest.raises(TypeError, match=rf"unknown setting '{key}'.*known settings: dt, kt, "):
+    with pytest.raises(
+        TypeError, match=rf"unknown setting '{key}'.*known settings: dt, dt_safety, kt, "
+    ):
         pinsettle.solve(pendulum, [1.0], **{key: 1})
     with pytest.raises(TypeError, match=rf"unknown setting '{key}'"):
         pinsettle.Settings(**{key: 1})

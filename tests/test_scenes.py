@@ -328,9 +328,9 @@ EXPECTED = {
     ),
     "panda_fingers_locked": Expected(
         {
-            "panda_joint1": "-0.95959",
+            "panda_joint1": "5.47885",
             "panda_joint2": "3.36194",
-            "panda_joint3": "3.11784",
+            "panda_joint3": "9.40103",
             "panda_joint4": "5.78567",
             "panda_joint5": "0.72484",
             "panda_joint6": "-3.86920",
@@ -349,12 +349,12 @@ EXPECTED = {
     "slider_spring": Expected({"slider": "-0.03924"}, ("500",)),
     "ur5": Expected(
         {
-            "shoulder_pan_joint": "-0.32297",
+            "shoulder_pan_joint": "0.00755",
             "shoulder_lift_joint": "1.570796",
             "elbow_joint": "0",
             "wrist_1_joint": "-1.570796",
-            "wrist_2_joint": "-0.32365",
-            "wrist_3_joint": "0.00253",
+            "wrist_2_joint": "0.00765",
+            "wrist_3_joint": "0.00898",
         },
         ("0", "0", "0", "0.1725", "10.69", "64.51"),
         neutral=("shoulder_pan_joint", "wrist_2_joint", "wrist_3_joint"),
@@ -367,7 +367,7 @@ EXPECTED = {
             "elbow_joint": "-2.293533",
             "wrist_1_joint": "3.818607",
             "wrist_2_joint": "-1.487249",
-            "wrist_3_joint": "-3.4233",
+            "wrist_3_joint": "-3.7916",
         },
         ("0", "3.76", "5.97", "21.5", "36.7", "129.0"),
         neutral=("wrist_3_joint",),
@@ -579,8 +579,9 @@ def test_scene_converges_to_an_equilibrium(name, solved):
     assert result.q.shape == (scene.model.nq,)
     residual = ref.residual(result.q)
     assert residual < MAX_RESIDUAL
-    # The residual reported is the one recomputed independently.
-    assert result.residual == pytest.approx(residual, rel=1e-9, abs=1e-15)
+    # The residual reported is the one recomputed independently, up to the round-off of two
+    # different sums over forces of ~10 N m (1e-14 N m).
+    assert result.residual == pytest.approx(residual, rel=1e-9, abs=1e-13)
     # At rest: the stopping rule bounds the energy of the final state.
     assert result.kinetic_energy <= result.settings.max_e
     assert result.joints == scene.joint_values(result.q)
@@ -756,19 +757,21 @@ def test_each_energy_measure_and_kt(energy, kt, bistable_theta):
         )
 
 
-def test_torque_disk_never_settles(solved):
+def test_torque_disk_has_no_equilibrium(solved):
     scene, result, ref = solved("torque_disk")
-    assert result.status == "max_steps" and not result.converged
-    assert result.steps == scene.settings.max_steps == 20000
+    assert result.status == "no_equilibrium" and not result.converged
+    assert "falls without bound" in result.reason
+    # Decided by the runaway test, well before any step limit: two runs of ten doublings of
+    # ds = 100 steps (the second after damping went to kt = 0).
+    assert result.steps <= 2 * 100 * 2**10 + 1 < scene.settings.max_steps
     assert result.peaks == 0  # the energy never stops growing
     # Balanced: gravity does nothing, the net static force is the effort, everywhere.
     assert ref.residual(result.q) == pytest.approx(1.0, rel=1e-12)
     assert result.residual == pytest.approx(1.0, rel=1e-12)
-    # Uniform acceleration 1 N m / 0.02 kg m^2 = 50 rad/s^2 from rest.
+    # Uniform acceleration 1 N m / 0.02 kg m^2 = 50 rad/s^2 from rest, whatever the steps.
     inertia = ref.full.inertias[1].inertia[1, 1]
     assert inertia == pytest.approx(0.02)
     speed = result.sim_time / inertia
-    assert result.sim_time == pytest.approx(20000 * scene.settings.dt, rel=1e-9)
     assert result.v[0] == pytest.approx(speed, rel=1e-9)
     assert result.kinetic_energy == pytest.approx(0.5 * inertia * speed**2, rel=1e-9)
     traced = pinsettle.solve(scene, trace_every=100)

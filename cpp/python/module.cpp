@@ -112,6 +112,13 @@ namespace
     out["kinetic_energy"] = r.kinetic_energy;
     out["simplified_kinetic_energy"] = r.simplified_kinetic_energy;
     out["residual"] = r.residual;
+    out["residual_before_polish"] = r.residual_before_polish;
+    out["polish_iterations"] = r.polish_iterations;
+    out["polished"] = r.polished;
+    out["dt"] = r.dt;
+    out["dt_estimates"] = r.dt_estimates;
+    out["dt_reductions"] = r.dt_reductions;
+    out["reason"] = r.reason;
     if (r.trace.empty())
     {
       out["trace"] = py::none();
@@ -141,7 +148,9 @@ namespace
       const TraceEvent & e = r.events[static_cast<std::size_t>(k)];
       event_step[k] = e.step;
       event_time[k] = e.time;
-      event_kind.append(e.kind == EventKind::Damping ? "damping" : "push");
+      event_kind.append(
+        e.kind == EventKind::Damping ? "damping"
+                                     : (e.kind == EventKind::Push ? "push" : "rollback"));
     }
     py::dict trace;
     trace["step"] = step;
@@ -218,7 +227,34 @@ PYBIND11_MODULE(_core, m)
   py::class_<Settings>(m, "Settings", "Solver settings (inputs only; see pinsettle.Settings).")
     .def(py::init<>())
     .def(py::init<const Settings &>(), py::arg("other"))
-    .def_readwrite("dt", &Settings::dt, "Time step (s), > 0.")
+    .def_property(
+      "dt",
+      [](const Settings & s) -> py::object {
+        if (s.dt == 0.)
+          return py::str("auto");
+        return py::float_(s.dt);
+      },
+      [](Settings & s, const py::object & value) {
+        if (py::isinstance<py::str>(value))
+        {
+          if (value.cast<std::string>() != "auto")
+            throw std::invalid_argument(
+              "dt must be 'auto' or a number > 0 (seconds), got '" + value.cast<std::string>()
+              + "'");
+          s.dt = 0.;
+          return;
+        }
+        const double dt = value.cast<double>();
+        if (!(std::isfinite(dt) && dt > 0.))
+          throw std::invalid_argument(
+            "dt must be 'auto' or a finite number > 0 (seconds), got "
+            + py::repr(value).cast<std::string>());
+        s.dt = dt;
+      },
+      "Time step (s) > 0, or 'auto' (the default): dt_safety * 2 / omega_max.")
+    .def_readwrite(
+      "dt_safety", &Settings::dt_safety, "Fraction of the stability limit used by dt='auto'.")
+    .def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
     .def_readwrite("kt", &Settings::kt, "Velocity scale at each energy peak, in [0, 1).")
     .def_readwrite("err", &Settings::err, "Relative peak threshold, >= 0.")
     .def_readwrite("ds", &Settings::ds, "Stopping window length (steps), >= 1.")
@@ -278,6 +314,19 @@ PYBIND11_MODULE(_core, m)
     [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
       Evaluation at = evaluationAt(model_obj, q, spec);
       return Eigen::VectorXd(computeStaticForce(at.model, at.data, q, at.elements.get()));
+    },
+    py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
+
+  m.def(
+    "time_scale",
+    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
+      Evaluation at = evaluationAt(model_obj, q, spec);
+      const TimeScale scale = computeTimeScale(at.model, at.data, q, at.elements.get());
+      py::dict out;
+      out["omega_max"] = scale.omega_max;
+      out["damping_rate"] = scale.damping_rate;
+      out["critical_step"] = scale.critical_step;
+      return out;
     },
     py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
 }

@@ -117,6 +117,7 @@ namespace pinsettle
     if (!std::isfinite(rest))
       throw std::invalid_argument("joint spring: rest must be finite");
     joint_springs_.push_back(JointSpring{joint, stiffness, rest, damping});
+    joint_damping_ = joint_damping_ || damping > 0.;
   }
 
   void ForceElements::addPointSpring(

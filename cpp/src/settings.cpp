@@ -40,6 +40,8 @@ namespace pinsettle
       return "aborted";
     case Status::Diverged:
       return "diverged";
+    case Status::NoEquilibrium:
+      return "no_equilibrium";
     }
     return "unknown";
   }
@@ -58,8 +60,10 @@ namespace pinsettle
 
   void checkSettings(const Settings & s)
   {
-    if (!(std::isfinite(s.dt) && s.dt > 0.))
-      fail("dt", "a finite number > 0 (seconds)", s.dt);
+    if (!(std::isfinite(s.dt) && s.dt >= 0.))
+      fail("dt", "a finite number > 0 (seconds), or 0 for the automatic step", s.dt);
+    if (!(s.dt_safety > 0. && s.dt_safety <= 1.))
+      fail("dt_safety", "in (0, 1]", s.dt_safety);
     if (!(s.kt >= 0. && s.kt < 1.))
       fail("kt", "in [0, 1)", s.kt);
     if (!(std::isfinite(s.err) && s.err >= 0.))

@@ -11,6 +11,7 @@
 #include <pinocchio/algorithm/rnea.hpp>
 
 #include <algorithm>
+#include <limits>
 #include <chrono>
 #include <cmath>
 #include <numeric>
@@ -110,7 +111,6 @@ namespace pinsettle
   , model_(model)
   , q_(model.nq)
   , v_(model.nv)
-  , v_prev_(model.nv)
   , dq_(model.nv)
   , q_next_(model.nq)
   , tau_(Eigen::VectorXd::Zero(model.nv))
@@ -139,6 +139,41 @@ namespace pinsettle
     }
   } // namespace
 
+  namespace
+  {
+    // Kinetic energy ratio between consecutive steps, held for kBlowUpSteps steps in a row,
+    // that no resolved motion produces: with dt <= 2 / omega_max a physical instability grows
+    // the energy at most e^2 per step; the explicit integrator past its limit grows it faster.
+    constexpr double kBlowUpRatio = 10.;
+    constexpr int kBlowUpSteps = 10;
+    // Energies beyond this are treated like non-finite values (they soon are).
+    constexpr double kHugeEnergy = 1e150;
+    // Step halvings before the run is declared diverged.
+    constexpr int kMaxReductions = 30;
+    // Runaway test: the energy released and the distance travelled since the last reset must
+    // both grow by kRunawayRatio or more over each of kRunawayDoublings consecutive doublings of
+    // the run length.
+    constexpr double kRunawayRatio = 1.5;
+    constexpr int kRunawayDoublings = 10;
+    // The automatic step is re-estimated once the configuration moved this far (rad or m)
+    // since the last estimate.
+    constexpr double kFarMove = 0.1;
+    // Whether q is farther than distance (rad or m, max norm) from q_ref; work holds the tangent
+    // difference (dim model.nv), so that nothing is allocated.
+    bool movedBeyond(
+      const pinocchio::Model & model,
+      const Eigen::VectorXd & q_ref,
+      const Eigen::VectorXd & q,
+      Eigen::VectorXd & work,
+      double distance)
+    {
+      pinocchio::difference(model, q_ref, q, work);
+      return work.lpNorm<Eigen::Infinity>() > distance;
+    }
+    // Automatic step when nothing pulls, pushes or damps (its value does not matter then).
+    constexpr double kRestStep = 1e-3;
+  } // namespace
+
   Result Solver::solve(
     const Eigen::VectorXd & q0,
     const Eigen::VectorXd & v0,
@@ -158,12 +193,14 @@ namespace pinsettle
       forces = nullptr; // nothing to apply: step exactly like the bare core
 
     const pinocchio::Model & model = model_;
-    const double dt = settings.dt, kt = settings.kt, err = settings.err;
+    const double err = settings.err;
     const double max_e = settings.max_e;
     const bool exact = settings.energy == EnergyMeasure::Exact;
     const bool use_fext = forces != nullptr && forces->hasExternalForces();
     const bool check_clock = std::isfinite(settings.max_time);
     const bool tracing = settings.trace_every > 0;
+    const bool auto_dt = settings.dt == 0.;
+    double kt = settings.kt; // lowered to 0 when partial damping cannot hold a runaway
 
     Result result;
     q_ = q0;
@@ -196,6 +233,91 @@ namespace pinsettle
     std::int64_t step = 0;
     StabilityReport report;
 
+    // Time step: fixed, or estimated from the time scales and re-estimated after large moves.
+    double dt = settings.dt, step_scale = 1.;
+    double h = dt; // the step actually taken last (dt, or less while moving fast)
+    std::int64_t estimated_at = 0;
+    const std::int64_t estimate_spacing =
+      std::max<std::int64_t>(settings.ds, static_cast<std::int64_t>(model.nv) * model.nv / 4);
+    const auto estimateStep = [&]() {
+      const TimeScale scale = computeTimeScale(model, data, q_, forces);
+      double next = std::isfinite(scale.critical_step)
+                      ? settings.dt_safety * scale.critical_step * step_scale
+                      : kRestStep * step_scale;
+      if (result.dt_estimates > 0)
+        next = std::min(next, 2. * dt); // grow gradually: the new estimate is local too
+      dt = next;
+      q_estimate_ = q_;
+      estimated_at = step;
+      ++result.dt_estimates;
+    };
+    const auto movedFar = [&]() {
+      return step - estimated_at >= estimate_spacing
+             && movedBeyond(model, q_estimate_, q_, moved_, kFarMove);
+    };
+    if (auto_dt)
+      estimateStep();
+
+    // Divergence guard: the last good state (start, after each damping event or push). A damping
+    // event becomes the new good state only if the stretch before it never grew the energy
+    // kBlowUpRatio-fold in one step: an explosion can pass a peak before it is caught.
+    q_good_ = q_;
+    v_good_ = v_;
+    double time_good = 0., e_exact_prev = 0.;
+    int blow_up = 0;
+    bool tainted = false;
+
+    // Runaway test (no equilibrium): the energy released by the potential since the last reset,
+    // the kinetic energy gained plus the energy taken out, sampled at doublings of the run.
+    std::int64_t reset_step = 0, next_sample = settings.ds;
+    double e_reset = 0., removed = 0., released_sample = 0., drift_sample = 0.;
+    int growing = 0;
+    // Net motion since the reset in tangent coordinates (a continuous joint unwrapped): a
+    // runaway also travels ever further, where a mechanism ringing in place stays put.
+    drift_.setZero(model.nv);
+    moved_.resize(model.nv);
+    const auto resetRunaway = [&](double e_now) {
+      reset_step = step;
+      next_sample = settings.ds;
+      e_reset = e_now;
+      removed = 0.;
+      released_sample = 0.;
+      drift_sample = 0.;
+      growing = 0;
+      drift_.setZero();
+    };
+    const auto restart = [&]() // samples of an interrupted stretch say nothing any more
+    {
+      still = 0;
+      fresh = 0;
+      window_count = 0;
+      blow_up = 0;
+      tainted = false;
+    };
+
+    // Back to the last good state with half the step; false once kMaxReductions are used up.
+    const auto rollBack = [&]() {
+      q_ = q_good_;
+      v_ = v_good_;
+      time = time_good;
+      if (result.dt_reductions == kMaxReductions)
+      {
+        status = Status::Diverged;
+        result.reason = "the integration kept blowing up (non-finite values or explosive energy "
+                        "growth) after the step was halved "
+                        + std::to_string(kMaxReductions) + " times";
+        return false;
+      }
+      ++result.dt_reductions;
+      if (tracing)
+        result.events.push_back(TraceEvent{step, time, EventKind::Rollback});
+      step_scale *= 0.5;
+      dt *= 0.5;
+      restart();
+      resetRunaway(0.);
+      return true;
+    };
+
     for (; step < settings.max_steps; ++step)
     {
       if (step > 0 && step % settings.check_every == 0)
@@ -212,6 +334,8 @@ namespace pinsettle
           status = Status::Aborted;
           break;
         }
+        if (auto_dt && movedFar())
+          estimateStep();
       }
 
       if (forces != nullptr)
@@ -232,11 +356,21 @@ namespace pinsettle
       const double e_simple = computeSimplifiedKineticEnergy(model, data);
       const double e = exact ? e_exact : e_simple;
 
-      if (!std::isfinite(e_exact) || !std::isfinite(e_simple) || !data.ddq.allFinite())
+      // Divergence guard: non-finite values, or an energy explosion no resolved motion makes.
+      blow_up =
+        fresh >= 1 && e_exact_prev > 0. && e_exact > kBlowUpRatio * e_exact_prev ? blow_up + 1 : 0;
+      tainted = tainted || blow_up > 0;
+      e_exact_prev = e_exact;
+      if (
+        !std::isfinite(e_exact) || !std::isfinite(e_simple) || e_exact > kHugeEnergy
+        || !data.ddq.allFinite() || blow_up >= kBlowUpSteps)
       {
-        status = Status::Diverged;
-        ++step;
-        break; // (q_, v_) is finite: it was checked when it was integrated
+        if (!rollBack())
+        {
+          ++step;
+          break;
+        }
+        continue;
       }
 
       if (trace_stride > 0 && step % trace_stride == 0)
@@ -251,6 +385,49 @@ namespace pinsettle
             TraceSample{
               step, time, e_exact, e_simple,
               settings.trace_configurations ? q_ : Eigen::VectorXd()});
+      }
+
+      // No equilibrium: the energy released since the reset keeps growing (by kRunawayRatio or
+      // more per doubling of the run, kRunawayDoublings times in a row): the potential falls
+      // without bound along the motion. Partial damping can lose to a potential that falls by
+      // a fixed amount per turn although a well exists (a pendulum under a constant torque just
+      // below what gravity holds), so the first verdict lowers kt to 0, which stops the
+      // mechanism at every peak, near the bottom of each well it passes; only a second runaway
+      // is reported.
+      if (step - reset_step == next_sample)
+      {
+        const double released = e_exact - e_reset + removed;
+        const double drift = drift_.lpNorm<Eigen::Infinity>();
+        growing = released_sample > 0. && released >= kRunawayRatio * released_sample
+                      && drift_sample > 0. && drift >= kRunawayRatio * drift_sample
+                    ? growing + 1
+                    : 0;
+        released_sample = released;
+        drift_sample = drift;
+        next_sample *= 2;
+        if (growing >= kRunawayDoublings)
+        {
+          if (kt > 0.)
+          {
+            kt = 0.;
+            result.reason = "kt lowered to 0: with partial damping the released energy kept "
+                            "growing";
+            resetRunaway(e_exact);
+          }
+          else
+          {
+            status = Status::NoEquilibrium;
+            std::ostringstream msg;
+            msg.precision(3);
+            msg << "the potential energy falls without bound: " << released << " J released and "
+                << drift << " (rad or m) travelled in " << (step - reset_step)
+                << " steps with kt = 0, both growing at least " << kRunawayRatio
+                << "x per doubling of the run " << kRunawayDoublings << " times in a row";
+            result.reason = msg.str();
+            ++step;
+            break;
+          }
+        }
       }
 
       // Stopping rule: energy decreasing and the sum of the last ds samples <= max_e.
@@ -295,9 +472,11 @@ namespace pinsettle
           ++result.pushes;
           if (tracing)
             result.events.push_back(TraceEvent{step, time, EventKind::Push});
-          still = 0;
-          fresh = 0;
-          window_count = 0;
+          q_good_ = q_;
+          v_good_ = v_;
+          time_good = time;
+          restart();
+          resetRunaway(0.);
           continue;
         }
         // Creeping near a stable or neutral rest: not at rest yet, go on.
@@ -315,14 +494,23 @@ namespace pinsettle
           // Parabola through (-1, e_prev2), (0, e_prev), (1, e): its vertex lies x steps after
           // the middle sample; the current sample is 1 - x steps past the peak.
           const double x = (e_prev2 - e) / (2. * (e_prev2 - 2. * e_prev + e));
-          const double back = (1. - x) * dt;
+          const double back = (1. - x) * h;
           dq_.noalias() = -back * v_;
           pinocchio::integrate(model, q_, dq_, q_next_);
           q_.swap(q_next_);
           time -= back;
         }
         v_ *= kt;
+        removed += (1. - kt * kt) * e_exact;
         fresh = 0;
+        if (!tainted)
+        {
+          q_good_ = q_;
+          v_good_ = v_;
+          time_good = time;
+        }
+        if (auto_dt && movedFar())
+          estimateStep();
         continue; // re-evaluate the dynamics at the damped state
       }
       e_prev2 = e_prev;
@@ -330,38 +518,103 @@ namespace pinsettle
       ++fresh;
 
       // Semi-implicit Euler on the configuration manifold.
-      v_prev_ = v_;
-      v_.noalias() += dt * data.ddq;
-      dq_.noalias() = dt * v_;
+      // The automatic step also bounds the turn per step to dt_safety (rad or m): velocity-
+      // dependent forces (Coriolis, centrifugal) stiffen fast motion, which K does not see.
+      h = dt;
+      if (auto_dt)
+      {
+        const double speed = v_.lpNorm<Eigen::Infinity>();
+        if (speed * h > settings.dt_safety)
+          h = settings.dt_safety / speed;
+      }
+      v_.noalias() += h * data.ddq;
+      dq_.noalias() = h * v_;
       pinocchio::integrate(model, q_, dq_, q_next_);
       if (!q_next_.allFinite() || !v_.allFinite())
       {
-        v_ = v_prev_; // q_ still holds the last finite configuration
-        status = Status::Diverged;
-        ++step;
-        break;
+        if (!rollBack())
+        {
+          ++step;
+          break;
+        }
+        continue;
       }
       q_.swap(q_next_);
-      time += dt;
+      drift_ += dq_;
+      time += h;
     }
 
     result.status = status;
     result.steps = step;
     result.sim_time = time;
+    result.dt = dt;
     result.trace_stride = trace_stride;
     result.q = q_;
     result.v = v_;
-    const std::pair<double, double> energies = computeKineticEnergies(model, data, q_, v_);
-    result.kinetic_energy = energies.first;
-    result.simplified_kinetic_energy = energies.second;
     result.residual = computeStaticResidual(model, data, q_, forces);
+    result.residual_before_polish = result.residual;
     if (report.verdict == Stability::Unknown || report_q_ != q_)
       report = assessStability(model, data, q_, forces);
+    if (settings.polish && status == Status::Converged)
+      polish(report, forces, result);
+    const std::pair<double, double> energies = computeKineticEnergies(model, data, result.q, v_);
+    result.kinetic_energy = energies.first;
+    result.simplified_kinetic_energy = energies.second;
     result.stability = report.verdict;
     result.min_stiffness_eigenvalue = report.min_eigenvalue;
     result.neutral_directions = report.neutral_directions;
     result.wall_time = std::chrono::duration<double>(Clock::now() - start).count();
     return result;
+  }
+
+  void Solver::polish(StabilityReport & report, const ForceModel * forces, Result & result)
+  {
+    const pinocchio::Model & model = model_;
+    // The correction a rest in a basin needs is about residual / (smallest stiffness): allow ten
+    // times that and no more, so that Newton cannot wander to another stationary point.
+    double softest = 0.;
+    for (Eigen::Index k = 0; k < report.eigenvalues.size(); ++k)
+      if (report.eigenvalues[k] > report.tolerance)
+      {
+        softest = report.eigenvalues[k];
+        break;
+      }
+    if (softest <= 0.)
+      return;
+    const double reach = 10. * result.residual / softest;
+
+    Eigen::VectorXd q = result.q, q_next(model.nq);
+    Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+    double residual = tau.lpNorm<Eigen::Infinity>();
+    int iterations = 0;
+    for (; iterations < 10 && residual > 0.; ++iterations)
+    {
+      const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
+      // Least squares with a rank cut: neutral directions (K singular there) are left alone.
+      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(K);
+      cod.setThreshold(
+        std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12));
+      const Eigen::VectorXd dq = -cod.solve(tau);
+      pinocchio::integrate(model, q, dq, q_next);
+      const Eigen::VectorXd tau_next = computeStaticForce(model, data, q_next, forces);
+      const double residual_next = tau_next.lpNorm<Eigen::Infinity>();
+      if (!(residual_next < residual))
+        break;
+      q.swap(q_next);
+      tau = tau_next;
+      residual = residual_next;
+    }
+    result.polish_iterations = iterations;
+    if (iterations == 0)
+      return;
+    const double moved = pinocchio::difference(model, result.q, q).lpNorm<Eigen::Infinity>();
+    const StabilityReport after = assessStability(model, data, q, forces);
+    if (moved > reach || after.verdict != report.verdict)
+      return;
+    result.q = q;
+    result.residual = residual;
+    result.polished = true;
+    report = after;
   }
 
 } // namespace pinsettle

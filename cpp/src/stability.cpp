@@ -5,6 +5,7 @@
 #include "pinsettle/stability.hpp"
 #include "pinsettle/solver.hpp"
 
+#include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/rnea-derivatives.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
@@ -12,6 +13,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <cmath>
+#include <limits>
 
 namespace pinsettle
 {
@@ -99,6 +101,77 @@ namespace pinsettle
     else
       report.verdict = Stability::Stable;
     return report;
+  }
+
+  namespace
+  {
+    // Largest |lambda| of A x = lambda M x, with M = L L^T: the eigenvalues of L^-1 A L^-T.
+    double largestGeneralizedEigenvalue(
+      const Eigen::MatrixXd & A, const Eigen::LLT<Eigen::MatrixXd> & llt)
+    {
+      Eigen::MatrixXd B = llt.matrixL().solve(0.5 * (A + A.transpose()));
+      B = llt.matrixL().solve(B.transpose()).eval();
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(
+        0.5 * (B + B.transpose()), Eigen::EigenvaluesOnly);
+      return eig.eigenvalues().cwiseAbs().maxCoeff();
+    }
+  } // namespace
+
+  TimeScale computeTimeScale(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces,
+    const Eigen::MatrixXd * stiffness)
+  {
+    TimeScale scale;
+    const Eigen::MatrixXd K =
+      stiffness != nullptr ? *stiffness : computeStiffnessMatrix(model, data, q, forces);
+    pinocchio::crba(model, data, q);
+    Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
+    Eigen::LLT<Eigen::MatrixXd> llt(M);
+    if (llt.info() != Eigen::Success) // a massless chain end: regularise relative to M's scale
+    {
+      M.diagonal().array() += 1e-12 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
+      llt.compute(M);
+    }
+    const Eigen::VectorXd pull = llt.solve(computeStaticForce(model, data, q, forces));
+    const double omega2 =
+      std::max(largestGeneralizedEigenvalue(K, llt), pull.lpNorm<Eigen::Infinity>());
+    scale.omega_max = std::sqrt(omega2);
+    if (forces != nullptr && forces->hasDamping())
+    {
+      // D = -d applied / d v by central differences at v = 0 (the damper forces are linear).
+      const double h = 1e-6;
+      Eigen::MatrixXd D(model.nv, model.nv);
+      Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), tau_plus(model.nv), tau_minus(model.nv);
+      ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
+      const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
+      const auto applied = [&](Eigen::VectorXd & tau) {
+        tau.setZero();
+        for (pinocchio::Force & f : fext)
+          f.setZero();
+        forces->computeForces(model, data, q, v, tau, fext);
+        if (forces->hasExternalForces()) // the joint torques of fext: rnea without inertia terms
+          tau += pinocchio::computeGeneralizedGravity(model, data, q)
+                 - pinocchio::rnea(model, data, q, zero, zero, fext);
+      };
+      for (int k = 0; k < model.nv; ++k)
+      {
+        v[k] = h;
+        applied(tau_plus);
+        v[k] = -h;
+        applied(tau_minus);
+        v[k] = 0.;
+        D.col(k) = -(tau_plus - tau_minus) / (2. * h);
+      }
+      scale.damping_rate = largestGeneralizedEigenvalue(D, llt);
+    }
+    const double gamma = scale.damping_rate;
+    const double root = std::sqrt(gamma * gamma + 4. * omega2);
+    scale.critical_step =
+      gamma + root > 0. ? 4. / (gamma + root) : std::numeric_limits<double>::infinity();
+    return scale;
   }
 
 } // namespace pinsettle

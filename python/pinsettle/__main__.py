@@ -9,11 +9,24 @@ import sys
 import numpy as np
 
 
+def _step(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or seconds, got '{text}'") from None
+
+
 def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("solver settings (defaults: pinsettle.Settings())")
     group.add_argument("--energy", choices=["exact", "simplified"], help="peak-detector signal")
     group.add_argument("--kt", type=float, help="velocity scale at each energy peak, in [0, 1)")
-    group.add_argument("--dt", type=float, help="time step (s)")
+    group.add_argument("--dt", type=_step, help="time step (s), or 'auto' (the default)")
+    group.add_argument("--dt-safety", type=float, help="fraction of the stable step (dt auto)")
+    group.add_argument(
+        "--polish", action="store_true", default=None, help="Newton polish after convergence"
+    )
     group.add_argument("--err", type=float, help="relative peak threshold")
     group.add_argument("--ds", type=int, help="stopping window (steps)")
     group.add_argument("--max-e", type=float, help="bound on the energy summed over the window")
@@ -23,7 +36,8 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
 
 
 def _setting_overrides(args: argparse.Namespace) -> dict:
-    keys = ["energy", "kt", "dt", "err", "ds", "max_e", "max_steps", "max_time", "backtrack"]
+    keys = ["energy", "kt", "dt", "dt_safety", "err", "ds", "max_e", "max_steps", "max_time"]
+    keys += ["backtrack", "polish"]
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 

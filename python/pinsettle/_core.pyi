@@ -8,7 +8,8 @@ import numpy.typing as npt
 import pinocchio
 
 class Settings:
-    dt: float
+    dt: float | str
+    dt_safety: float
     kt: float
     err: float
     ds: int
@@ -17,6 +18,7 @@ class Settings:
     max_time: float
     energy: str
     backtrack: bool
+    polish: bool
     trace_every: int
     trace_capacity: int
     trace_configurations: bool
@@ -45,3 +47,8 @@ def stiffness(
     q: npt.NDArray[np.float64],
     elements: dict[str, list[tuple[Any, ...]]] | None = ...,
 ) -> dict[str, Any]: ...
+def time_scale(
+    model: pinocchio.Model,
+    q: npt.NDArray[np.float64],
+    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+) -> dict[str, float]: ...

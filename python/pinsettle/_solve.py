@@ -14,7 +14,8 @@ from . import _core
 
 #: Settings keys with the Python type each one takes (used for clear messages).
 SETTING_TYPES: dict[str, str] = {
-    "dt": "float",
+    "dt": "float or 'auto'",
+    "dt_safety": "float",
     "kt": "float",
     "err": "float",
     "ds": "int",
@@ -23,6 +24,7 @@ SETTING_TYPES: dict[str, str] = {
     "max_time": "float",
     "energy": "str ('exact' or 'simplified')",
     "backtrack": "bool",
+    "polish": "bool",
     "trace_every": "int",
     "trace_capacity": "int",
     "trace_configurations": "bool",
@@ -43,13 +45,15 @@ class Settings(_core.Settings):
     type raises ``TypeError``, a value out of range raises ``ValueError`` when solving (or on
     ``check()``), naming the field and its allowed range.
 
-    Fields: ``dt`` time step (s); ``kt`` velocity scale at each energy peak, in [0, 1); ``err``
-    relative peak threshold; ``ds`` stopping window (steps); ``max_e`` bound on the sum of the
-    last ``ds`` energy samples (J for the exact measure); ``max_steps``; ``max_time`` (s);
-    ``energy`` ('exact' or 'simplified'); ``backtrack`` (back up to the interpolated peak before
-    damping); ``trace_every`` (0: no trace); ``trace_capacity``; ``trace_configurations``
-    (record q in the trace, for playback); ``check_every`` (steps between checks of the clock
-    and Ctrl-C).
+    Fields: ``dt`` time step (s), or 'auto' (the default: ``dt_safety`` times the stability
+    limit 2 / omega_max of the mechanism linearised where it is, re-estimated as it moves);
+    ``dt_safety`` in (0, 1]; ``polish`` (Newton steps after convergence); ``kt`` velocity
+    scale at each energy peak, in [0, 1); ``err`` relative peak threshold; ``ds`` stopping
+    window (steps); ``max_e`` bound on the sum of the last ``ds`` energy samples (J for the
+    exact measure); ``max_steps``; ``max_time`` (s); ``energy`` ('exact' or 'simplified');
+    ``backtrack`` (back up to the interpolated peak before damping); ``trace_every`` (0: no
+    trace); ``trace_capacity``; ``trace_configurations`` (record q in the trace, for
+    playback); ``check_every`` (steps between checks of the clock and Ctrl-C).
     """
 
     def __init__(self, **fields: Any) -> None:
@@ -86,7 +90,7 @@ def set_setting(settings: _core.Settings, key: str, value: Any) -> None:
         raise TypeError(f"setting '{key}' expects {kind}, got {type(value).__name__} {value!r}")
     if kind == "int" and isinstance(value, (int, np.integer)) and not -(2**63) <= value < 2**63:
         raise ValueError(f"setting '{key}' must fit in a 64-bit integer, got {value}")
-    if kind == "float" and isinstance(value, (int, np.integer)):
+    if kind.startswith("float") and isinstance(value, (int, np.integer)):
         value = float(value)
     if is_bool:
         value = bool(value)
@@ -104,7 +108,8 @@ class Trace:
 
     ``q`` (samples x model.nq) is recorded with ``Settings.trace_configurations``, else None.
     ``event_step``/``event_time``/``event_kind`` list every velocity change: 'damping' at an
-    energy peak, 'push' off an unstable rest (never decimated).
+    energy peak, 'push' off an unstable rest, 'rollback' to the last good state with the step
+    halved (never decimated).
     """
 
     step: np.ndarray
@@ -131,6 +136,11 @@ class Result:
     matrix at ``q`` (``min_stiffness_eigenvalue`` the smallest, N m/rad or N/m;
     ``neutral_directions`` how many are zero within the tolerance); ``pushes`` counts the
     pushes off an unstable rest (a saddle or a maximum is never reported converged).
+    ``status`` 'no_equilibrium' means the potential falls without bound along the motion;
+    ``reason`` says what was seen (also for 'diverged'). ``dt`` is the step in force at the end,
+    ``dt_estimates`` the automatic estimates made, ``dt_reductions`` the roll-backs with the
+    step halved (divergence guard). With ``polish``: ``residual_before_polish``,
+    ``polish_iterations`` and whether the polished pose was kept (``polished``).
     """
 
     q: np.ndarray
@@ -144,6 +154,13 @@ class Result:
     kinetic_energy: float
     simplified_kinetic_energy: float
     residual: float
+    residual_before_polish: float
+    polish_iterations: int
+    polished: bool
+    dt: float
+    dt_estimates: int
+    dt_reductions: int
+    reason: str
     stability: str
     min_stiffness_eigenvalue: float
     neutral_directions: int
@@ -164,11 +181,21 @@ class Result:
             + (f"{self.pushes} pushes off an unstable rest, " if self.pushes else "")
             + f"{self.sim_time:.4g} s simulated)",
             f"wall time        {self.wall_time * 1e3:.3f} ms",
-            f"residual         {self.residual:.3e} (max |net static generalized force|)",
+            f"residual         {self.residual:.3e} (max |net static generalized force|)"
+            + (
+                f", {self.residual_before_polish:.3e} before the Newton polish"
+                if self.polished
+                else ""
+            ),
+            f"time step        {self.dt:.4g} s"
+            + (f" ({self.dt_estimates} automatic estimates)" if self.dt_estimates else "")
+            + (f", halved {self.dt_reductions} times" if self.dt_reductions else ""),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
             f"stability        {self.stability} (smallest stiffness eigenvalue "
             f"{self.min_stiffness_eigenvalue:.4g}{neutral})",
         ]
+        if self.reason:
+            lines.append(f"reason           {self.reason}")
         if self.joints:
             lines.append("joints")
             for name, value in self.joints.items():
@@ -189,6 +216,12 @@ class Result:
             "sim_time_s": self.sim_time,
             "wall_time_s": self.wall_time,
             "residual": self.residual,
+            "residual_before_polish": self.residual_before_polish,
+            "polished": self.polished,
+            "reason": self.reason,
+            "dt": self.dt,
+            "dt_estimates": self.dt_estimates,
+            "dt_reductions": self.dt_reductions,
             "kinetic_energy": self.kinetic_energy,
             "simplified_kinetic_energy": self.simplified_kinetic_energy,
             "stability": self.stability,

@@ -112,6 +112,11 @@ namespace pinsettle
              && point_loads_.empty();
     }
 
+    bool hasDamping() const override
+    {
+      return joint_damping_ || spring_damping_;
+    }
+
     bool hasExternalForces() const override
     {
       return !point_springs_.empty() || !point_loads_.empty();
@@ -154,6 +159,7 @@ namespace pinsettle
     Eigen::VectorXd joint_loads_;
     bool has_joint_loads_ = false;
     bool spring_damping_ = false; // a point spring with damping needs body velocities
+    bool joint_damping_ = false;
   };
 
 } // namespace pinsettle

@@ -31,6 +31,13 @@ namespace pinsettle
       return false;
     }
 
+    /// \brief Whether the efforts depend on the velocity (dampers); only then does the automatic
+    /// time step look at the damping matrix.
+    virtual bool hasDamping() const
+    {
+      return false;
+    }
+
     /// \brief Whether the model applies nothing; the solver then skips it altogether.
     virtual bool empty() const
     {

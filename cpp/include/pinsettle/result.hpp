@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace pinsettle
@@ -26,8 +27,12 @@ namespace pinsettle
     TimeLimit,
     /// The abort callback asked to stop (Ctrl-C from Python); the state is the current one.
     Aborted,
-    /// A non-finite value appeared; the state is the last finite one.
-    Diverged
+    /// The integration blew up (non-finite values or explosive energy growth) and halving the
+    /// step 30 times did not cure it; the state is the last good one.
+    Diverged,
+    /// The motion never settles: the potential energy decreases without bound along it (a disk
+    /// under a constant torque, a free body falling); Result::reason says what was seen.
+    NoEquilibrium
   };
 
   /// \brief snake_case name of a status: "converged", "max_steps", ...
@@ -54,7 +59,9 @@ namespace pinsettle
     /// Energy peak: the velocity was scaled by Settings::kt.
     Damping,
     /// Rest on an unstable equilibrium: pushed along the most negative stiffness direction.
-    Push
+    Push,
+    /// Divergence guard: back to the last good state with the step halved.
+    Rollback
   };
 
   /// \brief A velocity change, recorded while tracing (Settings::trace_every > 0).
@@ -85,6 +92,20 @@ namespace pinsettle
     /// along the most negative stiffness direction, so that only a stable or neutral rest is
     /// reported converged.
     std::int64_t pushes = 0;
+    /// Time step in force at the end (s): the automatic estimate, or Settings::dt, times
+    /// 0.5^dt_reductions.
+    double dt = 0.;
+    /// Automatic step estimates made (computeTimeScale); 0 with a fixed step.
+    int dt_estimates = 0;
+    /// Roll-backs to the last good state with the step halved (divergence guard).
+    int dt_reductions = 0;
+    /// Residual before the Newton polish (N m or N); equal to residual when not polished.
+    double residual_before_polish = 0.;
+    /// Newton iterations of the polish; whether its result was kept.
+    int polish_iterations = 0;
+    bool polished = false;
+    /// Why the run ended short of convergence (no_equilibrium, diverged), else empty.
+    std::string reason;
     /// Simulated time (s).
     double sim_time = 0.;
     /// Wall-clock time of the solve (s).

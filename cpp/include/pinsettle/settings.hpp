@@ -32,8 +32,13 @@ namespace pinsettle
   ///
   struct Settings
   {
-    /// Time step of the semi-implicit Euler integration (s), > 0.
-    double dt = 1e-3;
+    /// Time step of the semi-implicit Euler integration (s): > 0 for a fixed step, 0 (the
+    /// default) for the automatic step dt_safety * TimeScale::critical_step, estimated at the
+    /// start and again whenever the state has moved far (computeTimeScale).
+    double dt = 0.;
+    /// Safety factor c of the automatic step, in (0, 1]: the fraction of the linearised
+    /// stability limit used (docs/robustness.md shows how the default was measured).
+    double dt_safety = 0.2;
     /// Velocity scale applied at each detected energy peak, in [0, 1).
     double kt = 0.5;
     /// Relative peak threshold: the middle of three samples is a peak when it exceeds both
@@ -61,6 +66,9 @@ namespace pinsettle
     /// Also record the configuration in each trace sample (for playback); costs a copy of q
     /// per recorded sample.
     bool trace_configurations = false;
+    /// After convergence, Newton steps on the static force with the stiffness matrix bring the
+    /// residual to round-off; kept only if the rest stays stable (or neutral) and close.
+    bool polish = false;
     /// The wall clock and the abort callback are checked every check_every steps (>= 1).
     std::int64_t check_every = 256;
   };

@@ -117,9 +117,14 @@ namespace pinsettle
     pinocchio::Data data;
 
   private:
+    // Newton steps from the converged result.q; keeps them only if the rest stays of the same
+    // kind (report) and close.
+    void polish(StabilityReport & report, const ForceModel * forces, Result & result);
+
     const pinocchio::Model & model_;
     // Workspace, sized once for the model.
-    Eigen::VectorXd q_, v_, v_prev_, dq_, q_next_, tau_, report_q_;
+    Eigen::VectorXd q_, v_, dq_, q_next_, tau_, report_q_, q_estimate_, q_good_, v_good_, drift_,
+      moved_;
     ForceVector fext_;
     std::vector<double> window_;
   };

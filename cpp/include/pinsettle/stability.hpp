@@ -78,6 +78,37 @@ namespace pinsettle
     const Eigen::VectorXd & q,
     const ForceModel * forces = nullptr);
 
+  /// \brief Time scales of the mechanism linearised at a configuration, for the automatic step.
+  struct TimeScale
+  {
+    /// Highest natural frequency (rad/s): the square root of the larger of max |eig(M^-1 K)|
+    /// (K symmetrised) and max |M^-1 tau_static| per unit of joint motion (rad or m). The second
+    /// term is the amplitude of a revolute joint's gravity torque A sin(theta): where K vanishes
+    /// (an arm held horizontal) the pull itself still sets the time scale.
+    double omega_max = 0.;
+    /// Highest damping rate (1/s): max eig(M^-1 D), D = -d applied / d v (dampers only).
+    double damping_rate = 0.;
+    /// Stability limit of semi-implicit Euler on the linearised system (s):
+    /// 4 / (damping_rate + sqrt(damping_rate^2 + 4 omega_max^2)), i.e. 2 / omega_max without
+    /// damping; infinity when nothing pulls or damps (a free body at rest without gravity).
+    double critical_step = 0.;
+  };
+
+  ///
+  /// \brief Time scales at q from the stiffness matrix K (computeStiffnessMatrix), the joint
+  /// space inertia matrix M (pinocchio::crba) and the damping matrix D.
+  ///
+  /// \param[in] q The joint configuration (dim model.nq).
+  /// \param[in] forces Applied efforts, or nullptr for gravity alone.
+  /// \param[in] stiffness K at q when already known (dim model.nv x model.nv), else nullptr.
+  ///
+  TimeScale computeTimeScale(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces = nullptr,
+    const Eigen::MatrixXd * stiffness = nullptr);
+
 } // namespace pinsettle
 
 #endif // ifndef __pinsettle_stability_hpp__

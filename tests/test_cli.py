@@ -73,6 +73,24 @@ def test_demo_flags_reach_the_solver():
     assert out["q"] == pytest.approx(result.q.tolist(), abs=1e-12)
 
 
+@pytest.mark.parametrize(
+    "flags, settings",
+    [
+        (["--dt", "2e-3"], {"dt": 2e-3}),
+        (["--dt-safety", "0.1"], {"dt_safety": 0.1}),
+        (["--no-scale-stiff-modes"], {"scale_stiff_modes": False}),
+        (["--polish"], {"polish": True}),
+    ],
+)
+def test_demo_step_flags_reach_the_solver(flags, settings):
+    proc = run("demo", "double_pendulum", "--json", *flags)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    result = pinsettle.solve(pinsettle.load_robot("double_pendulum"), **settings)
+    assert out["steps"] == result.steps and out["dt"] == result.dt
+    assert out["polished"] == result.polished
+
+
 def test_demo_text_output():
     proc = run("demo", "double_pendulum")
     assert proc.returncode == 0, proc.stderr

@@ -458,6 +458,7 @@ def test_settings_defaults():
         "energy": "exact",
         "backtrack": False,
         "polish": False,
+        "scale_stiff_modes": True,
         "trace_every": 0,
         "trace_capacity": 10_000,
         "trace_configurations": False,

@@ -118,6 +118,7 @@ namespace
     out["dt"] = r.dt;
     out["dt_estimates"] = r.dt_estimates;
     out["dt_reductions"] = r.dt_reductions;
+    out["scaled_modes"] = r.scaled_modes;
     out["reason"] = r.reason;
     if (r.trace.empty())
     {
@@ -255,6 +256,9 @@ PYBIND11_MODULE(_core, m)
     .def_readwrite(
       "dt_safety", &Settings::dt_safety, "Fraction of the stability limit used by dt='auto'.")
     .def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
+    .def_readwrite(
+      "scale_stiff_modes", &Settings::scale_stiff_modes,
+      "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).")
     .def_readwrite("kt", &Settings::kt, "Velocity scale at each energy peak, in [0, 1).")
     .def_readwrite("err", &Settings::err, "Relative peak threshold, >= 0.")
     .def_readwrite("ds", &Settings::ds, "Stopping window length (steps), >= 1.")
@@ -319,14 +323,20 @@ PYBIND11_MODULE(_core, m)
 
   m.def(
     "time_scale",
-    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
+    [](
+      const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
+      bool scale_stiff_modes) {
       Evaluation at = evaluationAt(model_obj, q, spec);
-      const TimeScale scale = computeTimeScale(at.model, at.data, q, at.elements.get());
+      const TimeScale scale =
+        computeTimeScale(at.model, at.data, q, at.elements.get(), scale_stiff_modes);
       py::dict out;
       out["omega_max"] = scale.omega_max;
+      out["omega_unscaled"] = scale.omega_unscaled;
+      out["scaled_modes"] = static_cast<int>(scale.stiff_masses.size());
       out["damping_rate"] = scale.damping_rate;
       out["critical_step"] = scale.critical_step;
       return out;
     },
-    py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
+    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
+    py::arg("scale_stiff_modes") = false);
 }

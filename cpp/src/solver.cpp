@@ -158,6 +158,9 @@ namespace pinsettle
     // The automatic step is re-estimated once the configuration moved this far (rad or m)
     // since the last estimate.
     constexpr double kFarMove = 0.1;
+    // ... and sooner while stiff modes are scaled: the modes are those of the estimate's
+    // configuration, and drift from the present ones as the mechanism moves.
+    constexpr double kFarMoveScaled = 0.1;
     // Whether q is farther than distance (rad or m, max norm) from q_ref; work holds the tangent
     // difference (dim model.nv), so that nothing is allocated.
     bool movedBeyond(
@@ -239,8 +242,37 @@ namespace pinsettle
     std::int64_t estimated_at = 0;
     const std::int64_t estimate_spacing =
       std::max<std::int64_t>(settings.ds, static_cast<std::int64_t>(model.nv) * model.nv / 4);
+    // Kinetic energy of the added inertia of the scaled stiff modes (J).
+    const auto addedEnergy = [&](const TimeScale & scale) {
+      if (scale.stiff_masses.size() == 0)
+        return 0.;
+      return 0.5 * (scale.stiff_momenta * v_).cwiseAbs2().dot(scale.stiff_masses);
+    };
+    double switch_loss = 0.; // kinetic energy taken when the scaled modes change (J)
     const auto estimateStep = [&]() {
-      const TimeScale scale = computeTimeScale(model, data, q_, forces);
+      const double added_before = addedEnergy(time_scale_);
+      time_scale_ = computeTimeScale(model, data, q_, forces, settings.scale_stiff_modes);
+      const TimeScale & scale = time_scale_;
+      const Eigen::Index stiff = scale.stiff_masses.size();
+      // New modes change the kinetic energy at the same velocity; never let that add energy
+      // (it could pump the motion up, estimate after estimate): scale the velocity down
+      // instead, as a damping event would. data.M is fresh from computeTimeScale's crba.
+      const double added_after = addedEnergy(scale);
+      if (added_after > added_before)
+      {
+        const double real = 0.5 * v_.dot(data.M.selfadjointView<Eigen::Upper>() * v_);
+        const double ratio = (real + added_before) / (real + added_after);
+        v_ *= std::sqrt(ratio);
+        switch_loss += (1. - ratio) * (real + added_after);
+      }
+      else
+        switch_loss += added_before - added_after;
+      result.scaled_modes = std::max(result.scaled_modes, static_cast<int>(stiff));
+      stiff_y_.resize(model.nv, stiff);
+      stiff_s_.resize(stiff, stiff);
+      stiff_z_.resize(stiff);
+      stiff_p_.resize(stiff);
+      stiff_llt_ = Eigen::LLT<Eigen::MatrixXd>(stiff);
       double next = std::isfinite(scale.critical_step)
                       ? settings.dt_safety * scale.critical_step * step_scale
                       : kRestStep * step_scale;
@@ -253,8 +285,11 @@ namespace pinsettle
     };
     const auto movedFar = [&]() {
       return step - estimated_at >= estimate_spacing
-             && movedBeyond(model, q_estimate_, q_, moved_, kFarMove);
+             && movedBeyond(
+               model, q_estimate_, q_, moved_,
+               time_scale_.stiff_masses.size() > 0 ? kFarMoveScaled : kFarMove);
     };
+    time_scale_ = TimeScale(); // no stiff-mode scaling with a fixed step
     if (auto_dt)
       estimateStep();
 
@@ -281,6 +316,7 @@ namespace pinsettle
       next_sample = settings.ds;
       e_reset = e_now;
       removed = 0.;
+      switch_loss = 0.;
       released_sample = 0.;
       drift_sample = 0.;
       growing = 0;
@@ -313,6 +349,12 @@ namespace pinsettle
         result.events.push_back(TraceEvent{step, time, EventKind::Rollback});
       step_scale *= 0.5;
       dt *= 0.5;
+      if (auto_dt) // the modes of the good state, and no longer step than the halved one
+      {
+        const double halved = dt;
+        estimateStep();
+        dt = std::min(dt, halved);
+      }
       restart();
       resetRunaway(0.);
       return true;
@@ -350,11 +392,19 @@ namespace pinsettle
         pinocchio::aba(model, data, q_, v_, tau_, fext_);
       else
         pinocchio::aba(model, data, q_, v_, tau_);
-
       // Both measures every step, from the body velocities ABA just computed.
       const double e_exact = computeBodyKineticEnergy(model, data);
       const double e_simple = computeSimplifiedKineticEnergy(model, data);
-      const double e = exact ? e_exact : e_simple;
+      // With stiff modes scaled, the exact measure includes their added inertia: it is the
+      // energy the scaled system exchanges with its potential.
+      const Eigen::Index stiff = time_scale_.stiff_masses.size();
+      double e_added = 0.;
+      if (stiff > 0)
+      {
+        stiff_p_.noalias() = time_scale_.stiff_momenta * v_;
+        e_added = 0.5 * stiff_p_.cwiseAbs2().dot(time_scale_.stiff_masses);
+      }
+      const double e = exact ? e_exact + e_added : e_simple;
 
       // Divergence guard: non-finite values, or an energy explosion no resolved motion makes.
       blow_up =
@@ -396,7 +446,7 @@ namespace pinsettle
       // is reported.
       if (step - reset_step == next_sample)
       {
-        const double released = e_exact - e_reset + removed;
+        const double released = e_exact + e_added - e_reset + removed + switch_loss;
         const double drift = drift_.lpNorm<Eigen::Infinity>();
         growing = released_sample > 0. && released >= kRunawayRatio * released_sample
                       && drift_sample > 0. && drift >= kRunawayRatio * drift_sample
@@ -501,7 +551,7 @@ namespace pinsettle
           time -= back;
         }
         v_ *= kt;
-        removed += (1. - kt * kt) * e_exact;
+        removed += (1. - kt * kt) * (e_exact + e_added);
         fresh = 0;
         if (!tainted)
         {
@@ -516,6 +566,23 @@ namespace pinsettle
       e_prev2 = e_prev;
       e_prev = e;
       ++fresh;
+
+      // Stiff modes scaled: the acceleration under M + W^T diag(d) W instead of M (Woodbury):
+      // a' = a - Y (diag(d)^-1 + W Y)^-1 W a with Y = M^-1 W^T.
+      if (stiff > 0)
+      {
+        const Eigen::MatrixXd & W = time_scale_.stiff_momenta;
+        dq_ = data.ddq; // kept aside from computeMinverse's passes
+        pinocchio::computeMinverse(model, data, q_);
+        stiff_y_.noalias() = data.Minv.selfadjointView<Eigen::Upper>() * W.transpose();
+        stiff_s_.noalias() = W * stiff_y_;
+        stiff_s_.diagonal() += time_scale_.stiff_masses.cwiseInverse();
+        stiff_llt_.compute(stiff_s_);
+        stiff_z_.noalias() = W * dq_;
+        stiff_llt_.solveInPlace(stiff_z_);
+        data.ddq = dq_;
+        data.ddq.noalias() -= stiff_y_ * stiff_z_;
+      }
 
       // Semi-implicit Euler on the configuration manifold.
       // The automatic step also bounds the turn per step to dt_safety (rad or m): velocity-

@@ -12,8 +12,11 @@
 
 #include <Eigen/Eigenvalues>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
+#include <vector>
 
 namespace pinsettle
 {
@@ -122,9 +125,11 @@ namespace pinsettle
     pinocchio::Data & data,
     const Eigen::VectorXd & q,
     const ForceModel * forces,
+    bool scale_stiff_modes,
     const Eigen::MatrixXd * stiffness)
   {
     TimeScale scale;
+    const Eigen::Index n = model.nv;
     const Eigen::MatrixXd K =
       stiffness != nullptr ? *stiffness : computeStiffnessMatrix(model, data, q, forces);
     pinocchio::crba(model, data, q);
@@ -135,9 +140,86 @@ namespace pinsettle
       M.diagonal().array() += 1e-12 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
       llt.compute(M);
     }
-    const Eigen::VectorXd pull = llt.solve(computeStaticForce(model, data, q, forces));
-    const double omega2 =
-      std::max(largestGeneralizedEigenvalue(K, llt), pull.lpNorm<Eigen::Infinity>());
+    const Eigen::MatrixXd L = llt.matrixL();
+    const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+
+    // Modes: K phi = lambda M phi. With B = L^-1 K L^-T = U Lambda U^T, Phi = L^-T U is
+    // M-orthonormal, Phi^T M = (L U)^T, and the modal pull is f = Phi^T tau = U^T L^-1 tau.
+    Eigen::MatrixXd B = L.triangularView<Eigen::Lower>().solve(0.5 * (K + K.transpose()));
+    B = L.triangularView<Eigen::Lower>().solve(B.transpose()).eval();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(0.5 * (B + B.transpose()));
+    const Eigen::VectorXd & lambda = eig.eigenvalues(); // increasing
+    const Eigen::MatrixXd & U = eig.eigenvectors();
+    const Eigen::VectorXd f = U.transpose() * L.triangularView<Eigen::Lower>().solve(tau);
+    const auto jointPull = [&](const Eigen::VectorXd & modal) { // |Phi modal|_inf
+      return L.transpose().triangularView<Eigen::Upper>().solve(modal).lpNorm<Eigen::Infinity>();
+    };
+    const double max_abs = lambda.cwiseAbs().maxCoeff();
+    const double pull_all = jointPull(U * f);
+    scale.omega_unscaled = std::sqrt(std::max(max_abs, pull_all));
+
+    // Soft set: modes by increasing |lambda|, each raising the level (its |lambda| unless it is
+    // zero within round-off, and the joint pull of the set so far). The stiff set starts at the
+    // first mode more than kStiffGap above the level (they are scaled down to the level), or more
+    // than kStiffSpread above the first level (a spread without a gap: a chain of links from 1 mm
+    // to 100 m; they are scaled down to kStiffSpread times that). Unstable modes (lambda < 0)
+    // count by |lambda|: their growth needs resolving too.
+    std::vector<Eigen::Index> order(static_cast<std::size_t>(n));
+    std::iota(order.begin(), order.end(), Eigen::Index(0));
+    std::sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) {
+      return std::abs(lambda[a]) < std::abs(lambda[b]);
+    });
+    // Eigenvalues below tol and pulls below pull_tol are zero within round-off: they set no
+    // level (a level of 1e-9 from a neutral mode would make every real mode 'stiff'). A zero
+    // mode's pull is noise from the eigenvectors of a near-degenerate cluster, hence the looser
+    // bound.
+    const double tol = 1e-12 * std::max(max_abs, pull_all);
+    const double pull_tol = std::max(tol, 1e-8 * pull_all);
+    std::size_t split = order.size();
+    double level = 0.;
+    double first_level = 0.;
+    double target = 0.;
+    Eigen::VectorXd soft_modal = Eigen::VectorXd::Zero(n);
+    for (std::size_t i = 0; i < order.size(); ++i)
+    {
+      const Eigen::Index k = order[i];
+      const double size = std::abs(lambda[k]);
+      if (scale_stiff_modes && level > 0. && size > tol)
+      {
+        const double cap = kStiffSpread * first_level;
+        if (size > kStiffGap * level || size > cap)
+        {
+          split = i;
+          target = size > kStiffGap * level ? level : std::max(level, cap);
+          break;
+        }
+      }
+      if (size > tol)
+        level = std::max(level, size);
+      soft_modal += U.col(k) * f[k];
+      const double pull = jointPull(soft_modal);
+      if (pull > pull_tol)
+        level = std::max(level, pull);
+      if (first_level == 0.)
+        first_level = level;
+    }
+    double omega2 = std::max(max_abs, pull_all);
+    if (split < order.size())
+    {
+      const Eigen::Index r = n - static_cast<Eigen::Index>(split);
+      Eigen::MatrixXd U_s(n, r);
+      scale.stiff_masses.resize(r);
+      Eigen::VectorXd modal = f;
+      for (Eigen::Index j = 0; j < r; ++j)
+      {
+        const Eigen::Index k = order[split + static_cast<std::size_t>(j)];
+        U_s.col(j) = U.col(k);
+        scale.stiff_masses[j] = std::abs(lambda[k]) / target - 1.;
+        modal[k] *= target / std::abs(lambda[k]); // the scaled modes' share of their pull
+      }
+      scale.stiff_momenta = (L * U_s).transpose();
+      omega2 = std::max(target, jointPull(U * modal));
+    }
     scale.omega_max = std::sqrt(omega2);
     if (forces != nullptr && forces->hasDamping())
     {
@@ -149,8 +231,8 @@ namespace pinsettle
       const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
       const auto applied = [&](Eigen::VectorXd & tau) {
         tau.setZero();
-        for (pinocchio::Force & f : fext)
-          f.setZero();
+        for (pinocchio::Force & force : fext)
+          force.setZero();
         forces->computeForces(model, data, q, v, tau, fext);
         if (forces->hasExternalForces()) // the joint torques of fext: rnea without inertia terms
           tau += pinocchio::computeGeneralizedGravity(model, data, q)

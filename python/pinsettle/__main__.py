@@ -27,6 +27,12 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--polish", action="store_true", default=None, help="Newton polish after convergence"
     )
+    group.add_argument(
+        "--scale-stiff-modes",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="with dt auto, slow modes over 100x faster than the rest (default: on)",
+    )
     group.add_argument("--err", type=float, help="relative peak threshold")
     group.add_argument("--ds", type=int, help="stopping window (steps)")
     group.add_argument("--max-e", type=float, help="bound on the energy summed over the window")
@@ -37,7 +43,7 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
 
 def _setting_overrides(args: argparse.Namespace) -> dict:
     keys = ["energy", "kt", "dt", "dt_safety", "err", "ds", "max_e", "max_steps", "max_time"]
-    keys += ["backtrack", "polish"]
+    keys += ["backtrack", "polish", "scale_stiff_modes"]
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 

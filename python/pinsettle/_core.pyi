@@ -19,6 +19,7 @@ class Settings:
     energy: str
     backtrack: bool
     polish: bool
+    scale_stiff_modes: bool
     trace_every: int
     trace_capacity: int
     trace_configurations: bool
@@ -51,4 +52,5 @@ def time_scale(
     model: pinocchio.Model,
     q: npt.NDArray[np.float64],
     elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+    scale_stiff_modes: bool = ...,
 ) -> dict[str, float]: ...

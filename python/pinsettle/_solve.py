@@ -25,6 +25,7 @@ SETTING_TYPES: dict[str, str] = {
     "energy": "str ('exact' or 'simplified')",
     "backtrack": "bool",
     "polish": "bool",
+    "scale_stiff_modes": "bool",
     "trace_every": "int",
     "trace_capacity": "int",
     "trace_configurations": "bool",
@@ -47,13 +48,14 @@ class Settings(_core.Settings):
 
     Fields: ``dt`` time step (s), or 'auto' (the default: ``dt_safety`` times the stability
     limit 2 / omega_max of the mechanism linearised where it is, re-estimated as it moves);
-    ``dt_safety`` in (0, 1]; ``polish`` (Newton steps after convergence); ``kt`` velocity
-    scale at each energy peak, in [0, 1); ``err`` relative peak threshold; ``ds`` stopping
-    window (steps); ``max_e`` bound on the sum of the last ``ds`` energy samples (J for the
-    exact measure); ``max_steps``; ``max_time`` (s); ``energy`` ('exact' or 'simplified');
-    ``backtrack`` (back up to the interpolated peak before damping); ``trace_every`` (0: no
-    trace); ``trace_capacity``; ``trace_configurations`` (record q in the trace, for
-    playback); ``check_every`` (steps between checks of the clock and Ctrl-C).
+    ``dt_safety`` in (0, 1]; ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the
+    rest get a larger effective mass, equilibria unchanged); ``polish`` (Newton steps after
+    convergence); ``kt`` velocity scale at each energy peak, in [0, 1); ``err`` relative peak
+    threshold; ``ds`` stopping window (steps); ``max_e`` bound on the sum of the last ``ds``
+    energy samples (J for the exact measure); ``max_steps``; ``max_time`` (s); ``energy``
+    ('exact' or 'simplified'); ``backtrack`` (back up to the interpolated peak before damping);
+    ``trace_every`` (0: no trace); ``trace_capacity``; ``trace_configurations`` (record q in the
+    trace, for playback); ``check_every`` (steps between checks of the clock and Ctrl-C).
     """
 
     def __init__(self, **fields: Any) -> None:
@@ -139,8 +141,9 @@ class Result:
     ``status`` 'no_equilibrium' means the potential falls without bound along the motion;
     ``reason`` says what was seen (also for 'diverged'). ``dt`` is the step in force at the end,
     ``dt_estimates`` the automatic estimates made, ``dt_reductions`` the roll-backs with the
-    step halved (divergence guard). With ``polish``: ``residual_before_polish``,
-    ``polish_iterations`` and whether the polished pose was kept (``polished``).
+    step halved (divergence guard), ``scaled_modes`` the most stiff modes slowed at once. With
+    ``polish``: ``residual_before_polish``, ``polish_iterations`` and whether the polished pose
+    was kept (``polished``).
     """
 
     q: np.ndarray
@@ -160,6 +163,7 @@ class Result:
     dt: float
     dt_estimates: int
     dt_reductions: int
+    scaled_modes: int
     reason: str
     stability: str
     min_stiffness_eigenvalue: float
@@ -189,7 +193,8 @@ class Result:
             ),
             f"time step        {self.dt:.4g} s"
             + (f" ({self.dt_estimates} automatic estimates)" if self.dt_estimates else "")
-            + (f", halved {self.dt_reductions} times" if self.dt_reductions else ""),
+            + (f", halved {self.dt_reductions} times" if self.dt_reductions else "")
+            + (f", {self.scaled_modes} stiff modes slowed" if self.scaled_modes else ""),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
             f"stability        {self.stability} (smallest stiffness eigenvalue "
             f"{self.min_stiffness_eigenvalue:.4g}{neutral})",
@@ -222,6 +227,7 @@ class Result:
             "dt": self.dt,
             "dt_estimates": self.dt_estimates,
             "dt_reductions": self.dt_reductions,
+            "scaled_modes": self.scaled_modes,
             "kinetic_energy": self.kinetic_energy,
             "simplified_kinetic_energy": self.simplified_kinetic_energy,
             "stability": self.stability,

@@ -405,7 +405,9 @@ BOOST_AUTO_TEST_CASE(time_scale_with_a_damper_is_the_semi_implicit_euler_limit)
 BOOST_AUTO_TEST_CASE(automatic_step_settles_a_stiff_spring_next_to_a_heavy_body)
 {
   // A 10 g slider on a 1e8 N/m spring, carried by a 10 kg pendulum: omega ~ 1e5 rad/s next to
-  // ~3 rad/s. The automatic step resolves the stiff mode and settles to the right answer.
+  // ~3 rad/s. Without stiff-mode scaling the automatic step resolves the stiff mode; with it
+  // (the default) the stiff mode is slowed to the pendulum's pace. Both settle to the same,
+  // right answer; scaling takes far fewer steps.
   pinocchio::Model model = pendulum(10., 1.);
   const pinocchio::JointIndex slider = model.addJoint(
     1, pinocchio::JointModelPZ(),
@@ -415,16 +417,76 @@ BOOST_AUTO_TEST_CASE(automatic_step_settles_a_stiff_spring_next_to_a_heavy_body)
   pinsettle::ForceElements springs(model);
   springs.addJointSpring(slider, 1e8, 0.);
   pinsettle::Solver solver(model);
-  pinsettle::Settings settings;
-  settings.max_e = 1e-18;
-  const pinsettle::Result result = solver.solve(Eigen::Vector2d(0.8, 0.), settings, &springs);
-  BOOST_CHECK(result.status == pinsettle::Status::Converged);
-  BOOST_CHECK(result.stability == pinsettle::Stability::Stable);
-  BOOST_CHECK_EQUAL(result.dt_reductions, 0);
-  // Hanging down, the slider sags by m g / k along the pendulum.
-  BOOST_CHECK_SMALL(result.q[0], 1e-8);
-  BOOST_CHECK_CLOSE(result.q[1], -0.01 * 9.81 / 1e8, 1e-3);
-  BOOST_CHECK_LT(result.dt, 2e-5); // below 2 / omega_max
+  std::int64_t steps[2] = {0, 0};
+  for (const bool scale : {false, true})
+  {
+    BOOST_TEST_CONTEXT("scale_stiff_modes " << scale)
+    {
+      pinsettle::Settings settings;
+      settings.max_e = 1e-18;
+      settings.scale_stiff_modes = scale;
+      const pinsettle::Result result = solver.solve(Eigen::Vector2d(0.8, 0.), settings, &springs);
+      BOOST_CHECK(result.status == pinsettle::Status::Converged);
+      BOOST_CHECK(result.stability == pinsettle::Stability::Stable);
+      BOOST_CHECK_EQUAL(result.dt_reductions, 0);
+      // Hanging down, the slider sags by m g / k along the pendulum.
+      BOOST_CHECK_SMALL(result.q[0], 1e-8);
+      BOOST_CHECK_CLOSE(result.q[1], -0.01 * 9.81 / 1e8, 1e-3);
+      if (scale)
+      {
+        BOOST_CHECK_EQUAL(result.scaled_modes, 1);
+        BOOST_CHECK_GT(result.dt, 1e-2); // the pendulum's pace: 0.2 * 2 / sqrt(g / l) ~ 0.13 s
+      }
+      else
+      {
+        BOOST_CHECK_EQUAL(result.scaled_modes, 0);
+        BOOST_CHECK_LT(result.dt, 2e-5); // below 2 / omega_max of the stiff mode
+      }
+      steps[scale ? 1 : 0] = result.steps;
+    }
+  }
+  BOOST_CHECK_LT(10 * steps[1], steps[0]);
+}
+
+BOOST_AUTO_TEST_CASE(stiff_mode_scaling_slows_the_stiff_mode_and_keeps_the_soft_one)
+{
+  // A stiff joint spring on a light link at the end of a heavy pendulum, at its equilibrium
+  // (no pull). Modes of K phi = lambda M phi: a soft pendulum mode and a stiff spring mode.
+  // With the added inertia W^T diag(d) W the stiff mode's eigenvalue drops to the soft one's,
+  // and the soft mode stays where it was.
+  pinocchio::Model model = pendulum(10., 1.);
+  const pinocchio::JointIndex j2 = model.addJoint(
+    1, pinocchio::JointModelRY(),
+    pinocchio::SE3(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0., 0., -1.)), "light");
+  model.appendBodyToJoint(
+    j2,
+    pinocchio::Inertia(0.01, Eigen::Vector3d(0., 0., -0.1), Eigen::Matrix3d::Identity() * 1e-6));
+  pinsettle::ForceElements springs(model);
+  springs.addJointSpring(j2, 1e6, 0.);
+  pinocchio::Data data(model);
+  const Eigen::Vector2d q = Eigen::Vector2d::Zero();
+  const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model, data, q, &springs);
+  pinocchio::crba(model, data, q);
+  Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
+  const Eigen::VectorXd before =
+    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd>(K, M, Eigen::EigenvaluesOnly)
+      .eigenvalues();
+  BOOST_REQUIRE_GT(before[1], pinsettle::kStiffGap * before[0]);
+
+  const pinsettle::TimeScale plain = pinsettle::computeTimeScale(model, data, q, &springs, false);
+  BOOST_CHECK_EQUAL(plain.stiff_masses.size(), 0);
+  BOOST_CHECK_CLOSE(plain.omega_max, std::sqrt(before[1]), 1e-6);
+
+  const pinsettle::TimeScale scaled = pinsettle::computeTimeScale(model, data, q, &springs, true);
+  BOOST_REQUIRE_EQUAL(scaled.stiff_masses.size(), 1);
+  BOOST_CHECK_CLOSE(scaled.omega_unscaled, plain.omega_max, 1e-9);
+  BOOST_CHECK_CLOSE(scaled.omega_max, std::sqrt(before[0]), 1e-6);
+  M += scaled.stiff_momenta.transpose() * scaled.stiff_masses.asDiagonal() * scaled.stiff_momenta;
+  const Eigen::VectorXd after =
+    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd>(K, M, Eigen::EigenvaluesOnly)
+      .eigenvalues();
+  BOOST_CHECK_CLOSE(after[0], before[0], 1e-6);
+  BOOST_CHECK_CLOSE(after[1], before[0], 1e-6);
 }
 
 BOOST_AUTO_TEST_CASE(constant_torque_on_a_free_wheel_has_no_equilibrium)

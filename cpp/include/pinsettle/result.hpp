@@ -99,6 +99,8 @@ namespace pinsettle
     int dt_estimates = 0;
     /// Roll-backs to the last good state with the step halved (divergence guard).
     int dt_reductions = 0;
+    /// Most stiff modes scaled by one estimate (Settings::scale_stiff_modes); 0 when none.
+    int scaled_modes = 0;
     /// Residual before the Newton polish (N m or N); equal to residual when not polished.
     double residual_before_polish = 0.;
     /// Newton iterations of the polish; whether its result was kept.

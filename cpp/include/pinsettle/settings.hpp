@@ -39,6 +39,10 @@ namespace pinsettle
     /// Safety factor c of the automatic step, in (0, 1]: the fraction of the linearised
     /// stability limit used (docs/robustness.md shows how the default was measured).
     double dt_safety = 0.2;
+    /// With the automatic step: give modes far stiffer than the rest (kStiffGap) a larger
+    /// effective mass, so that the step follows the slow modes (computeTimeScale). The
+    /// equilibria are unchanged; only the stiff modes' motion is slowed.
+    bool scale_stiff_modes = true;
     /// Velocity scale applied at each detected energy peak, in [0, 1).
     double kt = 0.5;
     /// Relative peak threshold: the middle of three samples is a peak when it exceeds both

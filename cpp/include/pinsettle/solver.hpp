@@ -6,6 +6,7 @@
 #define __pinsettle_solver_hpp__
 
 #include "pinsettle/forces.hpp"
+#include "pinsettle/stability.hpp"
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
 
@@ -125,6 +126,12 @@ namespace pinsettle
     // Workspace, sized once for the model.
     Eigen::VectorXd q_, v_, dq_, q_next_, tau_, report_q_, q_estimate_, q_good_, v_good_, drift_,
       moved_;
+    // The last automatic step estimate (its stiff-mode scaling is applied at every step) and the
+    // workspace of that scaling, sized at each estimate.
+    TimeScale time_scale_;
+    Eigen::MatrixXd stiff_y_, stiff_s_;
+    Eigen::VectorXd stiff_z_, stiff_p_;
+    Eigen::LLT<Eigen::MatrixXd> stiff_llt_;
     ForceVector fext_;
     std::vector<double> window_;
   };

@@ -79,20 +79,43 @@ namespace pinsettle
     const ForceModel * forces = nullptr);
 
   /// \brief Time scales of the mechanism linearised at a configuration, for the automatic step.
+  ///
+  /// With stiff-mode scaling on, modes far stiffer than the rest (a 1e8 N/m spring on a 10 g body
+  /// next to a 10 kg pendulum) get extra inertia so that their frequency drops to the level of
+  /// the others: the mass matrix becomes M(q) + W^T diag(d) W with constant W and d (the modes'
+  /// momenta and added masses at the estimate). That is still a mechanical system with the same
+  /// potential, so its equilibria, their stability and its energy balance are those of the real
+  /// one; only the stiff modes move more slowly, and the step follows the slow ones.
   struct TimeScale
   {
-    /// Highest natural frequency (rad/s): the square root of the larger of max |eig(M^-1 K)|
-    /// (K symmetrised) and max |M^-1 tau_static| per unit of joint motion (rad or m). The second
-    /// term is the amplitude of a revolute joint's gravity torque A sin(theta): where K vanishes
-    /// (an arm held horizontal) the pull itself still sets the time scale.
+    /// Highest natural frequency the step must resolve (rad/s): the square root of the larger of
+    /// max |eig(M^-1 K)| (K symmetrised; stiff modes at their scaled level) and
+    /// max |M^-1 tau_static| per unit of joint motion (rad or m). The second term is the
+    /// amplitude of a revolute joint's gravity torque A sin(theta): where K vanishes (an arm held
+    /// horizontal) the pull itself still sets the time scale.
     double omega_max = 0.;
+    /// The same without stiff-mode scaling (rad/s): what the explicit step alone would need.
+    double omega_unscaled = 0.;
     /// Highest damping rate (1/s): max eig(M^-1 D), D = -d applied / d v (dampers only).
     double damping_rate = 0.;
     /// Stability limit of semi-implicit Euler on the linearised system (s):
     /// 4 / (damping_rate + sqrt(damping_rate^2 + 4 omega_max^2)), i.e. 2 / omega_max without
     /// damping; infinity when nothing pulls or damps (a free body at rest without gravity).
     double critical_step = 0.;
+    /// Scaled stiff modes: W = Phi_s^T M at the estimate, Phi_s their M-orthonormal shapes
+    /// (dim r x model.nv) ...
+    Eigen::MatrixXd stiff_momenta;
+    /// ... and their added masses d = |lambda| / target - 1 (dim r), target the level they
+    /// are scaled down to.
+    Eigen::VectorXd stiff_masses;
   };
+
+  /// \brief Two clusters of modes count as apart when their eig(M^-1 K) differ by more than
+  /// this factor (100x in frequency).
+  constexpr double kStiffGap = 1e4;
+  /// \brief Modes more than this factor above the softest one (1000x in frequency) are scaled
+  /// down to it even without a gap: it bounds the steps per period of the slowest motion.
+  constexpr double kStiffSpread = 1e6;
 
   ///
   /// \brief Time scales at q from the stiffness matrix K (computeStiffnessMatrix), the joint
@@ -100,6 +123,9 @@ namespace pinsettle
   ///
   /// \param[in] q The joint configuration (dim model.nq).
   /// \param[in] forces Applied efforts, or nullptr for gravity alone.
+  /// \param[in] scale_stiff_modes Find modes more than kStiffGap stiffer than every mode (and
+  /// pull) below them and scale them down to that level (TimeScale::stiff_momenta,
+  /// TimeScale::stiff_masses).
   /// \param[in] stiffness K at q when already known (dim model.nv x model.nv), else nullptr.
   ///
   TimeScale computeTimeScale(
@@ -107,6 +133,7 @@ namespace pinsettle
     pinocchio::Data & data,
     const Eigen::VectorXd & q,
     const ForceModel * forces = nullptr,
+    bool scale_stiff_modes = false,
     const Eigen::MatrixXd * stiffness = nullptr);
 
 } // namespace pinsettle

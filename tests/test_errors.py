@@ -282,3 +282,18 @@ def test_zero_quaternion_is_rejected(solo12, function):
 def test_large_trace_capacity_is_only_a_bound(pendulum):
     result = pinsettle.solve(pendulum, [1.0], trace_every=1, trace_capacity=2**62, max_steps=10)
     assert len(result.trace.step) == 10
+
+
+def test_massless_motion_is_named_not_diverged():
+    # pendulum.urdf's root link has no inertial: on a floating base, turning the base one way
+    # and the hinge the other moves no mass. ABA would produce NaN; the solver says why.
+    model = pinsettle.load_urdf(
+        pinsettle.scene_path("pendulum").parent / "pendulum.urdf", floating=True
+    )
+    with pytest.raises(ValueError, match=r"inertia matrix M\(q0\) is singular") as info:
+        pinsettle.solve(model)
+    message = str(info.value)
+    assert "'root_joint'" in message and "'hinge'" in message and "<inertial>" in message
+    # The same URDF fixed to the world moves fine.
+    fixed = pinsettle.load_urdf(pinsettle.scene_path("pendulum").parent / "pendulum.urdf")
+    assert pinsettle.solve(fixed, np.array([0.3])).converged

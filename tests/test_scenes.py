@@ -360,6 +360,20 @@ EXPECTED = {
         neutral=("shoulder_pan_joint", "wrist_2_joint", "wrist_3_joint"),
         stable=False,
     ),
+    "pendulum_upright": Expected({"hinge": "0"}, ("9.81",)),
+    "ur5_saddle": Expected(
+        {
+            "shoulder_pan_joint": "0.0098",
+            "shoulder_lift_joint": "1.570796",
+            "elbow_joint": "0",
+            "wrist_1_joint": "-1.570796",
+            "wrist_2_joint": "0.0362",
+            "wrist_3_joint": "3.1420",
+        },
+        ("0", "0", "0", "0.1725", "10.69", "64.51"),
+        neutral=("shoulder_pan_joint", "wrist_2_joint", "wrist_3_joint"),
+        stable=False,
+    ),
     "ur5_tool_spring": Expected(
         {
             "shoulder_pan_joint": "0.150114",
@@ -375,6 +389,10 @@ EXPECTED = {
     ),
 }
 EQUILIBRIUM_SCENES = sorted(EXPECTED)
+# Scenes without an equilibrium: the potential falls without bound.
+NO_EQUILIBRIUM_SCENES = ["free_fall", "overloaded_pendulum", "torque_disk"]
+# Scenes that start at rest exactly on an unstable equilibrium.
+UNSTABLE_START_SCENES = ["pendulum_upright", "ur5_saddle"]
 
 # Points named in the comments: (scene, frame, point in the frame, world position as written).
 POSITIONS = [
@@ -442,7 +460,7 @@ def independent_root(ref: Reference, q_full: np.ndarray, neutral=()) -> np.ndarr
 
 def test_the_library_is_covered():
     # Every scene file has a header with its expectation, and this module checks all of them.
-    assert SCENES == sorted([*EXPECTED, "torque_disk"])
+    assert SCENES == sorted([*EXPECTED, *NO_EQUILIBRIUM_SCENES])
     for name in SCENES:
         assert "Expected:" in header(name), name
     assert pinsettle.scene_names() == SCENES  # the installed library is this folder
@@ -779,6 +797,72 @@ def test_torque_disk_has_no_equilibrium(solved):
     energy = traced.trace.kinetic_energy
     assert len(energy) > 100 and np.all(np.diff(energy) > 0)
     assert energy[-1] <= result.kinetic_energy
+
+
+@pytest.mark.parametrize("name", NO_EQUILIBRIUM_SCENES)
+def test_no_equilibrium_scenes_are_decided_in_bounded_time(name, solved):
+    scene, result, ref = solved(name)
+    assert result.status == "no_equilibrium" and not result.converged
+    assert "falls without bound" in result.reason
+    # By the runaway test (at most two runs of ten doublings of ds), not by the step limit.
+    assert result.steps <= 2 * scene.settings.ds * 2**10 + 1 < scene.settings.max_steps
+    assert result.dt_reductions == 0 and np.all(np.isfinite(result.q))
+    # Far from rest: the net static force stays of the size of the loads.
+    assert ref.residual(result.q) == pytest.approx(result.residual, rel=1e-9)
+    assert result.residual >= 1.0 - 1e-12  # at least the 1 N m of the weakest load
+
+
+def test_free_fall_falls_at_g(solved):
+    scene, result, ref = solved("free_fall")
+    # Nothing but gravity: the body falls straight down, z = -g t^2 / 2 (semi-implicit Euler
+    # with a varying step is within one step's fall of that), without turning.
+    z = result.q[2]
+    g = 9.81
+    assert result.q[0] == pytest.approx(0.0, abs=1e-9)
+    assert result.q[1] == pytest.approx(0.0, abs=1e-9)
+    assert np.allclose(result.q[3:7], [0, 0, 0, 1], atol=1e-9)
+    assert z == pytest.approx(-0.5 * g * result.sim_time**2, rel=1e-2)
+    assert result.v[2] == pytest.approx(-g * result.sim_time, rel=1e-2)
+
+
+def test_overloaded_pendulum_turns_the_way_the_load_pushes(solved, tmp_path):
+    scene, result, ref = solved("overloaded_pendulum")
+    # The load (+40 N m) beats the most spring and gravity can hold (29.81 N m): the hinge
+    # turns ever further in the load's direction.
+    assert result.joints["hinge"] > 100 * 2 * math.pi
+    assert result.v[0] > 0
+    # Just below the limit (a 29 N m load) the same arm holds: sin(t) = 29 / 29.81.
+    text = (ROBOTS / "overloaded_pendulum.toml").read_text(encoding="utf-8")
+    assert text.count("effort = 40.0") == 1
+    held = tmp_path / "held.toml"
+    held.write_text(text.replace("effort = 40.0", "effort = 29.0"), encoding="utf-8")
+    (tmp_path / "pendulum.urdf").write_text(
+        (ROBOTS / "pendulum.urdf").read_text(encoding="utf-8"), encoding="utf-8"
+    )
+    settled = pinsettle.solve(pinsettle.load_scene(held))
+    assert settled.converged and settled.stability == "stable"
+    assert math.sin(settled.joints["hinge"]) == pytest.approx(29.0 / 29.81, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", UNSTABLE_START_SCENES)
+def test_unstable_start_scenes_reach_a_stable_rest(name, solved):
+    scene, result, ref = solved(name)
+    start = pinsettle.assess_stability(scene, scene.q0())
+    # The start is an equilibrium (within round-off) ...
+    assert ref.residual(scene.q0()) < 1e-9
+    # ... but not a stable one ...
+    assert start.verdict == "unstable" and start.min_eigenvalue < 0
+    # ... and the answer is not the start, and is a stable-or-neutral rest.
+    assert result.converged and result.stability in ("stable", "neutral")
+    assert result.min_stiffness_eigenvalue > -1e-6
+    assert np.max(np.abs(result.q - scene.q0())) > 1.0
+    assert ref.residual(result.q) < 1e-6
+
+
+def test_ur5_saddle_is_left_by_a_push(solved):
+    scene, result, ref = solved("ur5_saddle")
+    # The solver is at rest on the saddle at once (gravity 3e-10 N m), so it must push.
+    assert result.pushes >= 1
 
 
 def test_panda_locked_fingers_stay_exactly_where_they_start(solved):

@@ -7,8 +7,11 @@
 #include "pinsettle/stability.hpp"
 
 #include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
+
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <limits>
@@ -78,6 +81,33 @@ namespace pinsettle
           msg << name << "[" << k << "] is " << v[k] << "; every entry must be finite";
     if (msg.tellp() > 0)
       throw std::invalid_argument(msg.str());
+  }
+
+  void checkMassMatrix(
+    const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q)
+  {
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
+    pinocchio::aba(model, data, q, zero, zero);
+    if (data.ddq.allFinite())
+      return;
+    pinocchio::crba(model, data, q);
+    const Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(M);
+    std::ostringstream msg;
+    msg << "the joint space inertia matrix M(q0) is singular (smallest eigenvalue "
+        << eig.eigenvalues()[0] << ", largest " << eig.eigenvalues()[model.nv - 1]
+        << "): moving the joints";
+    const Eigen::VectorXd phi = eig.eigenvectors().col(0).cwiseAbs();
+    const char * sep = " ";
+    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+      if (phi.segment(model.idx_vs[j], model.nvs[j]).maxCoeff() > 1e-3 * phi.maxCoeff())
+      {
+        msg << sep << "'" << model.names[j] << "'";
+        sep = ", ";
+      }
+    msg << " together moves no mass, so the dynamics are undefined. Give every moving link an "
+           "<inertial> with mass and inertia (a floating base needs a root link with mass)";
+    throw std::invalid_argument(msg.str());
   }
 
   Eigen::VectorXd computeStaticForce(
@@ -192,6 +222,7 @@ namespace pinsettle
       throw std::invalid_argument("model has no degree of freedom: nothing to settle");
     checkConfiguration(model_, q0, "q0");
     checkVelocity(model_, v0, "v0");
+    checkMassMatrix(model_, data, q0);
     if (forces != nullptr && forces->empty())
       forces = nullptr; // nothing to apply: step exactly like the bare core
 

@@ -182,7 +182,11 @@ class Result:
         lines = [
             f"status           {self.status}",
             f"steps            {self.steps} ({self.peaks} damping events, "
-            + (f"{self.pushes} pushes off an unstable rest, " if self.pushes else "")
+            + (
+                f"{self.pushes} push{'es' if self.pushes > 1 else ''} off an unstable rest, "
+                if self.pushes
+                else ""
+            )
             + f"{self.sim_time:.4g} s simulated)",
             f"wall time        {self.wall_time * 1e3:.3f} ms",
             f"residual         {self.residual:.3e} (max |net static generalized force|)"

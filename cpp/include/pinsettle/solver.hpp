@@ -42,6 +42,18 @@ namespace pinsettle
     const pinocchio::Model & model, const Eigen::VectorXd & v, const char * name = "v0");
 
   ///
+  /// \brief Check that the model can move at q: forward dynamics (pinocchio::aba) is finite,
+  /// i.e. the joint space inertia matrix M(q) is invertible.
+  ///
+  /// \param[in] q The joint configuration (dim model.nq).
+  /// \throws std::invalid_argument when it is not: a joint moves no mass (a floating base on a
+  ///         URDF root link without inertia, a joint whose child has no inertial); the joints
+  ///         that make up the massless motion (eigenvector of M's smallest eigenvalue) are named.
+  ///
+  void checkMassMatrix(
+    const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q);
+
+  ///
   /// \brief Net static generalized force: rnea(q, 0, 0) minus the applied efforts at (q, 0),
   /// i.e. gravity minus springs and loads. Zero at an equilibrium.
   ///

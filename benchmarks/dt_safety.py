@@ -16,7 +16,7 @@ import pinsettle
 
 FACTORS = [0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.8, 1.0]
 KTS = [0.0, 0.5, 0.9]
-NO_EQUILIBRIUM = {"torque_disk"}
+NO_EQUILIBRIUM = {"torque_disk", "free_fall", "overloaded_pendulum"}
 
 
 def measure(factors: list[float], max_steps: int) -> list[dict]:

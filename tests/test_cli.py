@@ -78,7 +78,6 @@ def test_demo_flags_reach_the_solver():
     [
         (["--dt", "2e-3"], {"dt": 2e-3}),
         (["--dt-safety", "0.1"], {"dt_safety": 0.1}),
-        (["--no-scale-stiff-modes"], {"scale_stiff_modes": False}),
         (["--polish"], {"polish": True}),
     ],
 )
@@ -89,6 +88,27 @@ def test_demo_step_flags_reach_the_solver(flags, settings):
     result = pinsettle.solve(pinsettle.load_robot("double_pendulum"), **settings)
     assert out["steps"] == result.steps and out["dt"] == result.dt
     assert out["polished"] == result.polished
+
+
+def test_scale_stiff_modes_flag(tmp_path):
+    # A 1e6 N m/rad joint spring on the double pendulum's second joint: a mode far faster than
+    # the first joint's swing. Slowed by default, resolved with --no-scale-stiff-modes.
+    scene = tmp_path / "stiff.toml"
+    scene.write_text(
+        '[model]\nrobot = "double_pendulum"\n[start]\njoint1 = 1.0\n'
+        '[[joint_spring]]\njoint = "joint2"\nstiffness = 1e6\n',
+        encoding="utf-8",
+    )
+    outs = {}
+    for flag in ("--scale-stiff-modes", "--no-scale-stiff-modes"):
+        proc = run("solve", str(scene), "--json", flag)
+        assert proc.returncode == 0, proc.stderr
+        outs[flag] = json.loads(proc.stdout)
+    scaled, plain = outs["--scale-stiff-modes"], outs["--no-scale-stiff-modes"]
+    assert scaled["scaled_modes"] == 1 and plain["scaled_modes"] == 0
+    assert scaled["dt"] > 100 * plain["dt"] and scaled["steps"] < plain["steps"]
+    # The same rest either way.
+    assert scaled["q"] == pytest.approx(plain["q"], abs=1e-4)  # both at max_e = 1e-12 J
 
 
 def test_demo_text_output():

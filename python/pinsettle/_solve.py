@@ -198,7 +198,11 @@ class Result:
             f"time step        {self.dt:.4g} s"
             + (f" ({self.dt_estimates} automatic estimates)" if self.dt_estimates else "")
             + (f", halved {self.dt_reductions} times" if self.dt_reductions else "")
-            + (f", {self.scaled_modes} stiff modes slowed" if self.scaled_modes else ""),
+            + (
+                f", {self.scaled_modes} stiff mode{'s' if self.scaled_modes > 1 else ''} slowed"
+                if self.scaled_modes
+                else ""
+            ),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
             f"stability        {self.stability} (smallest stiffness eigenvalue "
             f"{self.min_stiffness_eigenvalue:.4g}{neutral})",
@@ -226,6 +230,7 @@ class Result:
             "wall_time_s": self.wall_time,
             "residual": self.residual,
             "residual_before_polish": self.residual_before_polish,
+            "polish_iterations": self.polish_iterations,
             "polished": self.polished,
             "reason": self.reason,
             "dt": self.dt,

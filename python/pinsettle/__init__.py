@@ -41,6 +41,7 @@ __all__ = [
     "load_robot",
     "load_scene",
     "load_urdf",
+    "play",
     "robot_names",
     "robot_urdf",
     "scene_names",
@@ -60,3 +61,15 @@ def get_cmake_dir() -> str:
     if not path.is_dir():
         raise FileNotFoundError(f"the C++ package of pinsettle is not installed at {path}")
     return str(path)
+
+
+def __getattr__(name: str) -> object:
+    # ``pinsettle.play`` is imported on first use: importing pinsettle (or solving) never
+    # imports meshcat or matplotlib, and play.py itself imports them only when it runs.
+    if name == "play":
+        import importlib
+
+        # The submodule, made callable: pinsettle.play(scene, result) plays, and
+        # pinsettle.play.TRACE_SETTINGS, pinsettle.play.plot_energy are at hand.
+        return importlib.import_module(".play", __name__)
+    raise AttributeError(f"module 'pinsettle' has no attribute '{name}'")

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import time
+import webbrowser
+from pathlib import Path
 
 import numpy as np
 
@@ -39,6 +43,16 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--max-steps", type=int, help="largest number of steps")
     group.add_argument("--max-time", type=float, help="wall-clock budget (s)")
     group.add_argument("--backtrack", action="store_true", default=None, help="back up to the peak")
+
+
+def _add_start_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--start",
+        action="append",
+        default=[],
+        metavar="JOINT=VALUE",
+        help="override a start value (repeatable; comma-separated for a multi-DoF joint)",
+    )
 
 
 def _setting_overrides(args: argparse.Namespace) -> dict:
@@ -83,17 +97,24 @@ def _parse_start(items: list[str]) -> dict[str, float | list[float]]:
     return out
 
 
-def _solve(args: argparse.Namespace) -> int:
+def _load_scene(args: argparse.Namespace) -> tuple:
+    """The scene of args.scene and the start of its --start flags (None: the scene's own)."""
     import pinsettle
 
     scene = pinsettle.load_scene(pinsettle.scene_path(args.scene))
-    q0 = None
-    if args.start:
-        try:
-            scene.set_start(_parse_start(args.start))
-        except pinsettle.SceneError as error:
-            raise pinsettle.SceneError(f"--start: {error}") from None
-        q0 = scene.q0()
+    if not args.start:
+        return scene, None
+    try:
+        scene.set_start(_parse_start(args.start))
+    except pinsettle.SceneError as error:
+        raise pinsettle.SceneError(f"--start: {error}") from None
+    return scene, scene.q0()
+
+
+def _solve(args: argparse.Namespace) -> int:
+    import pinsettle
+
+    scene, q0 = _load_scene(args)
     result = pinsettle.solve(scene, q0, **_setting_overrides(args))
     if args.json:
         out = {"scene": str(scene.path), **result.to_dict()}
@@ -102,6 +123,77 @@ def _solve(args: argparse.Namespace) -> int:
         title = f"{scene.name}: {scene.description}" if scene.description else scene.name
         print(title)
         print(result.summary())
+    return 0 if result.converged else 1
+
+
+def _speed(text: str) -> float:
+    from pinsettle.play import check_speed
+
+    try:
+        return check_speed(float(text))
+    except ValueError:
+        raise ValueError(
+            "--speed must be a positive number (simulated seconds per second of playback), "
+            f"got '{text}'"
+        ) from None
+
+
+def _serve(viz: object) -> None:
+    """Keep the live server up until Ctrl-C or SIGTERM (then the caller closes it)."""
+
+    def stop(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        while viz.window.server.running:
+            time.sleep(0.2)
+        print("pinsettle: the meshcat server stopped", file=sys.stderr)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _play(args: argparse.Namespace) -> int:
+    import pinsettle
+    from pinsettle.play import TRACE_SETTINGS, play, require
+
+    require()  # before solving: a missing extra is a one-line message, exit 2
+    speed = None if args.speed is None else _speed(args.speed)
+    html = None if args.html is None else Path(args.html)
+    plot = Path(args.plot) if args.plot else None
+    if html is not None and plot is None:
+        plot = html.with_name(html.stem + "_energy.png")
+    for flag, path in (("--html", html), ("--plot", plot)):
+        if path is not None and not path.parent.is_dir():
+            raise FileNotFoundError(f"{flag} {path}: no such folder: {path.parent}")
+    scene, q0 = _load_scene(args)
+    overrides = {**_setting_overrides(args), **TRACE_SETTINGS}
+    result = pinsettle.solve(scene, q0, **overrides)
+    title = f"{scene.name}: {scene.description}" if scene.description else scene.name
+    print(title)
+    print(
+        f"{result.status}: {result.steps} steps, {result.peaks} damping events, "
+        f"{result.sim_time:.4g} s simulated"
+    )
+    with play(scene, result, speed=speed, html=html, plot=plot, live=html is None) as viz:
+        timeline = viz.timeline
+        print(
+            f"playback: {timeline.sim_time:.4g} s simulated in {timeline.duration:.3g} s "
+            f"(speed x{timeline.speed:.3g}), then the final pose held"
+        )
+        for path in (html, plot):
+            if path is not None:
+                print(f"wrote {path}")
+        if html is not None:
+            if not args.no_open:
+                webbrowser.open(html.resolve().as_uri(), new=2)
+        else:
+            print(f"meshcat: {viz.url} (Ctrl-C to stop)", flush=True)
+            if not args.no_open:
+                viz.open()
+            _serve(viz)
     return 0 if result.converged else 1
 
 
@@ -147,15 +239,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     solve.add_argument("scene", help="scene file (.toml) or scene name")
     solve.add_argument("--json", action="store_true", help="print one JSON object")
-    solve.add_argument(
-        "--start",
-        action="append",
-        default=[],
-        metavar="JOINT=VALUE",
-        help="override a start value (repeatable; comma-separated for a multi-DoF joint)",
-    )
+    _add_start_flag(solve)
     _add_setting_flags(solve)
     solve.set_defaults(func=_solve)
+    play = sub.add_parser(
+        "play",
+        help="solve a scene and play how it settles in meshcat (needs pinsettle[viz])",
+        description="Solve a scene and play the settling motion in meshcat: live in the "
+        "browser (a server on 127.0.0.1 until Ctrl-C), or with --html as a self-contained "
+        "page plus the energy plot (PNG) next to it.",
+    )
+    play.add_argument("scene", help="scene file (.toml) or scene name")
+    play.add_argument(
+        "--speed",
+        metavar="X",
+        help="simulated seconds per second of playback (default: real time, or faster so "
+        "that a long settle plays in about 6 s)",
+    )
+    play.add_argument("--html", metavar="FILE", help="write a static HTML page (no server)")
+    play.add_argument(
+        "--plot", metavar="FILE", help="energy plot (PNG; default with --html: FILE_energy.png)"
+    )
+    play.add_argument("--no-open", action="store_true", help="do not open a browser")
+    _add_start_flag(play)
+    _add_setting_flags(play)
+    play.set_defaults(func=_play)
     scenes = sub.add_parser("scenes", help="list the scenes of the library with a description")
     scenes.set_defaults(func=_scenes)
     robots = sub.add_parser("robots", help="list the robot names")
@@ -170,6 +278,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except (ValueError, TypeError, FileNotFoundError, IsADirectoryError) as error:
+        print(f"pinsettle: error: {error}", file=sys.stderr)
+        return 2
+    except ImportError as error:  # pinsettle play without its optional extra
+        from pinsettle.play import MissingDependencyError
+
+        if not isinstance(error, MissingDependencyError):
+            raise
         print(f"pinsettle: error: {error}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into head: not an error

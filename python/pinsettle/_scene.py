@@ -144,6 +144,9 @@ class Scene:
         self.name = name
         self.description = description
         self.path: Path | None = None
+        #: The URDF the model was built from, if any (its visual shapes are drawn by
+        #: ``pinsettle.play``; solving never loads them).
+        self.urdf: Path | None = None
         self.settings = make_settings(settings, {})
         self.joint_springs: list[JointSpring] = []
         self.springs: list[Spring] = []
@@ -161,14 +164,18 @@ class Scene:
         """A scene of the mechanism in a URDF file (meshes are not loaded)."""
         from .robots import load_urdf
 
-        return cls(load_urdf(path, floating=floating), **kwargs)
+        scene = cls(load_urdf(path, floating=floating), **kwargs)
+        scene.urdf = Path(path)
+        return scene
 
     @classmethod
     def from_robot(cls, name: str, *, floating: bool = False, **kwargs: Any) -> Scene:
         """A scene of a robot shipped by example-robot-data (see ``pinsettle.robot_names()``)."""
-        from .robots import load_robot
+        from .robots import load_robot, robot_urdf
 
-        return cls(load_robot(name, floating=floating), **kwargs)
+        scene = cls(load_robot(name, floating=floating), **kwargs)
+        scene.urdf = robot_urdf(name)
+        return scene
 
     @property
     def gravity(self) -> np.ndarray:
@@ -622,24 +629,27 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
             raise SceneError(f"[model] urdf must be a path (str), got {urdf!r}")
         from .robots import load_urdf
 
+        urdf_path = path.parent / urdf
         try:
-            model = load_urdf(path.parent / urdf, floating=floating)
+            model = load_urdf(urdf_path, floating=floating)
         except (FileNotFoundError, ValueError) as error:
             raise SceneError(f"[model] urdf: {error}") from None
     else:
         robot = m["robot"]
         if not isinstance(robot, str):
             raise SceneError(f"[model] robot must be a name (str), got {robot!r}")
-        from .robots import load_robot
+        from .robots import load_robot, robot_urdf
 
         try:
             model = load_robot(robot, floating=floating)
+            urdf_path = robot_urdf(robot)
         except (KeyError, ValueError, FileNotFoundError) as error:
             message = error.args[0] if error.args else str(error)
             raise SceneError(f"[model] robot: {message}") from None
 
     scene = Scene(model, name=path.stem, description=_description(path))
     scene.path = path
+    scene.urdf = urdf_path
 
     def at(where: str, fn: Any, *args: Any, **kwargs: Any) -> None:
         try:

@@ -1,0 +1,68 @@
+"""A meshcat server that listens on the loopback interface only (run by ``pinsettle.play``).
+
+meshcat's own ``meshcat-server`` binds its ZeroMQ socket to 127.0.0.1 but its web server to
+every interface; this one binds both to 127.0.0.1. It prints ``zmq_url=...`` and
+``web_url=...`` on stdout (as meshcat's server does), then stops writing anything, and exits
+by itself when the process that started it (``--parent PID``) is gone.
+
+Usage: ``python -m pinsettle._meshcat_server --parent PID``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+HOST = "127.0.0.1"
+
+
+def _bridge_class():
+    from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+    class LoopbackBridge(ZMQWebSocketBridge):
+        """meshcat's bridge with its web server bound to 127.0.0.1 (not every interface)."""
+
+        def make_app(self):
+            app = super().make_app()
+            listen = app.listen
+
+            def listen_on_loopback(port, **kwargs):
+                kwargs["address"] = HOST
+                return listen(port, **kwargs)
+
+            app.listen = listen_on_loopback  # the bridge looks the method up on the instance
+            return app
+
+    return LoopbackBridge
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pinsettle._meshcat_server")
+    parser.add_argument("--parent", type=int, default=None, help="exit when this process is gone")
+    args = parser.parse_args(argv)
+
+    import tornado.ioloop
+
+    bridge = _bridge_class()(host=HOST)
+    print(f"zmq_url={bridge.zmq_url}", flush=True)
+    print(f"web_url={bridge.web_url}", flush=True)
+    # Nothing reads our output from now on: send it nowhere, so that a full pipe never blocks.
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.dup2(devnull, 2)
+
+    if args.parent is not None:
+        parent = args.parent
+
+        def check_parent() -> None:
+            if os.getppid() != parent:
+                tornado.ioloop.IOLoop.current().stop()
+
+        tornado.ioloop.PeriodicCallback(check_parent, 500).start()
+    bridge.run()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

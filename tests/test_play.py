@@ -1,0 +1,300 @@
+"""Playback (pinsettle play): static HTML for every scene, the energy plot, the live server on
+127.0.0.1, what the animation ends on, and screenshots of both pages in headless Chromium.
+
+The screenshots need Chromium: without it these tests skip with the reason, except where
+PINSETTLE_REQUIRE_CHROMIUM=1 (set by .ci/run), where its absence is a failure."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pinocchio
+import pinsettle
+import pytest
+
+ROBOTS = Path(__file__).resolve().parents[1] / "robots"
+SCENES = sorted(p.stem for p in ROBOTS.glob("*.toml"))
+
+meshcat = pytest.importorskip("meshcat", reason="the viz extra (meshcat) is not installed")
+matplotlib = pytest.importorskip("matplotlib", reason="the viz extra (matplotlib) is not installed")
+from matplotlib import image  # noqa: E402
+
+
+def _play():
+    import importlib
+
+    return importlib.import_module("pinsettle.play")
+
+
+# --- what solving leaves out -----------------------------------------------------------------
+
+
+def test_solving_never_imports_meshcat_or_matplotlib():
+    code = (
+        "import sys, pinsettle\n"
+        "scene = pinsettle.load_scene(pinsettle.scene_path('bistable_pendulum'))\n"
+        "r = pinsettle.solve(scene, trace_every=1, trace_configurations=True)\n"
+        "assert r.converged\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('meshcat', 'matplotlib', 'pinsettle.play')))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_missing_extra_is_a_clear_message(tmp_path):
+    # meshcat made unimportable in a child process: play says what to install, exit 2.
+    code = (
+        "import sys; sys.modules['meshcat'] = None\n"
+        "from pinsettle.__main__ import main\n"
+        f"sys.exit(main(['play', 'pendulum', '--html', r'{tmp_path / 'p.html'}', '--no-open']))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 2
+    assert "meshcat" in out.stderr and "pip install 'pinsettle[viz]'" in out.stderr
+    assert "Traceback" not in out.stderr
+    assert not (tmp_path / "p.html").exists()
+
+
+@pytest.mark.parametrize(
+    "args, pattern",
+    [
+        (["--speed", "-1"], "--speed must be a positive number"),
+        (["--speed", "fast"], "--speed must be a positive number"),
+        (["--html", "/no/such/folder/x.html"], "--html /no/such/folder/x.html: no such folder"),
+        (["--kt", "2"], "kt"),
+    ],
+)
+def test_bad_play_flags(args, pattern):
+    proc = subprocess.run(
+        [sys.executable, "-m", "pinsettle", "play", "pendulum", "--no-open", *args],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert pattern in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_play_checks_its_arguments():
+    play = _play()
+    scene = pinsettle.load_scene(pinsettle.scene_path("pendulum"))
+    with pytest.raises(ValueError, match="speed must be a positive finite number"):
+        play.play(scene, speed=0.0, live=False)
+    with pytest.raises(TypeError, match="speed must be a positive number"):
+        play.play(scene, speed="x", live=False)
+    untraced = pinsettle.solve(scene)
+    with pytest.raises(ValueError, match="no recorded configurations"):
+        play.play(scene, untraced, live=False)
+
+
+# --- the static page and what its animation ends on ------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """Every scene played to a static page and an energy plot, once."""
+    folder = tmp_path_factory.mktemp("play")
+    play = _play()
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            scene = pinsettle.load_scene(ROBOTS / f"{name}.toml")
+            result = pinsettle.solve(scene, **play.TRACE_SETTINGS)
+            html, plot = folder / f"{name}.html", folder / f"{name}_energy.png"
+            viz = play.play(scene, result, html=html, plot=plot, live=False)
+            cache[name] = (scene, result, viz, html, plot)
+        return cache[name]
+
+    return get
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_every_scene_exports_a_self_contained_page_and_a_plot(name, exported):
+    scene, result, viz, html, plot = exported(name)
+    text = html.read_text(encoding="utf-8")
+    assert text.startswith("<!DOCTYPE html>") and "MeshCat.Viewer" in text
+    # Self-contained: no script, style or mesh fetched from anywhere.
+    assert "<script src" not in text and 'href="http' not in text
+    assert "package://" not in text
+    png = plot.read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    # Time scaled: a long settle plays in a few seconds.
+    assert viz.timeline.duration <= 10.0
+    assert viz.timeline.sim_time == pytest.approx(result.sim_time)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_the_animation_ends_on_the_final_pose(name, exported):
+    scene, result, viz, html, plot = exported(name)
+    # Where each visual shape is at result.q, computed here with Pinocchio.
+    model, visual = viz.model, viz.visual_model
+    data, gdata = model.createData(), visual.createData()
+    pinocchio.forwardKinematics(model, data, result.q)
+    pinocchio.updateGeometryPlacements(model, data, visual, gdata)
+    clips = {str(path.lower()): clip for path, clip in viz.animation.clips.items()}
+    for g, obj in enumerate(visual.geometryObjects):
+        clip = clips[f"/meshcat/pinsettle/pinocchio/visuals/{obj.name}"]
+        position = clip.tracks["position"]
+        assert np.allclose(position.values[-1], gdata.oMg[g].translation, atol=1e-9), obj.name
+        # ... held: the last two keyframes are the same pose.
+        assert np.allclose(position.values[-2], position.values[-1])
+        w = clip.tracks["quaternion"].values[-1]  # x, y, z, w
+        expected = pinocchio.Quaternion(gdata.oMg[g].rotation)
+        assert abs(np.dot(w, expected.coeffs())) == pytest.approx(1.0, abs=1e-9), obj.name
+    # Springs end between their attachment points at result.q.
+    pinocchio.updateFramePlacements(model, data)
+    for s, spring in enumerate(scene.springs):
+        a = data.oMf[model.getFrameId(spring.a_frame)].act(np.array(spring.a_point))
+        b = data.oMf[model.getFrameId(spring.b_frame)].act(np.array(spring.b_point))
+        track = clips[f"/meshcat/pinsettle/springs/{s}"].tracks["scale"]
+        assert track.values[-1][2] == pytest.approx(np.linalg.norm(a - b), rel=1e-9)
+
+
+def test_damping_events_are_marked(exported):
+    scene, result, viz, html, plot = exported("bistable_pendulum")
+    assert len(viz.timeline.events["damping"]) == result.peaks > 0
+    text = html.read_text(encoding="utf-8")
+    assert "damping events" in text  # the on-page counter
+
+
+# --- the live server ------------------------------------------------------------------------
+
+
+def _listening(port: int) -> list[str]:
+    """Local addresses (hex, as in /proc/net/tcp) of the sockets listening on port."""
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            local, state = line.split()[1], line.split()[3]
+            address, hex_port = local.rsplit(":", 1)
+            if state == "0A" and int(hex_port, 16) == port:  # 0A: LISTEN
+                found.append(address)
+    return found
+
+
+@pytest.fixture(scope="module")
+def live():
+    play = _play()
+    viz = play.play(pinsettle.load_scene(ROBOTS / "ur5_tool_spring.toml"), live=True)
+    yield viz
+    viz.close()
+
+
+def test_live_server_listens_on_loopback_only(live):
+    from urllib.parse import urlparse
+
+    url = urlparse(live.url)
+    assert url.hostname == "127.0.0.1"
+    assert _listening(url.port) == ["0100007F"]  # 127.0.0.1, and nothing else
+    zmq = urlparse(live.window.server.zmq_url)
+    assert zmq.hostname == "127.0.0.1" and _listening(zmq.port) == ["0100007F"]
+    page = urllib.request.urlopen(live.url, timeout=10).read()
+    assert b"meshcat" in page.lower()
+
+
+# --- in a real browser -----------------------------------------------------------------------
+
+
+def _chromium() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+@pytest.fixture(scope="module")
+def browser():
+    path = _chromium()
+    if path is None:
+        if os.environ.get("PINSETTLE_REQUIRE_CHROMIUM") == "1":
+            pytest.fail("Chromium is required here (PINSETTLE_REQUIRE_CHROMIUM=1) but not found")
+        pytest.skip("headless Chromium not found (Debian: apt-get install chromium)")
+    return path
+
+
+def screenshot(browser: str, url: str, path: Path, budget_ms: int = 4000) -> np.ndarray:
+    """A screenshot of url (800x600) as an RGB array in [0, 1]; retried once (a cold
+    Chromium sometimes exits before writing)."""
+    for _ in range(3):
+        if path.exists():
+            path.unlink()
+        subprocess.run(
+            [
+                browser,
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--use-gl=swiftshader",
+                "--enable-unsafe-swiftshader",
+                "--hide-scrollbars",
+                "--window-size=800,600",
+                f"--virtual-time-budget={budget_ms}",
+                f"--screenshot={path}",
+                url,
+            ],
+            capture_output=True,
+            timeout=120,
+        )
+        if path.exists():
+            return image.imread(path)[:, :, :3]
+    pytest.fail(f"Chromium wrote no screenshot of {url}")
+
+
+def drawn_fraction(pixels: np.ndarray) -> float:
+    """Share of the middle of the view (half its width and height) that is not background.
+    The background is a vertical gradient: each row's colour is read at its right edge."""
+    h, w, _ = pixels.shape
+    middle = pixels[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4]
+    background = pixels[h // 4 : 3 * h // 4, w - 3 : w - 2]
+    return float(np.mean(np.abs(middle - background).max(axis=2) > 0.08))
+
+
+SHOT_SCENES = ["bistable_pendulum", "ur5", "panda_fingers_locked", "free_fall", "chain20"]
+
+
+@pytest.mark.parametrize("name", SHOT_SCENES)
+def test_screenshot_shows_the_robot_and_the_last_frame_is_the_final_pose(
+    name, exported, browser, tmp_path
+):
+    scene, result, viz, html, plot = exported(name)
+    end = screenshot(browser, html.as_uri() + "#end", tmp_path / "end.png")
+    assert drawn_fraction(end) > 0.01, f"{name}: nothing drawn in the middle of the view"
+    # Played to the end (the animation lasts viz.timeline.end s), it holds the same picture as
+    # the page opened on its last frame.
+    budget = int(1000 * viz.timeline.end) + 6000
+    played = screenshot(browser, html.as_uri(), tmp_path / "played.png", budget)
+    h = played.shape[0]
+    below_overlay = slice(h // 5, h)  # the overlay's clock differs while it plays
+    assert np.mean(np.abs(played[below_overlay] - end[below_overlay]) > 0.05) < 0.002
+    # ... and that is not the start (except where the mechanism barely moves on screen).
+    start = screenshot(browser, html.as_uri(), tmp_path / "start.png", 300)
+    if name in ("bistable_pendulum", "ur5", "chain20"):
+        assert np.mean(np.abs(start[below_overlay] - end[below_overlay]) > 0.05) > 0.002
+
+
+def test_live_page_shows_the_robot(live, browser, tmp_path):
+    pixels = screenshot(browser, live.url, tmp_path / "live.png", 8000)
+    assert drawn_fraction(pixels) > 0.01
+
+
+def test_notebook_api_returns_pinocchios_visualizer():
+    from pinocchio.visualize import MeshcatVisualizer
+
+    scene = pinsettle.load_scene(ROBOTS / "pendulum.toml")
+    result = pinsettle.solve(scene, **pinsettle.play.TRACE_SETTINGS)
+    viz = pinsettle.play(scene, result, live=False)
+    assert isinstance(viz, MeshcatVisualizer)
+    assert viz.result is result and viz.url is None  # live=False: no server
+    assert viz.html().startswith("<!DOCTYPE html>")

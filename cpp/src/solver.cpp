@@ -188,9 +188,6 @@ namespace pinsettle
     // The automatic step is re-estimated once the configuration moved this far (rad or m)
     // since the last estimate.
     constexpr double kFarMove = 0.1;
-    // ... and sooner while stiff modes are scaled: the modes are those of the estimate's
-    // configuration, and drift from the present ones as the mechanism moves.
-    constexpr double kFarMoveScaled = 0.1;
     // Whether q is farther than distance (rad or m, max norm) from q_ref; work holds the tangent
     // difference (dim model.nv), so that nothing is allocated.
     bool movedBeyond(
@@ -316,9 +313,7 @@ namespace pinsettle
     };
     const auto movedFar = [&]() {
       return step - estimated_at >= estimate_spacing
-             && movedBeyond(
-               model, q_estimate_, q_, moved_,
-               time_scale_.stiff_masses.size() > 0 ? kFarMoveScaled : kFarMove);
+             && movedBeyond(model, q_estimate_, q_, moved_, kFarMove);
     };
     time_scale_ = TimeScale(); // no stiff-mode scaling with a fixed step
     if (auto_dt)

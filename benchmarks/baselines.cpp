@@ -437,8 +437,16 @@ int main(int argc, char ** argv)
       Recorder recorder;
       recorder.every = std::max<long>(1, (out.steps + spec.max_samples - 1) / spec.max_samples);
       const Outcome recorded = run(model, forces, used, recorder);
-      recorder.rows.push_back(static_cast<double>(recorded.steps));
-      recorder.rows.insert(recorder.rows.end(), recorded.q.data(), recorded.q.data() + model.nq);
+      // The final state, unless it is the last sample already (a run that stops on the
+      // residual check stops right after recording).
+      const std::size_t row = static_cast<std::size_t>(model.nq) + 1;
+      if (
+        recorder.rows.size() < row
+        || recorder.rows[recorder.rows.size() - row] != static_cast<double>(recorded.steps))
+      {
+        recorder.rows.push_back(static_cast<double>(recorded.steps));
+        recorder.rows.insert(recorder.rows.end(), recorded.q.data(), recorded.q.data() + model.nq);
+      }
       std::ofstream file(spec.samples_path, std::ios::binary);
       file.write(
         reinterpret_cast<const char *>(recorder.rows.data()),

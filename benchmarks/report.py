@@ -995,9 +995,9 @@ def generate(
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    start = time.perf_counter()
     results = Results(config, machine=machine())
     programs = build_programs(build_dir, log)
+    start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pinsettle-bench-") as tmp:
         tasks = plan(config, results, programs, Path(tmp))
         progress = Progress(len(tasks), stream=open(os.devnull, "w") if quiet else sys.stderr)
@@ -1012,7 +1012,7 @@ def generate(
     report_writer.write(results, output)
     if update_readme and report_writer.update_readme(results, ROOT / "README.md"):
         log("updated the speed section of README.md")
-    log(f"wrote {output / 'benchmarks.md'} and {output / 'benchmarks'}/ ({results.seconds:.0f} s)")
+    log(f"wrote {output / 'benchmarks.md'} and {output / 'benchmarks'}/")
     return results
 
 

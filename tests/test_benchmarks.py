@@ -62,6 +62,15 @@ def test_the_report_and_its_figures_are_written(quick):
         assert section in text
     assert results.machine["cpu"] in text and results.machine["date"] in text
     assert "nan" not in text.replace("nanosecond", "")
+    # Every table is well formed: as many cells in each row as in its header.
+    lines = text.splitlines()
+    for k, line in enumerate(lines[:-1]):
+        if line.startswith("| ") and lines[k + 1].startswith("| ---"):
+            width = line.count("|")
+            for row in lines[k + 1 :]:
+                if not row.startswith("|"):
+                    break
+                assert row.count("|") == width, row
 
 
 def test_the_reference_is_a_stable_root_checked_independently(quick):

@@ -4,7 +4,18 @@
 // cost of the force elements: a scene without any (which must step as fast as the bare core),
 // joint springs on every joint, and one point spring from the last body to the world.
 //
-//   step_cost ROBOT.urdf [steps] [repeats]
+// Every run starts at rest 0.3 rad (or m) away from the neutral configuration in every degree of
+// freedom, so that the mechanism moves (at its neutral pose a hanging chain is at rest, and the
+// solver would stop after one stopping window). The solver runs with kt = 0.99 and max_e = 0:
+// it damps at every energy peak as usual but never stops, and after `steps` steps its energy
+// is still far above the subnormal range (with kt = 0.5 and thousands of peaks the velocity
+// underflows to subnormal numbers, whose arithmetic is many times slower: a cost no real solve,
+// which stops long before, pays). The bare step takes a tenth of the solver's automatic step at
+// the start: without the solver's bound on the turn per step, a fixed step that large blows up
+// on a swinging arm, and non-finite values would time something else. ABA costs the same
+// whatever the step.
+//
+//   step_cost ROBOT.urdf [steps] [repeats] [--json]
 //
 
 #include <pinsettle/pinsettle.hpp>
@@ -15,7 +26,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
+#include <cstring>
 #include <iostream>
+#include <string>
 #include <vector>
 
 namespace
@@ -29,10 +42,17 @@ namespace
   }
 
   // The baseline: semi-implicit Euler on pinocchio::aba, nothing else.
+  // The start of every run: at rest, 0.3 rad (or m) from neutral in every degree of freedom.
+  Eigen::VectorXd start(const pinocchio::Model & model)
+  {
+    return pinocchio::integrate(
+      model, pinocchio::neutral(model), Eigen::VectorXd::Constant(model.nv, 0.3));
+  }
+
   double bareStep(const pinocchio::Model & model, long steps, double dt)
   {
     pinocchio::Data data(model);
-    Eigen::VectorXd q = pinocchio::neutral(model), q_next(model.nq);
+    Eigen::VectorXd q = start(model), q_next(model.nq);
     Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), dq(model.nv);
     const Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
     const Clock::time_point start = Clock::now();
@@ -50,6 +70,9 @@ namespace
     return seconds / static_cast<double>(steps);
   }
 
+  // Steps the last settle run took (max_e = 0 never stops a moving mechanism early).
+  long settled_steps = 0;
+
   double settleStep(
     const pinocchio::Model & model,
     long steps,
@@ -58,24 +81,36 @@ namespace
   {
     pinsettle::Settings settings;
     settings.max_e = 0.; // never stops early: exactly `steps` steps
+    settings.kt = 0.99;  // stays clear of subnormal velocities (see the top of the file)
     settings.max_steps = steps;
     settings.energy = measure;
     pinsettle::Solver solver(model);
-    const pinsettle::Result result = solver.solve(pinocchio::neutral(model), settings, forces);
+    const pinsettle::Result result = solver.solve(start(model), settings, forces);
+    settled_steps = static_cast<long>(result.steps);
     return result.wall_time / static_cast<double>(result.steps);
   }
 } // namespace
 
 int main(int argc, char ** argv)
 {
-  if (argc < 2)
+  std::vector<std::string> args;
+  bool json = false;
+  for (int k = 1; k < argc; ++k)
+    if (std::strcmp(argv[k], "--json") == 0)
+      json = true;
+    else
+      args.push_back(argv[k]);
+  if (args.empty())
   {
-    std::cerr << "usage: " << argv[0] << " ROBOT.urdf [steps] [repeats]\n";
+    std::cerr << "usage: " << argv[0] << " ROBOT.urdf [steps] [repeats] [--json]\n";
     return 2;
   }
-  const pinocchio::Model model = pinsettle::buildModelFromUrdf(argv[1]);
-  const long steps = argc > 2 ? std::atol(argv[2]) : 20000;
-  const int repeats = argc > 3 ? std::atoi(argv[3]) : 11;
+  const pinocchio::Model model = pinsettle::buildModelFromUrdf(args[0]);
+  const long steps = args.size() > 1 ? std::atol(args[1].c_str()) : 20000;
+  const int repeats = args.size() > 2 ? std::atoi(args[2].c_str()) : 11;
+  pinocchio::Data data(model);
+  const double dt = 0.1 * pinsettle::Settings().dt_safety
+                    * pinsettle::computeTimeScale(model, data, start(model)).critical_step;
 
   pinsettle::ForceElements none(model), joint_springs(model), point_spring(model);
   for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
@@ -87,7 +122,7 @@ int main(int argc, char ** argv)
   std::vector<double> bare, exact, simplified, empty, springs, point;
   for (int r = 0; r < repeats; ++r) // interleaved, so that machine noise hits all alike
   {
-    bare.push_back(bareStep(model, steps, 1e-3));
+    bare.push_back(bareStep(model, steps, dt));
     exact.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact));
     simplified.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Simplified));
     empty.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &none));
@@ -95,12 +130,29 @@ int main(int argc, char ** argv)
     point.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &point_spring));
   }
   const double b = median(bare);
+  if (json) // per-step times of every repeat (s), for benchmarks/report.py
+  {
+    auto list = [](const std::vector<double> & t) {
+      std::string out = "[";
+      for (std::size_t k = 0; k < t.size(); ++k)
+        out += (k ? ", " : "") + std::to_string(t[k] * 1e9);
+      return out + "]";
+    };
+    std::cout << "{\"nq\": " << model.nq << ", \"nv\": " << model.nv << ", \"steps\": " << steps
+              << ", \"settled_steps\": " << settled_steps << ", \"dt\": " << dt
+              << ", \"ns_per_step\": {\"bare\": " << list(bare) << ", \"exact\": " << list(exact)
+              << ", \"simplified\": " << list(simplified) << ", \"no_elements\": " << list(empty)
+              << ", \"joint_springs\": " << list(springs) << ", \"point_spring\": " << list(point)
+              << "}}\n";
+    return 0;
+  }
   auto row = [&](const char * name, const std::vector<double> & t) {
     const double m = median(t);
     std::cout << name << " " << m * 1e9 << " ns/step  ratio " << m / b << "\n";
   };
   std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << steps
-            << " steps, median of " << repeats << "\n"
+            << " steps (the last solver run took " << settled_steps << "), dt " << dt
+            << " s, median of " << repeats << "\n"
             << "bare aba+integrate          " << b * 1e9 << " ns/step\n";
   row("pinsettle (exact)          ", exact);
   row("pinsettle (simplified)     ", simplified);

@@ -8,11 +8,14 @@
 
 #include <pinocchio/bindings/python/pybind11.hpp>
 
+#include <pinocchio/algorithm/joint-configuration.hpp>
+
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
+#include "pinsettle/loops.hpp"
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"
 
@@ -79,20 +82,49 @@ namespace
     return elements;
   }
 
-  // A model read from Python, its force elements and scratch data, for one evaluation at q.
+  // Loop closures resolved to frame indices by the Python layer: a list of tuples
+  // (frame_a, point_a, frame_b, point_b, kind, name); None or empty for a tree.
+  std::unique_ptr<LoopConstraints> loopsFrom(
+    const pinocchio::Model & model, const py::object & spec)
+  {
+    if (spec.is_none() || py::len(spec) == 0)
+      return nullptr;
+    auto loops = std::make_unique<LoopConstraints>(model);
+    for (const py::handle & e : spec.cast<py::list>())
+    {
+      const auto t = e.cast<std::tuple<
+        std::size_t, Eigen::Vector3d, std::size_t, Eigen::Vector3d, std::string, std::string>>();
+      const std::string & kind = std::get<4>(t);
+      if (kind != "point" && kind != "frame")
+        throw std::invalid_argument(
+          std::get<5>(t) + ": kind must be 'point' or 'frame', got '" + kind + "'");
+      loops->addLoop(
+        std::get<0>(t), std::get<1>(t), std::get<2>(t), std::get<3>(t),
+        kind == "point" ? LoopKind::Point : LoopKind::Frame, std::get<5>(t));
+    }
+    return loops;
+  }
+
+  // A model read from Python, its force elements, loops and scratch data, for one evaluation
+  // at q.
   struct Evaluation
   {
     const pinocchio::Model & model;
     std::unique_ptr<ForceElements> elements;
+    std::unique_ptr<LoopConstraints> loops;
     pinocchio::Data data;
   };
 
   Evaluation evaluationAt(
-    const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec)
+    const py::object & model_obj,
+    const Eigen::VectorXd & q,
+    const py::object & spec,
+    const py::object & loops = py::none())
   {
     const pinocchio::Model & model = modelFrom(model_obj);
     checkConfiguration(model, q, "q");
-    return Evaluation{model, elementsFrom(model, spec), pinocchio::Data(model)};
+    return Evaluation{
+      model, elementsFrom(model, spec), loopsFrom(model, loops), pinocchio::Data(model)};
   }
 
   py::dict toDict(const Result & r)
@@ -119,6 +151,9 @@ namespace
     out["dt_estimates"] = r.dt_estimates;
     out["dt_reductions"] = r.dt_reductions;
     out["scaled_modes"] = r.scaled_modes;
+    out["mobility"] = r.mobility;
+    out["assembly_distance"] = r.assembly_distance;
+    out["constraint_error"] = r.constraint_error;
     out["reason"] = r.reason;
     if (r.trace.empty())
     {
@@ -173,11 +208,13 @@ namespace
     const Eigen::VectorXd & v0,
     const Settings & settings,
     const py::object & callback,
-    const py::object & elements_spec)
+    const py::object & elements_spec,
+    const py::object & loops_spec)
   {
     const pinocchio::Model & model = modelFrom(model_obj);
     const std::unique_ptr<ForceElements> elements = elementsFrom(model, elements_spec);
-    Solver solver(model);
+    const std::unique_ptr<LoopConstraints> loops = loopsFrom(model, loops_spec);
+    Solver solver(model, loops.get());
 
     // Polled with the GIL released in between: Ctrl-C (SIGINT) ends the run as "aborted" and
     // keeps the state; an exception from the user's callback ends it and is re-raised.
@@ -283,7 +320,8 @@ PYBIND11_MODULE(_core, m)
 
   m.def(
     "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
-    py::arg("callback") = py::none(), py::arg("elements") = py::none());
+    py::arg("callback") = py::none(), py::arg("elements") = py::none(),
+    py::arg("loops") = py::none());
 
   m.def(
     "kinetic_energies",
@@ -298,9 +336,13 @@ PYBIND11_MODULE(_core, m)
 
   m.def(
     "stiffness",
-    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
-      Evaluation at = evaluationAt(model_obj, q, spec);
-      const StabilityReport report = assessStability(at.model, at.data, q, at.elements.get());
+    [](
+      const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
+      const py::object & loops) {
+      Evaluation at = evaluationAt(model_obj, q, spec, loops);
+      const StabilityReport report =
+        at.loops ? assessStability(at.model, at.data, *at.loops, q, at.elements.get())
+                 : assessStability(at.model, at.data, q, at.elements.get());
       py::dict out;
       out["stiffness_matrix"] = report.stiffness;
       out["verdict"] = toString(report.verdict);
@@ -309,26 +351,66 @@ PYBIND11_MODULE(_core, m)
       out["tolerance"] = report.tolerance;
       out["eigenvalues"] = report.eigenvalues;
       out["softest_direction"] = report.softest_direction;
+      out["basis"] = report.basis;
       return out;
     },
-    py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
+    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
+    py::arg("loops") = py::none());
 
   m.def(
     "static_force",
-    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec) {
-      Evaluation at = evaluationAt(model_obj, q, spec);
+    [](
+      const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
+      const py::object & loops) {
+      Evaluation at = evaluationAt(model_obj, q, spec, loops);
+      if (at.loops)
+        return Eigen::VectorXd(
+          computeStaticForce(at.model, at.data, *at.loops, q, at.elements.get()));
       return Eigen::VectorXd(computeStaticForce(at.model, at.data, q, at.elements.get()));
     },
-    py::arg("model"), py::arg("q"), py::arg("elements") = py::none());
+    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
+    py::arg("loops") = py::none());
+
+  m.def(
+    "loops",
+    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & loops) {
+      Evaluation at = evaluationAt(model_obj, q, py::none(), loops);
+      py::dict out;
+      if (!at.loops)
+        throw std::invalid_argument("loops: none given");
+      const LoopMotion motion = computeLoopMotion(at.model, at.data, *at.loops, q);
+      out["error"] = computeLoopError(at.model, at.data, *at.loops, q);
+      out["jacobian"] = computeLoopJacobian(at.model, at.data, *at.loops, q);
+      out["rank"] = motion.rank;
+      out["basis"] = motion.basis;
+      return out;
+    },
+    py::arg("model"), py::arg("q"), py::arg("loops"),
+    "Loop errors (m or rad), their Jacobian, its rank and the allowed motions at q.");
+
+  m.def(
+    "assemble_loops",
+    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & loops) {
+      Evaluation at = evaluationAt(model_obj, q, py::none(), loops);
+      Eigen::VectorXd out = q;
+      pinocchio::normalize(at.model, out);
+      double moved = 0.;
+      if (at.loops)
+        moved = assembleLoops(at.model, at.data, *at.loops, out);
+      return py::make_tuple(out, moved);
+    },
+    py::arg("model"), py::arg("q"), py::arg("loops"),
+    "q moved onto the loops (Gauss-Newton) and how far it moved; ValueError if it cannot be.");
 
   m.def(
     "time_scale",
     [](
       const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
-      bool scale_stiff_modes) {
-      Evaluation at = evaluationAt(model_obj, q, spec);
+      bool scale_stiff_modes, const py::object & loops) {
+      Evaluation at = evaluationAt(model_obj, q, spec, loops);
       const TimeScale scale =
-        computeTimeScale(at.model, at.data, q, at.elements.get(), scale_stiff_modes);
+        at.loops ? computeTimeScale(at.model, at.data, *at.loops, q, at.elements.get())
+                 : computeTimeScale(at.model, at.data, q, at.elements.get(), scale_stiff_modes);
       py::dict out;
       out["omega_max"] = scale.omega_max;
       out["omega_unscaled"] = scale.omega_unscaled;
@@ -338,5 +420,5 @@ PYBIND11_MODULE(_core, m)
       return out;
     },
     py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
-    py::arg("scale_stiff_modes") = false);
+    py::arg("scale_stiff_modes") = false, py::arg("loops") = py::none());
 }

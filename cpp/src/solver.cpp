@@ -5,6 +5,7 @@
 #include "pinsettle/solver.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/stability.hpp"
+#include "loop-stepper.hpp"
 
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/crba.hpp>
@@ -136,9 +137,10 @@ namespace pinsettle
     return computeStaticForce(model, data, q, forces).lpNorm<Eigen::Infinity>();
   }
 
-  Solver::Solver(const pinocchio::Model & model)
+  Solver::Solver(const pinocchio::Model & model, const LoopConstraints * loops)
   : data(model)
   , model_(model)
+  , loops_(loops != nullptr && !loops->empty() ? loops : nullptr)
   , q_(model.nq)
   , v_(model.nv)
   , dq_(model.nv)
@@ -146,6 +148,28 @@ namespace pinsettle
   , tau_(Eigen::VectorXd::Zero(model.nv))
   , fext_(model.joints.size(), pinocchio::Force::Zero())
   {
+    if (loops_ != nullptr)
+    {
+      if (&loops_->model() != &model)
+        throw std::invalid_argument("loops: they were made for another model than the solver's");
+      stepper_.reset(new LoopStepper(model, *loops_));
+    }
+  }
+
+  Solver::~Solver() = default;
+
+  Eigen::VectorXd Solver::staticForce(const Eigen::VectorXd & q, const ForceModel * forces)
+  {
+    if (loops_ != nullptr)
+      return computeStaticForce(model_, data, *loops_, q, forces);
+    return computeStaticForce(model_, data, q, forces);
+  }
+
+  StabilityReport Solver::assess(const Eigen::VectorXd & q, const ForceModel * forces)
+  {
+    if (loops_ != nullptr)
+      return assessStability(model_, data, *loops_, q, forces);
+    return assessStability(model_, data, q, forces);
   }
 
   Result Solver::solve(
@@ -237,6 +261,24 @@ namespace pinsettle
     q_ = q0;
     pinocchio::normalize(model, q_); // q0 is normalised within 1e-6; make it exact
     v_ = v0;
+    result.mobility = model.nv;
+    if (loops_ != nullptr)
+    {
+      // Closed mechanism: start assembled, with a velocity the loops allow.
+      result.assembly_distance = assembleLoops(model, data, *loops_, q_);
+      const LoopMotion motion = computeLoopMotion(model, data, *loops_, q_);
+      result.mobility = static_cast<int>(motion.basis.cols());
+      if (result.mobility == 0)
+      {
+        std::ostringstream msg;
+        msg << "the loops leave the mechanism no degree of freedom (" << motion.rank
+            << " independent loop equations on model.nv = " << model.nv
+            << " joint velocities): it is a structure, with nothing to settle";
+        throw std::invalid_argument(msg.str());
+      }
+      v_ = motion.basis * (motion.basis.transpose() * v_);
+      stepper_->init(data, q_);
+    }
     tau_.setZero();
 
     // Stopping window: the last ds samples of the driving energy, as a ring buffer.
@@ -279,7 +321,9 @@ namespace pinsettle
     double switch_loss = 0.; // kinetic energy taken when the scaled modes change (J)
     const auto estimateStep = [&]() {
       const double added_before = addedEnergy(time_scale_);
-      time_scale_ = computeTimeScale(model, data, q_, forces, settings.scale_stiff_modes);
+      time_scale_ = loops_ != nullptr
+                      ? computeTimeScale(model, data, *loops_, q_, forces)
+                      : computeTimeScale(model, data, q_, forces, settings.scale_stiff_modes);
       const TimeScale & scale = time_scale_;
       const Eigen::Index stiff = scale.stiff_masses.size();
       // New modes change the kinetic energy at the same velocity; never let that add energy
@@ -414,7 +458,9 @@ namespace pinsettle
             f.setZero();
         forces->computeForces(model, data, q_, v_, tau_, fext_);
       }
-      if (use_fext)
+      if (loops_ != nullptr)
+        stepper_->dynamics(data, q_, v_, tau_, use_fext ? &fext_ : nullptr);
+      else if (use_fext)
         pinocchio::aba(model, data, q_, v_, tau_, fext_);
       else
         pinocchio::aba(model, data, q_, v_, tau_);
@@ -529,7 +575,7 @@ namespace pinsettle
       // (10 max_e) and go on: it falls away to where it would really stay.
       if ((quiet && decreasing) || exact_rest || creeping)
       {
-        report = assessStability(model, data, q_, forces);
+        report = assess(q_, forces);
         report_q_ = q_;
         last_assessed = step;
         if (report.verdict != Stability::Unstable && !creeping)
@@ -574,6 +620,8 @@ namespace pinsettle
           dq_.noalias() = -back * v_;
           pinocchio::integrate(model, q_, dq_, q_next_);
           q_.swap(q_next_);
+          if (loops_ != nullptr)
+            stepper_->project(data, q_, v_);
           time -= back;
         }
         v_ *= kt;
@@ -633,6 +681,8 @@ namespace pinsettle
         continue;
       }
       q_.swap(q_next_);
+      if (loops_ != nullptr) // back onto the loops, and a velocity they allow
+        stepper_->project(data, q_, v_);
       drift_ += dq_;
       time += h;
     }
@@ -644,10 +694,10 @@ namespace pinsettle
     result.trace_stride = trace_stride;
     result.q = q_;
     result.v = v_;
-    result.residual = computeStaticResidual(model, data, q_, forces);
+    result.residual = staticForce(q_, forces).lpNorm<Eigen::Infinity>();
     result.residual_before_polish = result.residual;
     if (report.verdict == Stability::Unknown || report_q_ != q_)
-      report = assessStability(model, data, q_, forces);
+      report = assess(q_, forces);
     if (settings.polish && status == Status::Converged)
       polish(report, forces, result);
     const std::pair<double, double> energies = computeKineticEnergies(model, data, result.q, v_);
@@ -656,6 +706,9 @@ namespace pinsettle
     result.stability = report.verdict;
     result.min_stiffness_eigenvalue = report.min_eigenvalue;
     result.neutral_directions = report.neutral_directions;
+    if (loops_ != nullptr)
+      result.constraint_error =
+        computeLoopError(model, data, *loops_, result.q).lpNorm<Eigen::Infinity>();
     result.wall_time = std::chrono::duration<double>(Clock::now() - start).count();
     return result;
   }
@@ -677,19 +730,26 @@ namespace pinsettle
     const double reach = 10. * result.residual / softest;
 
     Eigen::VectorXd q = result.q, q_next(model.nq);
-    Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+    Eigen::VectorXd tau = staticForce(q, forces);
     double residual = tau.lpNorm<Eigen::Infinity>();
     int iterations = 0;
     for (; iterations < 10 && residual > 0.; ++iterations)
     {
-      const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
+      // Newton on the allowed motions (all of them without loops): K ds = -B^T tau, dq = B ds.
+      const StabilityReport at = loops_ != nullptr ? assess(q, forces) : StabilityReport();
+      const Eigen::MatrixXd K =
+        loops_ != nullptr ? at.stiffness : computeStiffnessMatrix(model, data, q, forces);
       // Least squares with a rank cut: neutral directions (K singular there) are left alone.
       Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(K);
       cod.setThreshold(
         std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12));
-      const Eigen::VectorXd dq = -cod.solve(tau);
+      const Eigen::VectorXd dq =
+        loops_ != nullptr ? Eigen::VectorXd(-at.basis * cod.solve(at.basis.transpose() * tau))
+                          : Eigen::VectorXd(-cod.solve(tau));
       pinocchio::integrate(model, q, dq, q_next);
-      const Eigen::VectorXd tau_next = computeStaticForce(model, data, q_next, forces);
+      if (loops_ != nullptr)
+        projectOntoLoops(model, data, *loops_, q_next);
+      const Eigen::VectorXd tau_next = staticForce(q_next, forces);
       const double residual_next = tau_next.lpNorm<Eigen::Infinity>();
       if (!(residual_next < residual))
         break;
@@ -701,7 +761,7 @@ namespace pinsettle
     if (iterations == 0)
       return;
     const double moved = pinocchio::difference(model, result.q, q).lpNorm<Eigen::Infinity>();
-    const StabilityReport after = assessStability(model, data, q, forces);
+    const StabilityReport after = assess(q, forces);
     if (moved > reach || after.verdict != report.verdict)
       return;
     result.q = q;

@@ -77,23 +77,25 @@ namespace pinsettle
     return K;
   }
 
-  StabilityReport assessStability(
-    const pinocchio::Model & model,
-    pinocchio::Data & data,
-    const Eigen::VectorXd & q,
-    const ForceModel * forces)
+  StabilityReport assessStiffness(const Eigen::MatrixXd & K, double relative_tolerance)
   {
     StabilityReport report;
-    report.stiffness = computeStiffnessMatrix(model, data, q, forces);
-    const Eigen::MatrixXd & K = report.stiffness;
+    report.stiffness = K;
+    report.basis = Eigen::MatrixXd::Identity(K.rows(), K.cols());
+    if (K.rows() == 0)
+    {
+      report.verdict = Stability::Neutral;
+      report.eigenvalues.resize(0);
+      report.softest_direction.resize(0);
+      return report;
+    }
     const Eigen::MatrixXd symmetric = 0.5 * (K + K.transpose());
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(symmetric);
     report.eigenvalues = eig.eigenvalues();
     report.softest_direction = eig.eigenvectors().col(0);
     report.min_eigenvalue = report.eigenvalues[0];
     report.max_abs_eigenvalue = report.eigenvalues.cwiseAbs().maxCoeff();
-    const bool finite_differences = forces != nullptr && !forces->empty();
-    report.tolerance = (finite_differences ? 1e-7 : 1e-9) * report.max_abs_eigenvalue;
+    report.tolerance = relative_tolerance * report.max_abs_eigenvalue;
     for (Eigen::Index k = 0; k < report.eigenvalues.size(); ++k)
       if (std::abs(report.eigenvalues[k]) <= report.tolerance)
         ++report.neutral_directions;
@@ -104,6 +106,17 @@ namespace pinsettle
     else
       report.verdict = Stability::Stable;
     return report;
+  }
+
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    const bool finite_differences = forces != nullptr && !forces->empty();
+    return assessStiffness(
+      computeStiffnessMatrix(model, data, q, forces), finite_differences ? 1e-7 : 1e-9);
   }
 
   namespace
@@ -120,6 +133,41 @@ namespace pinsettle
     }
   } // namespace
 
+  Eigen::MatrixXd computeDampingMatrix(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    Eigen::MatrixXd D = Eigen::MatrixXd::Zero(model.nv, model.nv);
+    if (forces == nullptr || !forces->hasDamping())
+      return D;
+    // D = -d applied / d v by central differences at v = 0 (the damper forces are linear).
+    const double h = 1e-6;
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), tau_plus(model.nv), tau_minus(model.nv);
+    ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
+    const auto applied = [&](Eigen::VectorXd & tau) {
+      tau.setZero();
+      for (pinocchio::Force & force : fext)
+        force.setZero();
+      forces->computeForces(model, data, q, v, tau, fext);
+      if (forces->hasExternalForces()) // the joint torques of fext: rnea without inertia terms
+        tau += pinocchio::computeGeneralizedGravity(model, data, q)
+               - pinocchio::rnea(model, data, q, zero, zero, fext);
+    };
+    for (int k = 0; k < model.nv; ++k)
+    {
+      v[k] = h;
+      applied(tau_plus);
+      v[k] = -h;
+      applied(tau_minus);
+      v[k] = 0.;
+      D.col(k) = -(tau_plus - tau_minus) / (2. * h);
+    }
+    return D;
+  }
+
   TimeScale computeTimeScale(
     const pinocchio::Model & model,
     pinocchio::Data & data,
@@ -128,12 +176,27 @@ namespace pinsettle
     bool scale_stiff_modes,
     const Eigen::MatrixXd * stiffness)
   {
-    TimeScale scale;
-    const Eigen::Index n = model.nv;
     const Eigen::MatrixXd K =
       stiffness != nullptr ? *stiffness : computeStiffnessMatrix(model, data, q, forces);
+    const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+    const bool damped = forces != nullptr && forces->hasDamping();
+    const Eigen::MatrixXd D =
+      damped ? computeDampingMatrix(model, data, q, forces) : Eigen::MatrixXd();
     pinocchio::crba(model, data, q);
-    Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
+    const Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
+    return computeTimeScale(K, M, tau, damped ? &D : nullptr, scale_stiff_modes);
+  }
+
+  TimeScale computeTimeScale(
+    const Eigen::MatrixXd & K,
+    const Eigen::MatrixXd & mass,
+    const Eigen::VectorXd & tau,
+    const Eigen::MatrixXd * damping,
+    bool scale_stiff_modes)
+  {
+    TimeScale scale;
+    const Eigen::Index n = K.rows();
+    Eigen::MatrixXd M = mass;
     Eigen::LLT<Eigen::MatrixXd> llt(M);
     if (llt.info() != Eigen::Success) // a massless chain end: regularise relative to M's scale
     {
@@ -141,8 +204,6 @@ namespace pinsettle
       llt.compute(M);
     }
     const Eigen::MatrixXd L = llt.matrixL();
-    const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
-
     // Modes: K phi = lambda M phi. With B = L^-1 K L^-T = U Lambda U^T, Phi = L^-T U is
     // M-orthonormal, Phi^T M = (L U)^T, and the modal pull is f = Phi^T tau = U^T L^-1 tau.
     Eigen::MatrixXd B = L.triangularView<Eigen::Lower>().solve(0.5 * (K + K.transpose()));
@@ -221,34 +282,8 @@ namespace pinsettle
       omega2 = std::max(target, jointPull(U * modal));
     }
     scale.omega_max = std::sqrt(omega2);
-    if (forces != nullptr && forces->hasDamping())
-    {
-      // D = -d applied / d v by central differences at v = 0 (the damper forces are linear).
-      const double h = 1e-6;
-      Eigen::MatrixXd D(model.nv, model.nv);
-      Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), tau_plus(model.nv), tau_minus(model.nv);
-      ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
-      const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
-      const auto applied = [&](Eigen::VectorXd & tau) {
-        tau.setZero();
-        for (pinocchio::Force & force : fext)
-          force.setZero();
-        forces->computeForces(model, data, q, v, tau, fext);
-        if (forces->hasExternalForces()) // the joint torques of fext: rnea without inertia terms
-          tau += pinocchio::computeGeneralizedGravity(model, data, q)
-                 - pinocchio::rnea(model, data, q, zero, zero, fext);
-      };
-      for (int k = 0; k < model.nv; ++k)
-      {
-        v[k] = h;
-        applied(tau_plus);
-        v[k] = -h;
-        applied(tau_minus);
-        v[k] = 0.;
-        D.col(k) = -(tau_plus - tau_minus) / (2. * h);
-      }
-      scale.damping_rate = largestGeneralizedEigenvalue(D, llt);
-    }
+    if (damping != nullptr)
+      scale.damping_rate = largestGeneralizedEigenvalue(*damping, llt);
     const double gamma = scale.damping_rate;
     const double root = std::sqrt(gamma * gamma + 4. * omega2);
     scale.critical_step =

@@ -34,6 +34,7 @@ def solve(
     settings: Settings,
     callback: Callable[[], bool] | None = ...,
     elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+    loops: list[tuple[Any, ...]] | None = ...,
 ) -> dict[str, Any]: ...
 def kinetic_energies(
     model: pinocchio.Model, q: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
@@ -42,15 +43,24 @@ def static_force(
     model: pinocchio.Model,
     q: npt.NDArray[np.float64],
     elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+    loops: list[tuple[Any, ...]] | None = ...,
 ) -> npt.NDArray[np.float64]: ...
 def stiffness(
     model: pinocchio.Model,
     q: npt.NDArray[np.float64],
     elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+    loops: list[tuple[Any, ...]] | None = ...,
 ) -> dict[str, Any]: ...
 def time_scale(
     model: pinocchio.Model,
     q: npt.NDArray[np.float64],
     elements: dict[str, list[tuple[Any, ...]]] | None = ...,
     scale_stiff_modes: bool = ...,
+    loops: list[tuple[Any, ...]] | None = ...,
 ) -> dict[str, float]: ...
+def loops(
+    model: pinocchio.Model, q: npt.NDArray[np.float64], loops: list[tuple[Any, ...]]
+) -> dict[str, Any]: ...
+def assemble_loops(
+    model: pinocchio.Model, q: npt.NDArray[np.float64], loops: list[tuple[Any, ...]] | None
+) -> tuple[npt.NDArray[np.float64], float]: ...

@@ -75,6 +75,22 @@ class PointLoad:
     torque: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+@dataclass(frozen=True)
+class Loop:
+    """A loop closure: ``a_point`` of ``a_frame`` and ``b_point`` of ``b_frame`` coincide
+    (``kind`` 'point': a spherical joint, a pin joint in a plane) or the two frames, moved to
+    those points, coincide (``kind`` 'frame': a weld)."""
+
+    a_frame: str
+    a_point: tuple[float, float, float]
+    b_frame: str
+    b_point: tuple[float, float, float]
+    kind: str = "point"
+
+
+LOOP_KINDS = ("point", "frame")
+
+
 # --- value checks with messages that name the parameter --------------------------------------
 
 
@@ -151,6 +167,8 @@ class Scene:
         self.joint_springs: list[JointSpring] = []
         self.springs: list[Spring] = []
         self.loads: list[JointLoad | PointLoad] = []
+        #: Loop closures of the tree (``add_loop``, ``[[loop]]``).
+        self.loops: list[Loop] = []
         self.locked: list[str] = []
         self._start: dict[str, Any] = {}
         if gravity is not None:
@@ -364,6 +382,42 @@ class Scene:
         self._changed()
         return self
 
+    def add_loop(self, a: Any, b: Any, kind: str = "point") -> Scene:
+        """Close a loop of the tree: the point ``a`` and the point ``b`` (each a frame name, a
+        ``(frame, point)`` pair or ``{"frame": ..., "point": [x, y, z]}``, point in the frame,
+        m) are held together. ``kind`` 'point' makes the two points coincide (a spherical joint;
+        in a plane, a pin joint); 'frame' makes the two frames, moved to their points, coincide
+        (a weld). A planar loop closed by a 3-D point constraint is fine: redundant equations are
+        dropped. The solver assembles the loops from the start configuration first."""
+        a_frame, a_point = self._end(a, "a")
+        b_frame, b_point = self._end(b, "b")
+        if not isinstance(kind, str) or kind not in LOOP_KINDS:
+            raise SceneError(f"kind must be 'point' or 'frame', got {kind!r}")
+        self.loops.append(Loop(a_frame, a_point, b_frame, b_point, kind))
+        self._changed()
+        return self
+
+    def assemble(self, q: Any = None) -> tuple[np.ndarray, float]:
+        """The configuration q (the start by default, full model) moved onto the loops, and how
+        far it moved (max |difference|, rad or m), as the solver does before it starts.
+
+        Raises:
+            SceneError: the loops cannot be assembled from there (the message names the loop).
+        """
+        from ._solve import _as_vector
+
+        q = self.q0() if q is None else _as_vector(q, "q", self.model.nq, "model.nq")
+        compiled = self.compile(q)
+        if not compiled.loops:
+            return q.copy(), 0.0
+        try:
+            reduced, moved = _core.assemble_loops(
+                compiled.model, q[compiled.q_index], compiled.loops
+            )
+        except ValueError as error:
+            raise SceneError(str(error)) from None
+        return compiled.full_q(reduced), float(moved)
+
     # -- what the solver sees -----------------------------------------------------------------
 
     def q0(self) -> np.ndarray:
@@ -394,12 +448,28 @@ class Scene:
 
     def static_force(self, q: Any) -> np.ndarray:
         """Net static generalized force on the free (unlocked) joints at the full
-        configuration q: gravity minus springs and loads (dim of the reduced model's nv)."""
+        configuration q: gravity minus springs and loads (dim of the reduced model's nv). With
+        loops, its component along the motions the loops allow at q (the constraint reactions
+        take the rest): zero at an equilibrium of the closed mechanism."""
         from ._solve import _as_vector
 
         q = _as_vector(q, "q", self.model.nq, "model.nq")
         compiled = self.compile(q)
-        return _core.static_force(compiled.model, q[compiled.q_index], compiled.elements)
+        return _core.static_force(
+            compiled.model, q[compiled.q_index], compiled.elements, compiled.loops
+        )
+
+    def loop_error(self, q: Any) -> np.ndarray:
+        """The loops' constraint errors at the full configuration q, stacked (3 per point loop:
+        p_a - p_b in world axes, m; 6 per frame loop: that and the rotation vector of
+        R_a R_b^T, rad); empty without loops."""
+        from ._solve import _as_vector
+
+        q = _as_vector(q, "q", self.model.nq, "model.nq")
+        compiled = self.compile(q)
+        if not compiled.loops:
+            return np.zeros(0)
+        return _core.loops(compiled.model, q[compiled.q_index], compiled.loops)["error"]
 
     def residual(self, q: Any) -> float:
         """max |static_force(q)| (N m or N)."""
@@ -413,6 +483,7 @@ class Scene:
             ("joint_springs", self.joint_springs),
             ("springs", self.springs),
             ("loads", self.loads),
+            ("loops", self.loops),
         ):
             if items:
                 parts.append(f"{len(items)} {label}")
@@ -505,6 +576,29 @@ class _Compiled:
         }
         # No elements: the solver runs the bare core.
         self.elements = spec if any(spec.values()) else None
+        for k, loop in enumerate(scene.loops, start=1):
+            ja = model.frames[frame(loop.a_frame)].parentJoint
+            jb = model.frames[frame(loop.b_frame)].parentJoint
+            if ja == jb:
+                body = "the world" if ja == 0 else f"the body of joint '{model.names[ja]}'"
+                raise SceneError(
+                    f"[[loop]] #{k}: both ends ('{loop.a_frame}' and '{loop.b_frame}') are on the "
+                    f"same rigid body ({body}"
+                    + (", once the locked joints are removed" if locked_ids else "")
+                    + "); such a loop holds nothing"
+                )
+        #: Loop closures as the C++ core takes them; None for a tree (plain ABA).
+        self.loops = [
+            (
+                frame(loop.a_frame),
+                np.array(loop.a_point),
+                frame(loop.b_frame),
+                np.array(loop.b_point),
+                loop.kind,
+                f"[[loop]] #{k} ('{loop.a_frame}' to '{loop.b_frame}')",
+            )
+            for k, loop in enumerate(scene.loops, start=1)
+        ] or None
         try:
             _core.static_force(model, pinocchio.neutral(model), self.elements)
         except ValueError as error:  # anything the C++ checks catch that the above did not
@@ -539,11 +633,12 @@ def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | lis
 
 # --- the scene file ----------------------------------------------------------------------------
 
-_TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "solver"]
+_TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "solver"]
 _MODEL_KEYS = ["urdf", "robot", "floating", "locked", "gravity"]
 _JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
 _SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
 _LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
+_LOOP_KEYS = ["a", "b", "kind"]
 
 
 def _check_keys(table: Mapping[str, Any], known: list[str], where: str) -> None:
@@ -721,6 +816,17 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         else:
             raise SceneError(f"{where}: needs 'joint' (with 'effort') or 'frame' (with 'force')")
 
+    for k, s in enumerate(_tables(data, "loop"), start=1):
+        where = f"[[loop]] #{k}"
+        _check_keys(s, _LOOP_KEYS, where)
+        for end in ("a", "b"):
+            if not isinstance(_required(s, end, where), dict):
+                raise SceneError(
+                    f"{where}: {end} must be an inline table {{ frame = ..., point = [x, y, z] }}"
+                    f", got {s[end]!r}"
+                )
+        at(where, scene.add_loop, s["a"], s["b"], s.get("kind", "point"))
+
     solver = _table(data, "solver", "[solver]")
     for key, value in solver.items():
         if key not in SETTING_TYPES:
@@ -735,4 +841,6 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         raise SceneError(f"[solver]: {error}") from None
 
     scene.compile()  # locked joints and elements resolve now, not at the first solve
+    if scene.loops:
+        scene.assemble()  # a start the loops cannot be closed from is an error of the file
     return scene

@@ -143,7 +143,13 @@ class Result:
     ``dt_estimates`` the automatic estimates made, ``dt_reductions`` the roll-backs with the
     step halved (divergence guard), ``scaled_modes`` the most stiff modes slowed at once. With
     ``polish``: ``residual_before_polish``, ``polish_iterations`` and whether the polished pose
-    was kept (``polished``).
+    was kept (``polished``). ``mobility`` is the mechanism's degrees of freedom (nv of the free
+    joints less the independent loop equations). ``loops`` counts the loop closures. With loops
+    (a ``Scene`` with ``[[loop]]``): ``assembly_distance`` how far the start moved to close
+    them (rad or m), ``constraint_error`` the largest loop error of ``q`` (m or rad), and
+    ``residual``,
+    ``stability`` and the stiffness eigenvalues are those of the closed mechanism (the static
+    force along the motions the loops allow, K restricted to them).
     """
 
     q: np.ndarray
@@ -165,6 +171,10 @@ class Result:
     dt_reductions: int
     scaled_modes: int
     reason: str
+    mobility: int
+    assembly_distance: float
+    constraint_error: float
+    loops: int
     stability: str
     min_stiffness_eigenvalue: float
     neutral_directions: int
@@ -204,6 +214,15 @@ class Result:
                 else ""
             ),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
+            *(
+                [
+                    f"loops            {self.mobility} degree{'s' if self.mobility != 1 else ''}"
+                    f" of freedom, constraint error {self.constraint_error:.1e}, start moved "
+                    f"{self.assembly_distance:.3g} to assemble"
+                ]
+                if self.loops
+                else []
+            ),
             f"stability        {self.stability} (smallest stiffness eigenvalue "
             f"{self.min_stiffness_eigenvalue:.4g}{neutral})",
         ]
@@ -237,6 +256,10 @@ class Result:
             "dt_estimates": self.dt_estimates,
             "dt_reductions": self.dt_reductions,
             "scaled_modes": self.scaled_modes,
+            "loops": self.loops,
+            "mobility": self.mobility,
+            "assembly_distance": self.assembly_distance,
+            "constraint_error": self.constraint_error,
             "kinetic_energy": self.kinetic_energy,
             "simplified_kinetic_energy": self.simplified_kinetic_energy,
             "stability": self.stability,
@@ -322,7 +345,10 @@ class StabilityReport:
     ``verdict``: 'stable' (every eigenvalue of the symmetric part of K positive beyond
     ``tolerance``), 'neutral' (none negative, ``neutral_directions`` zero) or 'unstable' (one
     negative). ``eigenvalues`` in increasing order (N m/rad or N/m), ``softest_direction`` the
-    unit eigenvector of the smallest (a joint-velocity direction, dim nv).
+    unit eigenvector of the smallest (a joint-velocity direction, dim nv). ``basis`` (nv x dim
+    K) gives the joint velocities K's coordinates stand for: the identity for a tree; for a
+    scene with loops, an orthonormal basis of the motions the loops allow, K being restricted
+    to them (including the curvature of the loops under their reactions).
     """
 
     verdict: str
@@ -332,6 +358,7 @@ class StabilityReport:
     eigenvalues: np.ndarray
     softest_direction: np.ndarray
     stiffness_matrix: np.ndarray
+    basis: np.ndarray
 
 
 def assess_stability(model: Any, q: Any) -> StabilityReport:
@@ -343,7 +370,9 @@ def assess_stability(model: Any, q: Any) -> StabilityReport:
     if isinstance(model, Scene):
         q = _as_vector(q, "q", model.model.nq, "model.nq")
         compiled = model.compile(q)
-        raw = _core.stiffness(compiled.model, q[compiled.q_index], compiled.elements)
+        raw = _core.stiffness(
+            compiled.model, q[compiled.q_index], compiled.elements, compiled.loops
+        )
     else:
         _check_model(model)
         raw = _core.stiffness(model, _as_vector(q, "q", model.nq, "model.nq"))
@@ -400,8 +429,10 @@ def solve(
             s,
             callback,
             compiled.elements,
+            compiled.loops,
         )
         raw["q"] = compiled.full_q(raw["q"])
+        raw["loops"] = len(scene.loops)
         raw["v"] = compiled.full_v(raw["v"], full.nv)
         if raw["trace"] is not None and raw["trace"]["q"] is not None:
             raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
@@ -415,6 +446,7 @@ def solve(
         q = pinocchio.neutral(model) if q0 is None else _as_vector(q0, "q0", model.nq, "model.nq")
         v = np.zeros(model.nv) if v0 is None else _as_vector(v0, "v0", model.nv, "model.nv")
         raw = _core.solve(model, q, v, s, callback)
+        raw["loops"] = 0
         naming = model
     trace = raw.pop("trace")
     if trace is not None:

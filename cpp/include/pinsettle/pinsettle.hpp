@@ -8,6 +8,7 @@
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/forces.hpp"
+#include "pinsettle/loops.hpp"
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
 #include "pinsettle/solver.hpp"

@@ -101,6 +101,13 @@ namespace pinsettle
     int dt_reductions = 0;
     /// Most stiff modes scaled by one estimate (Settings::scale_stiff_modes); 0 when none.
     int scaled_modes = 0;
+    /// Degrees of freedom of the mechanism: model.nv less the independent loop equations.
+    int mobility = 0;
+    /// How far the start configuration moved to assemble the loops (max |difference|, rad or
+    /// m); 0 without loops.
+    double assembly_distance = 0.;
+    /// Largest loop constraint error of the final configuration (m or rad); 0 without loops.
+    double constraint_error = 0.;
     /// Residual before the Newton polish (N m or N); equal to residual when not polished.
     double residual_before_polish = 0.;
     /// Newton iterations of the polish; whether its result was kept.
@@ -116,7 +123,8 @@ namespace pinsettle
     double kinetic_energy = 0.;
     /// Simplified energy sum |v|^2 + |w|^2 of the final state.
     double simplified_kinetic_energy = 0.;
-    /// max |rnea(q, 0, 0) - applied generalized forces| of the final configuration (N m or N).
+    /// max |rnea(q, 0, 0) - applied generalized forces| of the final configuration (N m or N);
+    /// with loops, of its component along the motions they allow (computeStaticForce).
     double residual = 0.;
     /// Stability of the final configuration (assessStability).
     Stability stability = Stability::Unknown;

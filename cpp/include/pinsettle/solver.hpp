@@ -6,15 +6,19 @@
 #define __pinsettle_solver_hpp__
 
 #include "pinsettle/forces.hpp"
+#include "pinsettle/loops.hpp"
 #include "pinsettle/stability.hpp"
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
 
 #include <functional>
+#include <memory>
 #include <vector>
 
 namespace pinsettle
 {
+
+  class LoopStepper;
 
   /// \brief Called every Settings::check_every steps; returning true stops the run with
   /// Status::Aborted and keeps the current state.
@@ -89,10 +93,21 @@ namespace pinsettle
   /// The solver owns its pinocchio::Data and a workspace sized for the model; the step loop does
   /// not allocate. The model must outlive the solver.
   ///
+  /// With loop closures (LoopConstraints) each step runs Pinocchio's constrained forward dynamics
+  /// (pinocchio::constraintDynamics) instead of aba, then projects q onto the loops (Gauss-Newton
+  /// to 1e-13) and the velocity onto the motions they allow; the residual, the stability verdict,
+  /// the automatic step and the Newton polish are those of the closed mechanism. Without loops
+  /// none of this runs.
+  ///
   class Solver
   {
   public:
-    explicit Solver(const pinocchio::Model & model);
+    ///
+    /// \param[in] model The mechanism's tree.
+    /// \param[in] loops Loop closures of the tree (they must outlive the solver), or nullptr.
+    ///
+    explicit Solver(const pinocchio::Model & model, const LoopConstraints * loops = nullptr);
+    ~Solver();
 
     ///
     /// \brief Settle the mechanism from rest at q0.
@@ -101,7 +116,8 @@ namespace pinsettle
     /// \param[in] settings Solver settings, checked with checkSettings.
     /// \param[in] forces Applied efforts, or nullptr for gravity alone.
     /// \param[in] abort Optional callback polled every settings.check_every steps.
-    /// \throws std::invalid_argument on bad settings or a bad q0.
+    /// \throws std::invalid_argument on bad settings or a bad q0, or when the loops cannot be
+    ///         assembled from q0 or leave no degree of freedom.
     ///
     Result solve(
       const Eigen::VectorXd & q0,
@@ -134,7 +150,13 @@ namespace pinsettle
     // kind (report) and close.
     void polish(StabilityReport & report, const ForceModel * forces, Result & result);
 
+    // Static force, stiffness report and projections of the closed mechanism (loops or not).
+    Eigen::VectorXd staticForce(const Eigen::VectorXd & q, const ForceModel * forces);
+    StabilityReport assess(const Eigen::VectorXd & q, const ForceModel * forces);
+
     const pinocchio::Model & model_;
+    const LoopConstraints * loops_;
+    std::unique_ptr<LoopStepper> stepper_;
     // Workspace, sized once for the model.
     Eigen::VectorXd q_, v_, dq_, q_next_, tau_, report_q_, q_estimate_, q_good_, v_good_, drift_,
       moved_;

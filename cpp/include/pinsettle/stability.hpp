@@ -43,9 +43,21 @@ namespace pinsettle
     Eigen::VectorXd eigenvalues;
     /// Unit eigenvector of the smallest eigenvalue, a tangent direction (dim model.nv).
     Eigen::VectorXd softest_direction;
-    /// The stiffness matrix K the verdict was drawn from (dim model.nv x model.nv).
+    /// The stiffness matrix K the verdict was drawn from (dim model.nv x model.nv; with loops,
+    /// restricted to the motions they allow: dim mobility x mobility).
     Eigen::MatrixXd stiffness;
+    /// The joint velocities K's coordinates stand for (dim model.nv x dim K): the identity
+    /// without loops, an orthonormal basis of the allowed motions with them.
+    Eigen::MatrixXd basis;
   };
+
+  ///
+  /// \brief The verdict from a stiffness matrix: eigenvalues of its symmetric part, zero within
+  /// relative_tolerance times the largest absolute one.
+  ///
+  /// \param[in] K Stiffness matrix (dim n x n); basis is set to the identity.
+  ///
+  StabilityReport assessStiffness(const Eigen::MatrixXd & K, double relative_tolerance);
 
   ///
   /// \brief Stiffness matrix K = d tau_static / dq, the Jacobian of the net static generalized
@@ -135,6 +147,34 @@ namespace pinsettle
     const ForceModel * forces = nullptr,
     bool scale_stiff_modes = false,
     const Eigen::MatrixXd * stiffness = nullptr);
+
+  ///
+  /// \brief Time scales of the linear system M a = tau - K x - D v from its matrices (the
+  /// computation behind the model-based overload, also used on reduced coordinates).
+  ///
+  /// \param[in] K Stiffness (dim n x n); its symmetric part is used.
+  /// \param[in] mass Inertia (dim n x n, symmetric positive definite).
+  /// \param[in] tau Static force at the linearisation point (dim n), the pull.
+  /// \param[in] damping Damping matrix D (dim n x n), or nullptr for none.
+  ///
+  TimeScale computeTimeScale(
+    const Eigen::MatrixXd & K,
+    const Eigen::MatrixXd & mass,
+    const Eigen::VectorXd & tau,
+    const Eigen::MatrixXd * damping,
+    bool scale_stiff_modes);
+
+  ///
+  /// \brief Damping matrix D = -d applied / d v at (q, 0) by central differences (the damper
+  /// forces are linear in v); zero without dampers.
+  ///
+  /// \return D (dim model.nv x model.nv, N m s/rad or N s/m).
+  ///
+  Eigen::MatrixXd computeDampingMatrix(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces);
 
 } // namespace pinsettle
 

@@ -1,0 +1,61 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+// Private to the library: the per-step work of a solve with loop closures.
+//
+
+#ifndef __pinsettle_loop_stepper_hpp__
+#define __pinsettle_loop_stepper_hpp__
+
+#include "pinsettle/loops.hpp"
+
+#include <memory>
+
+namespace pinsettle
+{
+
+  ///
+  /// \brief Constrained dynamics and the projections onto the loops, with its workspace
+  /// allocated once (Pinocchio's constraint models and data live in the implementation, so
+  /// that only loops.cpp compiles Pinocchio's constrained dynamics).
+  ///
+  class LoopStepper
+  {
+  public:
+    LoopStepper(const pinocchio::Model & model, const LoopConstraints & loops);
+    ~LoopStepper();
+
+    /// \brief Set up for a solve from q (on the loops): sizes the constraint data and scales
+    /// the proximal regularisation to the mechanism's Delassus matrix.
+    void init(pinocchio::Data & data, const Eigen::VectorXd & q);
+
+    ///
+    /// \brief Constrained forward dynamics (pinocchio::constraintDynamics): data.ddq holds the
+    /// acceleration; data.v the body velocities (local frames) for the energy measures.
+    ///
+    /// \param[in] tau Applied joint efforts (dim model.nv).
+    /// \param[in] fext Spatial forces per joint (local frames), or nullptr.
+    ///
+    void dynamics(
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q,
+      const Eigen::VectorXd & v,
+      const Eigen::VectorXd & tau,
+      const ForceVector * fext);
+
+    ///
+    /// \brief Project q onto the loops (Gauss-Newton, least norm) and v onto the motions they
+    /// allow at the projected q (orthogonal projection in joint coordinates).
+    ///
+    /// \return The largest constraint error left (m or rad).
+    ///
+    double project(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v);
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+  };
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_loop_stepper_hpp__

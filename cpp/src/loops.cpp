@@ -1,0 +1,513 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+// constraintDynamics is marked "unsupported, the API will change"; it is the constrained
+// forward dynamics Pinocchio ships, and only this file calls it.
+#define PINOCCHIO_DISABLE_UNSUPPORTED_WARNINGS
+
+#include "pinsettle/loops.hpp"
+#include "pinsettle/solver.hpp"
+#include "loop-stepper.hpp"
+
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/constrained-dynamics.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+
+#include <Eigen/SVD>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace pinsettle
+{
+
+  const char * toString(LoopKind kind)
+  {
+    return kind == LoopKind::Point ? "point" : "frame";
+  }
+
+  LoopConstraints::LoopConstraints(const pinocchio::Model & model)
+  : model_(model)
+  {
+  }
+
+  void LoopConstraints::addLoop(
+    pinocchio::FrameIndex frame_a,
+    const Eigen::Vector3d & point_a,
+    pinocchio::FrameIndex frame_b,
+    const Eigen::Vector3d & point_b,
+    LoopKind kind,
+    const std::string & name)
+  {
+    const std::string what = name.empty() ? "loop #" + std::to_string(loops_.size() + 1) : name;
+    for (const pinocchio::FrameIndex frame : {frame_a, frame_b})
+      if (frame >= model_.frames.size())
+      {
+        std::ostringstream msg;
+        msg << what << ": frame index " << frame << " is out of range (the model has "
+            << model_.frames.size() << " frames)";
+        throw std::invalid_argument(msg.str());
+      }
+    if (!point_a.allFinite() || !point_b.allFinite())
+      throw std::invalid_argument(what + ": every entry of the points must be finite");
+    const pinocchio::Frame & fa = model_.frames[frame_a];
+    const pinocchio::Frame & fb = model_.frames[frame_b];
+    if (fa.parentJoint == fb.parentJoint)
+      throw std::invalid_argument(
+        what + ": both ends ('" + fa.name + "' and '" + fb.name + "') are on the same rigid body ("
+        + (fa.parentJoint == 0 ? std::string("the world") : "the body of joint '" + model_.names[fa.parentJoint] + "'")
+        + "); such a loop holds nothing");
+    // Frames of a fixed link sit on their parent joint at a fixed placement.
+    const pinocchio::SE3 offset_a(Eigen::Matrix3d::Identity(), point_a);
+    const pinocchio::SE3 offset_b(Eigen::Matrix3d::Identity(), point_b);
+    loops_.push_back(
+      Loop{
+        what, fa.parentJoint, fa.placement * offset_a, fb.parentJoint, fb.placement * offset_b,
+        kind});
+    rows_ += loops_.back().rows();
+  }
+
+  namespace
+  {
+    // World placement of a loop end from the kinematics in data.oMi.
+    pinocchio::SE3 endPlacement(
+      const pinocchio::Data & data, pinocchio::JointIndex joint, const pinocchio::SE3 & placement)
+    {
+      return data.oMi[joint] * placement;
+    }
+
+    // Loop errors, and the Jacobian when J is given; kinematics from q (a computeJointJacobians
+    // pass with the Jacobian, forwardKinematics without). work is a 6 x nv scratch.
+    void evaluateLoops(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const LoopConstraints & loops,
+      const Eigen::VectorXd & q,
+      Eigen::VectorXd & error,
+      Eigen::MatrixXd * J,
+      pinocchio::Data::Matrix6x & work_a,
+      pinocchio::Data::Matrix6x & work_b)
+    {
+      if (J != nullptr)
+        pinocchio::computeJointJacobians(model, data, q);
+      else
+        pinocchio::forwardKinematics(model, data, q);
+      Eigen::Index row = 0;
+      for (const Loop & loop : loops.loops())
+      {
+        const pinocchio::SE3 Ma = endPlacement(data, loop.joint_a, loop.placement_a);
+        const pinocchio::SE3 Mb = endPlacement(data, loop.joint_b, loop.placement_b);
+        error.segment<3>(row) = Ma.translation() - Mb.translation();
+        if (loop.kind == LoopKind::Frame)
+          error.segment<3>(row + 3) =
+            pinocchio::log3(Eigen::Matrix3d(Ma.rotation() * Mb.rotation().transpose()));
+        if (J != nullptr)
+        {
+          // WORLD Jacobians: spatial velocity at the world origin; a point p moves with
+          // v + w x p.
+          work_a.setZero();
+          work_b.setZero();
+          if (loop.joint_a > 0)
+            pinocchio::getJointJacobian(model, data, loop.joint_a, pinocchio::WORLD, work_a);
+          if (loop.joint_b > 0)
+            pinocchio::getJointJacobian(model, data, loop.joint_b, pinocchio::WORLD, work_b);
+          const Eigen::Matrix3d skew_a = pinocchio::skew(Ma.translation());
+          const Eigen::Matrix3d skew_b = pinocchio::skew(Mb.translation());
+          J->middleRows<3>(row).noalias() =
+            work_a.topRows<3>() - skew_a * work_a.bottomRows<3>() - work_b.topRows<3>();
+          J->middleRows<3>(row).noalias() += skew_b * work_b.bottomRows<3>();
+          if (loop.kind == LoopKind::Frame)
+            J->middleRows<3>(row + 3) = work_a.bottomRows<3>() - work_b.bottomRows<3>();
+        }
+        row += loop.rows();
+      }
+    }
+
+    // Rank of a decomposition: singular values above 1e-9 of the largest (redundant equations,
+    // a planar loop's out-of-plane row, fall below).
+    Eigen::Index svdRank(const Eigen::JacobiSVD<Eigen::MatrixXd> & svd)
+    {
+      const Eigen::VectorXd & s = svd.singularValues();
+      if (s.size() == 0 || s[0] <= 0.)
+        return 0;
+      Eigen::Index r = 0;
+      while (r < s.size() && s[r] > 1e-9 * s[0])
+        ++r;
+      return r;
+    }
+
+    // Least-norm solution of J x = b from an SVD of J.
+    void solveLeastNorm(
+      const Eigen::JacobiSVD<Eigen::MatrixXd> & svd,
+      Eigen::Index rank,
+      const Eigen::VectorXd & b,
+      Eigen::VectorXd & x)
+    {
+      const Eigen::VectorXd c = svd.matrixU().leftCols(rank).transpose() * b;
+      x.noalias() = svd.matrixV().leftCols(rank) * c.cwiseQuotient(svd.singularValues().head(rank));
+    }
+
+    // Gauss-Newton onto the loops; on return error and J are those of the final q and svd is
+    // J's decomposition. Returns the largest error left.
+    double gaussNewton(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const LoopConstraints & loops,
+      Eigen::VectorXd & q,
+      double tolerance,
+      int max_iterations,
+      Eigen::VectorXd & error,
+      Eigen::MatrixXd & J,
+      Eigen::JacobiSVD<Eigen::MatrixXd> & svd,
+      Eigen::VectorXd & dq,
+      Eigen::VectorXd & q_next,
+      Eigen::VectorXd & error_next,
+      pinocchio::Data::Matrix6x & work_a,
+      pinocchio::Data::Matrix6x & work_b)
+    {
+      evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
+      double size = error.lpNorm<Eigen::Infinity>();
+      svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      for (int it = 0; it < max_iterations && size > tolerance; ++it)
+      {
+        solveLeastNorm(svd, svdRank(svd), error, dq);
+        // A full step, halved while it does not lower the error (far from the manifold the
+        // linearisation overshoots).
+        bool improved = false;
+        for (double step = 1.; step > 1e-3; step *= 0.5)
+        {
+          pinocchio::integrate(model, q, (-step * dq).eval(), q_next);
+          evaluateLoops(model, data, loops, q_next, error_next, nullptr, work_a, work_b);
+          const double next = error_next.lpNorm<Eigen::Infinity>();
+          if (next < size)
+          {
+            q.swap(q_next);
+            size = next;
+            improved = true;
+            break;
+          }
+        }
+        evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
+        svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        if (!improved)
+          break;
+      }
+      return size;
+    }
+  } // namespace
+
+  Eigen::VectorXd computeLoopError(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q)
+  {
+    Eigen::VectorXd error(loops.rows());
+    pinocchio::Data::Matrix6x work_a(6, model.nv), work_b(6, model.nv);
+    evaluateLoops(model, data, loops, q, error, nullptr, work_a, work_b);
+    return error;
+  }
+
+  Eigen::MatrixXd computeLoopJacobian(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q)
+  {
+    Eigen::VectorXd error(loops.rows());
+    Eigen::MatrixXd J(loops.rows(), model.nv);
+    pinocchio::Data::Matrix6x work_a(6, model.nv), work_b(6, model.nv);
+    evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
+    return J;
+  }
+
+  LoopMotion computeLoopMotion(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q)
+  {
+    Eigen::VectorXd error(loops.rows());
+    Eigen::MatrixXd J(loops.rows(), model.nv);
+    pinocchio::Data::Matrix6x work_a(6, model.nv), work_b(6, model.nv);
+    evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
+    LoopMotion motion;
+    motion.error = loops.empty() ? 0. : error.lpNorm<Eigen::Infinity>();
+    if (loops.empty())
+    {
+      motion.basis = Eigen::MatrixXd::Identity(model.nv, model.nv);
+      return motion;
+    }
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(J, Eigen::ComputeFullV);
+    motion.rank = static_cast<int>(svdRank(svd));
+    motion.basis = svd.matrixV().rightCols(model.nv - motion.rank);
+    return motion;
+  }
+
+  double projectOntoLoops(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    Eigen::VectorXd & q,
+    double tolerance,
+    int max_iterations)
+  {
+    if (loops.empty())
+      return 0.;
+    Eigen::VectorXd error(loops.rows()), error_next(loops.rows()), dq(model.nv), q_next(model.nq);
+    Eigen::MatrixXd J(loops.rows(), model.nv);
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd;
+    pinocchio::Data::Matrix6x work_a(6, model.nv), work_b(6, model.nv);
+    return gaussNewton(
+      model, data, loops, q, tolerance, max_iterations, error, J, svd, dq, q_next, error_next,
+      work_a, work_b);
+  }
+
+  double assembleLoops(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    Eigen::VectorXd & q)
+  {
+    if (loops.empty())
+      return 0.;
+    const Eigen::VectorXd start = q;
+    const Eigen::VectorXd error_start = computeLoopError(model, data, loops, q);
+    const double left = projectOntoLoops(model, data, loops, q, 1e-13, 100);
+    if (!(left <= 1e-10))
+    {
+      // Name the loop that stays open.
+      const Eigen::VectorXd error = computeLoopError(model, data, loops, q);
+      Eigen::Index row = 0;
+      std::size_t worst = 0;
+      double worst_size = -1., worst_start = 0.;
+      for (std::size_t k = 0; k < loops.loops().size(); ++k)
+      {
+        const int rows = loops.loops()[k].rows();
+        const double size = error.segment(row, rows).lpNorm<Eigen::Infinity>();
+        if (size > worst_size)
+        {
+          worst = k;
+          worst_size = size;
+          worst_start = error_start.segment(row, rows).lpNorm<Eigen::Infinity>();
+        }
+        row += rows;
+      }
+      const Loop & loop = loops.loops()[worst];
+      std::ostringstream msg;
+      msg.precision(4);
+      msg << "cannot assemble the loops from the start configuration: " << loop.name << " ("
+          << toString(loop.kind) << ", joint '" << model.names[loop.joint_a] << "' to joint '"
+          << model.names[loop.joint_b] << "') is still " << worst_size
+          << (loop.kind == LoopKind::Point ? " m" : " (m or rad)")
+          << " apart after Gauss-Newton from " << worst_start
+          << " (the links cannot reach each other from there, or the start is too far from an "
+             "assembled pose; give [start] values close to one)";
+      q = start;
+      throw std::invalid_argument(msg.str());
+    }
+    return pinocchio::difference(model, start, q).lpNorm<Eigen::Infinity>();
+  }
+
+  namespace
+  {
+    // The static force's component along the allowed motions (N N^T tau), and the
+    // least-squares reactions (J^T lambda = tau) when asked.
+    Eigen::VectorXd projectedForce(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const LoopConstraints & loops,
+      const Eigen::VectorXd & q,
+      const ForceModel * forces,
+      Eigen::VectorXd * lambda)
+    {
+      const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+      if (loops.empty())
+        return tau;
+      const Eigen::MatrixXd J = computeLoopJacobian(model, data, loops, q);
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      const Eigen::Index rank = svdRank(svd);
+      const Eigen::MatrixXd N = svd.matrixV().rightCols(model.nv - rank);
+      if (lambda != nullptr) // J^T lambda = tau: lambda = U_r S_r^-1 V_r^T tau
+        *lambda = svd.matrixU().leftCols(rank)
+                  * (svd.matrixV().leftCols(rank).transpose() * tau)
+                      .cwiseQuotient(svd.singularValues().head(rank));
+      return N * (N.transpose() * tau);
+    }
+  } // namespace
+
+  Eigen::VectorXd computeStaticForce(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    return projectedForce(model, data, loops, q, forces, nullptr);
+  }
+
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    if (loops.empty())
+      return assessStability(model, data, q, forces);
+    Eigen::VectorXd lambda;
+    projectedForce(model, data, loops, q, forces, &lambda);
+    const Eigen::MatrixXd N = computeLoopMotion(model, data, loops, q).basis;
+    const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
+    // The reactions' stiffness d(J^T lambda)/dq along the allowed motions, lambda held.
+    const double h = 1e-6;
+    Eigen::MatrixXd C(model.nv, N.cols());
+    Eigen::VectorXd q_plus(model.nq), q_minus(model.nq);
+    for (Eigen::Index k = 0; k < N.cols(); ++k)
+    {
+      pinocchio::integrate(model, q, (h * N.col(k)).eval(), q_plus);
+      pinocchio::integrate(model, q, (-h * N.col(k)).eval(), q_minus);
+      C.col(k) = (computeLoopJacobian(model, data, loops, q_plus).transpose() * lambda
+                  - computeLoopJacobian(model, data, loops, q_minus).transpose() * lambda)
+                 / (2. * h);
+    }
+    const Eigen::MatrixXd reduced = N.transpose() * (K * N - C);
+    StabilityReport report = assessStiffness(reduced, 1e-7);
+    report.softest_direction = N * report.softest_direction;
+    report.basis = N;
+    return report;
+  }
+
+  TimeScale computeTimeScale(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    if (loops.empty())
+      return computeTimeScale(model, data, q, forces, false);
+    const StabilityReport report = assessStability(model, data, loops, q, forces);
+    const Eigen::MatrixXd & N = report.basis;
+    const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+    const bool damped = forces != nullptr && forces->hasDamping();
+    Eigen::MatrixXd D;
+    if (damped)
+      D = N.transpose() * computeDampingMatrix(model, data, q, forces) * N;
+    pinocchio::crba(model, data, q);
+    const Eigen::MatrixXd M =
+      N.transpose() * Eigen::MatrixXd(data.M.selfadjointView<Eigen::Upper>()) * N;
+    return computeTimeScale(
+      report.stiffness, M, Eigen::VectorXd(N.transpose() * tau), damped ? &D : nullptr, false);
+  }
+
+  // --- the solver's per-step work ----------------------------------------------------------
+
+  struct LoopStepper::Impl
+  {
+    typedef pinocchio::RigidConstraintModel ConstraintModel;
+    typedef pinocchio::RigidConstraintData ConstraintData;
+
+    Impl(const pinocchio::Model & model, const LoopConstraints & loops)
+    : model(model)
+    , loops(loops)
+    , error(loops.rows())
+    , error_next(loops.rows())
+    , J(loops.rows(), model.nv)
+    , dq(model.nv)
+    , q_next(model.nq)
+    , tau(model.nv)
+    , zero(Eigen::VectorXd::Zero(model.nv))
+    , work_a(6, model.nv)
+    , work_b(6, model.nv)
+    {
+      for (const Loop & loop : loops.loops())
+      {
+        // LOCAL_WORLD_ALIGNED: the same axes as the errors and Jacobians above.
+        constraint_models.push_back(ConstraintModel(
+          loop.kind == LoopKind::Point ? pinocchio::CONTACT_3D : pinocchio::CONTACT_6D, model,
+          loop.joint_a, loop.placement_a, loop.joint_b, loop.placement_b,
+          pinocchio::LOCAL_WORLD_ALIGNED));
+        constraint_models.back().name = loop.name;
+      }
+      for (const ConstraintModel & cm : constraint_models)
+        constraint_datas.push_back(ConstraintData(cm));
+    }
+
+    const pinocchio::Model & model;
+    const LoopConstraints & loops;
+    std::vector<ConstraintModel> constraint_models;
+    std::vector<ConstraintData> constraint_datas;
+    pinocchio::ProximalSettings prox;
+    Eigen::VectorXd error, error_next;
+    Eigen::MatrixXd J;
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd;
+    Eigen::VectorXd dq, q_next, tau, zero, velocity;
+    pinocchio::Data::Matrix6x work_a, work_b;
+  };
+
+  LoopStepper::LoopStepper(const pinocchio::Model & model, const LoopConstraints & loops)
+  : impl_(new Impl(model, loops))
+  {
+  }
+
+  LoopStepper::~LoopStepper() = default;
+
+  void LoopStepper::init(pinocchio::Data & data, const Eigen::VectorXd & q)
+  {
+    Impl & d = *impl_;
+    pinocchio::initConstraintDynamics(d.model, data, d.constraint_models, d.constraint_datas);
+    // Redundant equations make the Delassus matrix J M^-1 J^T singular; the proximal iterations
+    // of constraintDynamics handle that with a regularisation mu, here 1e-12 of the matrix's
+    // scale (its largest diagonal entry), so that one or two iterations converge.
+    const Eigen::MatrixXd Jq = computeLoopJacobian(d.model, data, d.loops, q);
+    pinocchio::computeMinverse(d.model, data, q);
+    const Eigen::MatrixXd Minv = data.Minv.selfadjointView<Eigen::Upper>();
+    const double scale = (Jq * Minv * Jq.transpose()).diagonal().maxCoeff();
+    d.prox = pinocchio::ProximalSettings(1e-14, std::max(1e-12 * scale, 1e-300), 20);
+  }
+
+  void LoopStepper::dynamics(
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & v,
+    const Eigen::VectorXd & tau,
+    const ForceVector * fext)
+  {
+    Impl & d = *impl_;
+    const pinocchio::Model & model = d.model;
+    d.tau = tau;
+    if (fext != nullptr) // constraintDynamics takes no fext: add their joint efforts
+    {
+      d.tau += pinocchio::computeGeneralizedGravity(model, data, q);
+      d.tau -= pinocchio::rnea(model, data, q, d.zero, d.zero, *fext);
+    }
+    pinocchio::constraintDynamics(
+      model, data, q, v, d.tau, d.constraint_models, d.constraint_datas, d.prox);
+    // Body velocities in their own frames, as aba leaves them for the energy measures.
+    for (pinocchio::JointIndex i = 1; i < static_cast<pinocchio::JointIndex>(model.njoints); ++i)
+      data.v[i] = data.oMi[i].actInv(data.ov[i]);
+  }
+
+  double LoopStepper::project(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v)
+  {
+    Impl & d = *impl_;
+    const double left = gaussNewton(
+      d.model, data, d.loops, q, 1e-13, 10, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
+      d.work_a, d.work_b);
+    // v <- v - J^+ J v: the nearest velocity the loops allow.
+    const Eigen::Index rank = svdRank(d.svd);
+    d.error_next.noalias() = d.J * v;
+    solveLeastNorm(d.svd, rank, d.error_next, d.dq);
+    v -= d.dq;
+    return left;
+  }
+
+} // namespace pinsettle

@@ -418,6 +418,16 @@ class Scene:
             raise SceneError(str(error)) from None
         return compiled.full_q(reduced), float(moved)
 
+    def mobility(self, q: Any = None) -> int:
+        """Degrees of freedom at the full configuration q (the assembled start by default):
+        the free joints' nv less the independent loop equations."""
+        q = self.assemble(q)[0]
+        compiled = self.compile(q)
+        if not compiled.loops:
+            return int(compiled.model.nv)
+        basis = _core.loops(compiled.model, q[compiled.q_index], compiled.loops)["basis"]
+        return int(basis.shape[1])
+
     # -- what the solver sees -----------------------------------------------------------------
 
     def q0(self) -> np.ndarray:
@@ -842,5 +852,12 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
 
     scene.compile()  # locked joints and elements resolve now, not at the first solve
     if scene.loops:
-        scene.assemble()  # a start the loops cannot be closed from is an error of the file
+        # A start the loops cannot be closed from, or loops that lock everything, are errors of
+        # the file.
+        q = scene.assemble()[0]
+        if scene.mobility(q) == 0:
+            raise SceneError(
+                "[[loop]]: the loops leave the mechanism no degree of freedom (every joint "
+                "motion would open a loop): it is a structure, with nothing to settle"
+            )
     return scene

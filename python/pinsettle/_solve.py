@@ -199,7 +199,8 @@ class Result:
             )
             + f"{self.sim_time:.4g} s simulated)",
             f"wall time        {self.wall_time * 1e3:.3f} ms",
-            f"residual         {self.residual:.3e} (max |net static generalized force|)"
+            f"residual         {self.residual:.3e} (max |net static generalized force|"
+            + (", along the motions the loops allow)" if self.loops else ")")
             + (
                 f", {self.residual_before_polish:.3e} before the Newton polish"
                 if self.polished

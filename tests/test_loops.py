@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 from pathlib import Path
 
 import loop_reference  # tests/loop_reference.py (pytest puts tests/ on sys.path)
@@ -185,6 +186,22 @@ def test_loop_scene_matches_closed_form(solved) -> None:
     n_driver = report.basis[driver, 0]
     curvature = mechanism.curvature(ref[mechanism.driver])
     assert report.stiffness_matrix[0, 0] == pytest.approx(curvature * n_driver**2, rel=1e-4)
+
+
+@pytest.mark.parametrize("name", LOOP_SCENES)
+def test_loop_scene_header_states_the_closed_form(name: str) -> None:
+    """The numbers in the scene file's "Expected:" header are the closed form's."""
+    header = (ROBOTS / f"{name}.toml").read_text().split("[model]")[0]
+    assert "Expected: converged, stable" in header
+    mechanism = loop_reference.MECHANISMS[name]()
+    stated = {
+        joint: float(value)
+        for joint, value in re.findall(r"(\w+_joint) = (-?\d+\.\d+)", header.split("Another")[0])
+    }
+    ref = mechanism.equilibrium(stated[mechanism.driver], 0.01)
+    assert set(stated) == set(ref) - {"stable"}
+    for joint, value in stated.items():
+        assert value == pytest.approx(ref[joint], abs=1e-6), joint
 
 
 def test_loop_scene_matches_constrained_minimisation(solved) -> None:

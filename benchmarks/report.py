@@ -8,7 +8,8 @@ For each scene of the benchmark set it measures how the error falls with the ste
 with wall time, for kinetic damping (both energy measures as the peak detector's signal) and
 for baselines on the same Pinocchio dynamics: plain viscous damping and FIRE (C++,
 benchmarks/baselines.cpp, built here with CMake against the installed package) and Newton's
-method from the same start. Then the sweeps of the settings (kt, err, ds, max_e, backtracking,
+method from the same start (the baselines on trees only: they run unconstrained ABA, which
+cannot hold a closed loop). Then the sweeps of the settings (kt, err, ds, max_e, backtracking,
 fixed against automatic dt), the cost of one step against a bare ``pinocchio::aba`` +
 ``integrate`` step (benchmarks/step_cost.cpp) and the scaling with chain length.
 
@@ -18,6 +19,13 @@ The error of a configuration q is measured two ways:
   2 pi), q* the exact equilibrium the run comes to rest at (see ``landing``);
 - residual: ``max |tau_static(q)|`` (``Scene.static_force``) divided by the scene's force scale,
   ``max |tau_static(q0)|`` at the start.
+
+Scenes with closed loops (``[[loop]]``) are measured on the closed mechanism: their start is
+moved onto the loops first (``Scene.assemble``, as the solver does), the static force is the one
+projected onto the motions the loops allow (what ``Scene.static_force`` returns for them), Newton
+steps are taken in the reduced coordinates of ``pinsettle.assess_stability`` (``basis``) and
+every step is moved back onto the loops, and the KD runs' final loop error is measured here with
+Pinocchio's frame placements.
 
 Every number in the report is computed by this script; nothing is typed in by hand.
 """
@@ -143,6 +151,9 @@ SCENE_NAMES = (
     "chain20",
     "chain100",
     "stiff_spring",
+    "fourbar",
+    "slider_crank",
+    "parallel_gripper",
 )
 
 
@@ -159,7 +170,11 @@ def make_scene(name: str) -> BenchScene:
 
 class Statics:
     """A scene's static force on its free joints, compiled once (``Scene.static_force`` compiles
-    the scene again for every q when joints are locked), and distances between poses."""
+    the scene again for every q when joints are locked), and distances between poses.
+
+    With closed loops: ``q0`` is the start moved onto the loops (where the solver starts), the
+    force is projected onto the motions the loops allow, and ``step`` moves its result back onto
+    the loops."""
 
     def __init__(self, scene: pinsettle.Scene) -> None:
         self.scene = scene
@@ -167,8 +182,11 @@ class Statics:
         self.compiled = scene.compile()
         self.model = self.compiled.model
         self.elements = self.compiled.elements
+        self.loops = self.compiled.loops  # None for a tree
         self.data = self.model.createData()
-        self.q0 = scene.q0()
+        self.full_data = self.full.createData()
+        self.q0, self.assembly_distance = scene.assemble(scene.q0())
+        self.mobility = scene.mobility(self.q0) if self.loops else self.model.nv
         self.force_scale = float(np.max(np.abs(self.force(self.q0))))
         # Tangent entries that are angles of revolute joints: compared modulo 2 pi.
         angle = np.zeros(self.full.nv, dtype=bool)
@@ -179,10 +197,15 @@ class Statics:
         self.simple = self.full.nq == self.full.nv  # difference is a plain subtraction
 
     def force(self, q: np.ndarray) -> np.ndarray:
-        """tau_static(q) on the free joints, as ``Scene.static_force``. Without elements it is
-        Pinocchio's generalized gravity, as in pinsettle::computeStaticForce, on a Data kept
-        here (pinsettle's binding builds a pinocchio::Data per call, which on a 200-link chain
-        costs 0.1 s)."""
+        """tau_static(q) on the free joints, as ``Scene.static_force`` (with loops: projected
+        onto the motions they allow at q). Without elements and loops it is Pinocchio's
+        generalized gravity, as in pinsettle::computeStaticForce, on a Data kept here
+        (pinsettle's binding builds a pinocchio::Data per call, which on a 200-link chain costs
+        0.1 s)."""
+        if self.loops:
+            return _core.static_force(
+                self.model, q[self.compiled.q_index], self.elements, self.loops
+            )
         if self.elements is None:
             return pinocchio.computeGeneralizedGravity(
                 self.model, self.data, q[self.compiled.q_index]
@@ -210,16 +233,63 @@ class Statics:
         return float(self.distances(qa, qb[None, :])[0])
 
     def step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """q moved by dq (free joints), then back onto the loops; all nan when the loops cannot
+        be closed from there."""
         full = np.zeros(self.full.nv)
         full[self.compiled.v_index] = dq
-        return pinocchio.integrate(self.full, q, full)
+        return self.project(pinocchio.integrate(self.full, q, full))
+
+    def project(self, q: np.ndarray) -> np.ndarray:
+        """q moved onto the loops (``Scene.assemble``); q itself for a tree."""
+        if not self.loops or not np.all(np.isfinite(q)):
+            return q
+        try:
+            reduced, _ = _core.assemble_loops(self.model, q[self.compiled.q_index], self.loops)
+        except ValueError:
+            return np.full_like(q, math.nan)
+        return self.compiled.full_q(np.asarray(reduced))
+
+    def basis(self, q: np.ndarray) -> np.ndarray:
+        """Orthonormal basis (nv x mobility) of the motions the loops allow at q (the loops'
+        Jacobian's null space); the identity for a tree."""
+        if not self.loops:
+            return np.eye(self.model.nv)
+        return _core.loops(self.model, q[self.compiled.q_index], self.loops)["basis"]
+
+    def loop_error(self, q: np.ndarray) -> float:
+        """Largest loop error at q (m; rad for the rotation of a frame loop), from Pinocchio's
+        frame placements on the full model: nothing of pinsettle's loop code. 0 for a tree."""
+        if not self.scene.loops:
+            return 0.0
+        if not np.all(np.isfinite(q)):
+            return math.inf
+        pinocchio.framesForwardKinematics(self.full, self.full_data, q)
+        errors = []
+        for loop in self.scene.loops:
+            a = self.full_data.oMf[self.full.getFrameId(loop.a_frame)]
+            b = self.full_data.oMf[self.full.getFrameId(loop.b_frame)]
+            errors.append(a.act(np.asarray(loop.a_point)) - b.act(np.asarray(loop.b_point)))
+            if loop.kind == "frame":
+                errors.append(pinocchio.log3(a.rotation @ b.rotation.T))
+        return float(np.max(np.abs(np.concatenate(errors))))
 
     def stiffness(self, q: np.ndarray) -> pinsettle.StabilityReport:
+        """K (with loops: reduced, mobility x mobility, in the coordinates of ``basis``)."""
         return pinsettle.assess_stability(self.scene, q)
+
+    def newton_step(self, q: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
+        """Newton's step from q (dim nv of the free joints): dq = B lstsq(K, -B^T f), K and B
+        from ``pinsettle.assess_stability`` (K reduced to the motions the loops allow, B their
+        basis; the identity for a tree), rank cut 1e-10 so that neutral directions are left
+        alone."""
+        f = self.force(q) if f is None else f
+        report = self.stiffness(q)
+        B = report.basis
+        return B @ np.linalg.lstsq(report.stiffness_matrix, -(B.T @ f), rcond=1e-10)[0]
 
     def time_scale(self, q: np.ndarray, scale_stiff_modes: bool = False) -> dict:
         return _core.time_scale(
-            self.model, q[self.compiled.q_index], self.elements, scale_stiff_modes
+            self.model, q[self.compiled.q_index], self.elements, scale_stiff_modes, self.loops
         )
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
@@ -232,8 +302,9 @@ def newton(
 ) -> tuple[np.ndarray, list[float], int]:
     """Newton's method on the static force from q with the stiffness matrix of
     ``pinsettle.assess_stability`` (least squares with a rank cut, so neutral directions are
-    left alone), full steps, until the residual stops falling or is <= tolerance (relative:
-    round-off).
+    left alone; with loops in the reduced coordinates, each step moved back onto the loops:
+    ``Statics.newton_step``), full steps, until the residual stops falling or is <= tolerance
+    (relative: round-off).
     Returns the last pose, the relative residual after each iteration (the start first) and the
     iterations taken."""
     residuals = [statics.residual(q)]
@@ -241,11 +312,9 @@ def newton(
     for _ in range(iterations):
         if not residuals[-1] > tolerance:
             break
-        f = statics.force(q)
-        K = statics.stiffness(q).stiffness_matrix
-        dq = np.linalg.lstsq(K, -f, rcond=1e-10)[0]
+        dq = statics.newton_step(q)
         trial = statics.step(q, dq)
-        r = statics.residual(trial)
+        r = statics.residual(trial) if np.all(np.isfinite(trial)) else math.inf
         if not np.all(np.isfinite(trial)) or not r < residuals[-1]:
             break
         q = trial
@@ -258,7 +327,9 @@ def newton_from_start(
     statics: Statics, q: np.ndarray, line_search: bool, iterations: int = 50
 ) -> tuple[np.ndarray, list[float], list[float], list[np.ndarray]]:
     """Newton's method as a user runs it from the start, with the stiffness matrix of
-    ``pinsettle.assess_stability`` as Jacobian (least squares with a rank cut 1e-10): full steps,
+    ``pinsettle.assess_stability`` as Jacobian (least squares with a rank cut 1e-10; with loops
+    the reduced Newton of ``Statics.newton_step``, the start and every step moved onto the
+    loops): full steps,
     or with ``line_search`` halved until |tau_static|_2 falls (Armijo, 1e-4), until the residual
     is <= 1e-14 of the force scale, a step fails or 50 iterations. Returns the end pose, the
     relative residual and the elapsed wall time (s) at the start and after each iteration, and
@@ -269,11 +340,13 @@ def newton_from_start(
         if not residuals[-1] > 1e-14:
             break
         f = statics.force(q)
-        K = statics.stiffness(q).stiffness_matrix
-        dq = np.linalg.lstsq(K, -f, rcond=1e-10)[0]
+        dq = statics.newton_step(q, f)
         a, norm = 1.0, np.linalg.norm(f)
         trial = statics.step(q, dq)
-        while line_search and not np.linalg.norm(statics.force(trial)) <= (1 - 1e-4 * a) * norm:
+        while line_search and not (
+            np.all(np.isfinite(trial))
+            and np.linalg.norm(statics.force(trial)) <= (1 - 1e-4 * a) * norm
+        ):
             a *= 0.5
             if a < 1e-10:
                 break
@@ -289,14 +362,15 @@ def newton_from_start(
 
 def fd_newton_step(statics: Statics, q: np.ndarray, h: float = 1e-6) -> float:
     """Size (max norm, rad or m) of one Newton step from q with a central-difference Jacobian
-    of the static force: nothing of pinsettle's stiffness code. Tiny at a root."""
-    nv = statics.model.nv
-    J = np.empty((nv, nv))
-    for i in range(nv):
-        e = np.zeros(nv)
-        e[i] = h
+    of the static force: nothing of pinsettle's stiffness code. Tiny at a root. With loops the
+    differences are taken along the basis B of the motions they allow (each side moved back
+    onto the loops) and the step solves B^T J y = -B^T f, dq = B y."""
+    B = statics.basis(q)
+    J = np.empty((statics.model.nv, B.shape[1]))
+    for i in range(B.shape[1]):
+        e = h * B[:, i]
         J[:, i] = (statics.force(statics.step(q, e)) - statics.force(statics.step(q, -e))) / (2 * h)
-    step = np.linalg.lstsq(J, -statics.force(q), rcond=1e-8)[0]
+    step = B @ np.linalg.lstsq(B.T @ J, -(B.T @ statics.force(q)), rcond=1e-8)[0]
     return float(np.max(np.abs(step)))
 
 
@@ -314,6 +388,7 @@ class Reference:
     fd_step: float  # size of the independent Newton step from q* (rad or m)
     steps: int  # of the kinetic-damping run that found it
     seconds_per_step: float  # of that run
+    constraint_error: float = 0.0  # largest loop error of q (m), Statics.loop_error
 
     @property
     def step_budget(self) -> int:
@@ -340,6 +415,7 @@ def reference(statics: Statics) -> Reference:
         fd_newton_step(statics, q),
         r.steps,
         r.wall_time / r.steps,
+        statics.loop_error(q),
     )
 
 
@@ -453,7 +529,7 @@ def run_kd(
     result = timed[-1]
     land = landing(statics, ref, result.q)
     target = _target(statics, ref, land)
-    c, damping = None, []
+    c, damping, along = None, [], math.nan
     if curve:
         traced = pinsettle.solve(
             statics.scene,
@@ -468,6 +544,8 @@ def run_kd(
         steps = np.append(t.step, traced.steps)
         rows = np.vstack([t.q, traced.q[None, :]])
         c = curve_of(statics, target, steps, rows)
+        if statics.loops:
+            along = max(statics.loop_error(row) for row in rows)
         damping = [
             step for step, kind in zip(t.event_step, t.event_kind, strict=True) if kind == "damping"
         ]
@@ -491,6 +569,11 @@ def run_kd(
             "dt_reductions": result.dt_reductions,
             "scaled_modes": result.scaled_modes,
             "damping_steps": np.array(damping),  # steps of the damping events (traced run)
+            # Largest loop error (m) of the final q, measured here (Statics.loop_error) and by
+            # the solver (Result.constraint_error), and over the traced run's samples.
+            "constraint_error": statics.loop_error(result.q),
+            "solver_constraint_error": result.constraint_error,
+            "constraint_error_along": along,
         },
     )
 
@@ -705,6 +788,7 @@ def run_newton(statics: Statics, ref: Reference, line_search: bool) -> Run:
             "times": times,
             "min_eigenvalue": report.min_eigenvalue if report else math.nan,
             "largest_angle": float(np.max(np.abs(q))) if finite else math.inf,
+            "constraint_error": statics.loop_error(q),  # 0 for a tree
         },
     )
 
@@ -768,7 +852,7 @@ class Config:
 
 FULL = Config(SCENE_NAMES, CHAIN_LENGTHS, repeats=5, sweep_repeats=3)
 QUICK = Config(
-    ("pendulum",),
+    ("pendulum", "fourbar"),
     (5, 10),
     repeats=1,
     sweep_repeats=1,
@@ -790,6 +874,8 @@ class SceneData:
     description: str = ""
     force_scale: float = math.nan
     nv: int = 0
+    loops: int = 0  # loop closures
+    mobility: int = 0  # degrees of freedom (nv less the independent loop equations)
     runs: dict[str, Run] = field(default_factory=dict)  # main runs by key
     damping: Damping | None = None
     # The viscous baselines with other coefficients: (method, factor of the rule's c) -> run.
@@ -826,6 +912,8 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
                 bench.description,
                 statics.force_scale,
                 statics.model.nv,
+                len(bench.scene.loops),
+                statics.mobility,
             )
 
         tasks.append((f"{name}: reference equilibrium", setup))
@@ -843,6 +931,12 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
         def baseline_runs(name=name):
             d = results.scenes[name]
             s, ref = d.statics, d.ref
+            if d.loops:
+                # The C++ baselines run unconstrained ABA: they cannot hold a loop. Newton (the
+                # reduced one, steps moved back onto the loops) can.
+                d.runs["newton"] = run_newton(s, ref, line_search=False)
+                d.runs["newton_ls"] = run_newton(s, ref, line_search=True)
+                return
             d.damping = damping_rule(s, ref)
             for method, c in (("viscous", d.damping.joint), ("mass_damping", d.damping.mass)):
                 d.runs[method] = run_baseline(baselines, s, ref, method, reps, work, damping=c)
@@ -862,7 +956,7 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
             d.runs["newton"] = run_newton(s, ref, line_search=False)
             d.runs["newton_ls"] = run_newton(s, ref, line_search=True)
 
-        tasks.append((f"{name}: viscous damping, FIRE, Newton", baseline_runs))
+        tasks.append((f"{name}: viscous damping, FIRE (trees only), Newton", baseline_runs))
 
         def sweep_kt(name=name):
             d = results.scenes[name]

@@ -114,6 +114,50 @@ def steps_to(run: R.Run, level: float = LEVEL) -> float | None:
     return None if hit is None else hit[0]
 
 
+BASELINES = ("viscous", "mass_damping", "fire")
+
+
+def loop_scenes(results: R.Results) -> list[str]:
+    """The scenes with closed loops, in the report's order."""
+    return [name for name, d in results.scenes.items() if d.loops]
+
+
+def trees_only(results: R.Results) -> str:
+    """The sentence that says why the loop scenes have no baselines ('' when there are none)."""
+    names = loop_scenes(results)
+    if not names:
+        return ""
+    return (
+        "baselines run on trees only: "
+        + ", ".join(f"`{n}`" for n in names)
+        + (" closes" if len(names) == 1 else " close")
+        + " kinematic loops, which the baselines' unconstrained `pinocchio::aba` cannot hold"
+    )
+
+
+def kd_runs(d: R.SceneData) -> list[R.Run]:
+    """Every kinetic-damping run on a scene: the main runs and the sweeps'."""
+    runs = [r for r in d.runs.values() if r.method == "kd"]
+    return runs + [r for sweep in d.sweeps.values() for r in sweep if r.method == "kd"]
+
+
+def worst_constraint_error(d: R.SceneData) -> float:
+    """Largest final loop error (m) over every KD run on the scene, as measured by the report
+    and as reported by the solver."""
+    return max(
+        max(r.extra["constraint_error"], r.extra["solver_constraint_error"]) for r in kd_runs(d)
+    )
+
+
+def per_step_ratio(results: R.Results, name: str, base: str = "pendulum") -> float:
+    """KD's time per step (exact energy, main run) on a scene over the pendulum's."""
+    if base not in results.scenes:
+        return math.nan
+    return results.scenes[name].runs["kd_exact"].per_step / (
+        results.scenes[base].runs["kd_exact"].per_step
+    )
+
+
 # --- figures -----------------------------------------------------------------------------------
 
 STYLE = {
@@ -160,15 +204,30 @@ def scene_figure(d: R.SceneData, path: Path) -> None:
     axes[0, 0].set_ylabel("distance max|q - q*| (rad or m)")
     axes[1, 0].set_ylabel("residual / force scale")
     axes[1, 0].set_xlabel("wall time (s): steps x measured time per step")
-    axes[1, 1].set_xlabel("steps (ABA evaluations)")
+    axes[1, 1].set_xlabel(
+        "steps (constrained-dynamics evaluations)" if d.loops else "steps (ABA evaluations)"
+    )
     axes[0, 0].set_title("against wall time")
     axes[0, 1].set_title("against steps")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
-    fig.suptitle(f"{d.bench_name}: {d.description}", fontsize=10)
+    title = f"{d.bench_name}: {d.description}"
+    if d.loops:
+        title += f"\n(closed loops, mobility {d.mobility}: the baselines run on trees only)"
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0.06, 1, 1))
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def scene_color(k: int):
+    """The k-th scene's colour in the figures with a line per scene: the ten of matplotlib's
+    cycle, then the light shades of tab20 (C10 would be C0 again)."""
+    if k < 10:
+        return f"C{k}"
+    import matplotlib
+
+    return matplotlib.colormaps["tab20"]((2 * (k - 10) + 1) % 20)
 
 
 def kt_figure(results: R.Results, path: Path) -> None:
@@ -194,9 +253,9 @@ def kt_figure(results: R.Results, path: Path) -> None:
                 x,
                 y,
                 ls=ls,
-                marker="o",
+                marker="s" if d.loops else "o",
                 ms=3,
-                color=f"C{k}",
+                color=scene_color(k),
                 label=name if energy == "exact" else None,
             )
     ax.set_yscale("log")
@@ -221,7 +280,8 @@ def max_e_figure(results: R.Results, path: Path) -> None:
         runs = [r for r in d.sweeps["max_e"] if r.settings.get("energy") == "exact"]
         x = [r.settings["max_e"] for r in runs]
         y = [max(r.distance, FLOOR) for r in runs]
-        ax.plot(x, y, marker="o", ms=3, color=f"C{k}", label=name)
+        marker = "s" if d.loops else "o"
+        ax.plot(x, y, marker=marker, ms=3, color=scene_color(k), label=name)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("max_e (J, exact energy)")
@@ -300,7 +360,8 @@ by that command.
 """
 
 
-def summary_rules() -> str:
+def summary_rules(results: R.Results) -> str:
+    names = ", ".join(f"`{n}`" for n in loop_scenes(results)) or "none here"
     return f"""## How it is measured
 
 **Error.** For a configuration q, the *distance* `max |q - q*|` over the free joints (rad or m;
@@ -363,6 +424,20 @@ scale (checked every 64 steps; FIRE has it every step) or {R.BASELINE_MAX_STEPS:
   *Newton + line search* halves a step until `|tau_static|_2` falls. At most 50 iterations; where
   it lands is judged with `pinsettle.assess_stability`.
 
+**Closed loops** (scenes with `[[loop]]`: {names}). The solver runs
+Pinocchio's constrained dynamics and keeps the pose on the loops; the report measures the closed
+mechanism the same way. Its start is the scene's start moved onto the loops (`Scene.assemble`,
+as the solver does first), and the force scale is taken there. The residual is the static force
+projected onto the motions the loops allow (`Scene.static_force`: zero at an equilibrium of the
+closed mechanism; the loops' reactions take the rest). Newton's step, for the references, the
+landings and Newton from the start, is the reduced one, `dq = B lstsq(K_r, -B^T f)` with K_r and
+its basis B from `pinsettle.assess_stability`, followed by moving the pose back onto the loops;
+the check step differentiates the projected force along B. The distance is `max |q - q*|` over
+the free joints as for a tree. The final constraint error of every KD run (the largest loop
+error, m) is measured here from Pinocchio's frame placements and compared with the solver's
+`Result.constraint_error`. The C++ baselines run unconstrained ABA and cannot close a loop: the
+baselines run on trees only.
+
 """
 
 
@@ -376,6 +451,8 @@ def scenes_table(results: R.Results) -> str:
                 f"`{name}`",
                 d.description,
                 str(d.nv),
+                str(d.loops) if d.loops else "-",
+                str(d.mobility),
                 f"{d.force_scale:.3g}",
                 f"{ref.stability}{neutral} (min eig. {ref.min_eigenvalue:.3g})",
                 fmt_e(ref.residual),
@@ -387,13 +464,15 @@ def scenes_table(results: R.Results) -> str:
             "scene",
             "what",
             "nv",
+            "loops",
+            "mobility",
             "force scale (N m or N)",
             "q*",
             "residual of q*",
             "check step (rad or m)",
         ],
         rows,
-        right=(2, 3, 5, 6),
+        right=(2, 3, 4, 5, 7, 8),
     )
 
 
@@ -412,6 +491,8 @@ def summary_table(results: R.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
         for key in METHOD_ORDER:
+            if key not in d.runs:
+                continue
             run = d.runs[key]
             cells = [f"`{name}`" if key == "kd_exact" else "", run.label]
             for level in R.RESIDUAL_LEVELS:
@@ -424,6 +505,7 @@ def summary_table(results: R.Results) -> str:
                 run.status,
                 fmt_e(run.distance) if run.landing.q is not None else "-",
                 fmt_e(run.residual),
+                fmt_e(run.extra["constraint_error"]) if d.loops else "-",
                 where,
             ]
             rows.append(cells)
@@ -434,7 +516,11 @@ def summary_table(results: R.Results) -> str:
         f"{lv[0]} and {lv[1]} (median over the repeats, min-max in brackets); the run's end: "
         "status, distance from its rest q*, residual, and where it rests (the stability of q*). "
         "KD runs use `max_e = "
-        f"{R.DEEP_MAX_E:g}` here (see above); Newton's times are Python's.\n\n"
+        f"{R.DEEP_MAX_E:g}` here (see above); Newton's times are Python's. For the scenes with "
+        "closed loops, the final constraint error (largest loop error, m) and the reduced "
+        "Newton; "
+        + (trees_only(results) or "the baselines run on trees only")
+        + ".\n\n"
         + table(
             [
                 "scene",
@@ -446,10 +532,11 @@ def summary_table(results: R.Results) -> str:
                 "status",
                 "final distance",
                 "final residual",
+                "constraint error (m)",
                 "rests",
             ],
             rows,
-            right=(2, 3, 4, 5, 7, 8),
+            right=(2, 3, 4, 5, 7, 8, 9),
         )
     )
 
@@ -559,9 +646,11 @@ def conclusions(results: R.Results) -> str:
             + (" (the default)." if chosen == 0.5 else " (the default is 0.5).")
         )
     # Baselines, by time (their steps cost differently).
-    for key in ("viscous", "mass_damping", "fire"):
+    for key in BASELINES:
         ratios, faster, slower, never = [], [], [], []
         for name, d in scenes.items():
+            if key not in d.runs:
+                continue
             tk, tb = time_to(d.runs["kd_exact"]), time_to(d.runs[key])
             if tb is None or tk is None:
                 never.append(name)
@@ -592,6 +681,8 @@ def conclusions(results: R.Results) -> str:
                 )
             )
         out.append(text + ".")
+    if loop_scenes(results):
+        out.append(f"- The {trees_only(results)} (see Closed loops below).")
     for key in ("newton", "newton_ls"):
         kinds: dict[str, list[str]] = {}
         for name, d in scenes.items():
@@ -686,6 +777,7 @@ def conclusions(results: R.Results) -> str:
             + outcome_steps_time(runs["auto, unscaled"])
             + ". The baselines have no such scaling: their step is set by the stiff mode."
         )
+    out += closed_loops_short(results)
     kd_ok = [
         name
         for name, d in scenes.items()
@@ -698,13 +790,118 @@ def conclusions(results: R.Results) -> str:
     return "\n".join(out) + "\n\n"
 
 
+def closed_loops_short(results: R.Results) -> list[str]:
+    """The "Closed loops" paragraph of the short section: steps and time to the level on each
+    loop scene, the constraint error at the end, the cost per step against the pendulum's."""
+    names = loop_scenes(results)
+    if not names:
+        return []
+    parts, worst = [], 0.0
+    for name in names:
+        d = results.scenes[name]
+        run = d.runs["kd_exact"]
+        hit = run.reach("residual", LEVEL)
+        reached = (
+            f"{fmt_steps(hit[0])} steps, {fmt_time(hit[1])}"
+            if hit is not None
+            else f"not reached ({run.status}, residual {fmt_e(run.residual)})"
+        )
+        ratio = per_step_ratio(results, name)
+        cost = (
+            f"; {fmt_time(run.per_step)} per step, {ratio:.1f} times the pendulum's"
+            if math.isfinite(ratio)
+            else f"; {fmt_time(run.per_step)} per step"
+        )
+        parts.append(
+            f"`{name}` ({d.loops} loop{'s' if d.loops != 1 else ''}, nv {d.nv}, mobility "
+            f"{d.mobility}): {reached}, final constraint error "
+            f"{fmt_e(run.extra['constraint_error'])} m{cost}"
+        )
+        worst = max(worst, worst_constraint_error(d))
+    bound = 1e-10
+    verdict = "below" if worst < bound else "**above**"
+    return [
+        f"- **Closed loops**: kinetic damping (exact energy, default kt = "
+        f"{R.pinsettle.Settings().kt:g}) to a residual of "
+        f"{LEVEL:g} (projected onto the motions the loops allow): "
+        + "; ".join(parts)
+        + f". The largest final constraint error over every KD run on these scenes (main runs "
+        f"and sweeps) is {fmt_e(worst)} m, {verdict} {bound:g} m. A step's cost includes "
+        "Pinocchio's constrained dynamics (`pinocchio::constraintDynamics` on the loops) plus "
+        "the projections of q onto the loops and of v onto the motions they allow, and the "
+        "solve's set-up (the assembly of the start, the step estimates, the final stability "
+        "check); both times per step from the same run of this report (whole solve / steps, "
+        "exact energy). Newton from the start is the reduced Newton (see How it is measured)."
+    ]
+
+
+def closed_loops_section(results: R.Results) -> str:
+    names = loop_scenes(results)
+    if not names:
+        return ""
+    rows = []
+    for name in names:
+        d = results.scenes[name]
+        for key in ("kd_exact", "kd_simplified"):
+            run = d.runs[key]
+            ratio = per_step_ratio(results, name)
+            rows.append(
+                [
+                    f"`{name}`" if key == "kd_exact" else "",
+                    f"{d.loops}, {d.mobility}" if key == "kd_exact" else "",
+                    f"{d.statics.assembly_distance:.3g}" if key == "kd_exact" else "",
+                    run.label,
+                    *reach_cell(run, "residual", LEVEL),
+                    fmt_e(run.extra["constraint_error"]),
+                    fmt_e(run.extra["solver_constraint_error"]),
+                    fmt_e(run.extra["constraint_error_along"]),
+                    fmt_time(run.per_step)
+                    + (f" ({ratio:.1f})" if math.isfinite(ratio) and key == "kd_exact" else ""),
+                    fmt_e(worst_constraint_error(d)) if key == "kd_exact" else "",
+                ]
+            )
+    return (
+        "## Closed loops\n\n"
+        "The scenes with `[[loop]]`: loop closures and mobility (degrees of freedom), how far "
+        "the start moved to close the loops (rad or m), and for kinetic damping "
+        f"(`max_e = {R.DEEP_MAX_E:g}`) the steps and time to a residual of {LEVEL:g}, the final "
+        "constraint error (largest loop error of the final q, m) measured here from Pinocchio's "
+        "frame placements and as the solver reports it (`Result.constraint_error`), the largest "
+        "over the traced run's samples, the time per step (whole solve / steps; in brackets, "
+        "over the pendulum's KD step in the same run: constrained dynamics plus the projections "
+        "onto the loops against a bare tree step) and the largest final constraint error over "
+        "every KD run on the scene (these and all the sweeps'). The "
+        + trees_only(results)
+        + "; Newton from the start is the reduced Newton (summary above, baselines section).\n\n"
+        + table(
+            [
+                "scene",
+                "loops, mobility",
+                "start moved",
+                "method",
+                f"steps to {LEVEL:g}",
+                f"time to {LEVEL:g}",
+                "constraint error",
+                "solver's",
+                "largest along the run",
+                "time per step (x pendulum)",
+                "largest over every KD run",
+            ],
+            rows,
+            right=(2, 4, 5, 6, 7, 8, 9, 10),
+        )
+        + "\n"
+    )
+
+
 def figures_section(results: R.Results, figures: str) -> str:
     parts = [
         "## Error against wall time and against steps\n\n"
         "One figure per scene: distance (top) and relative residual (bottom) against wall time "
         "(left: steps times the run's measured time per step; Newton: Python's elapsed time per "
-        "iteration) and against steps (right: ABA evaluations). Dotted lines: the residual levels "
-        f"of the summary. Values below {FLOOR:g} are drawn at {FLOOR:g}.\n"
+        "iteration) and against steps (right: ABA evaluations; constrained-dynamics evaluations on "
+        "the scenes with closed loops, whose figures have no baselines). Dotted lines: the "
+        f"residual levels of the summary. Values below {FLOOR:g} are drawn at {FLOOR:g}.\n"
     ]
     for name in results.scenes:
         parts.append(f"![{name}]({figures}/{name}.png)\n")
@@ -883,6 +1080,8 @@ def dt_section(results: R.Results) -> str:
 def baselines_section(results: R.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
+        if d.damping is None:  # closed loops: no baselines
+            continue
         damping = d.damping
         v, m, f = d.runs["viscous"], d.runs["mass_damping"], d.runs["fire"]
         rows.append(
@@ -904,7 +1103,9 @@ def baselines_section(results: R.Results) -> str:
         "## Baselines\n\n"
         "The coefficients and steps of the rules above: the slowest mode's frequency omega "
         "(rad/s), the joint dampers' c (N m s/rad) and their step (s), the mass-proportional c "
-        "(1/s) and its step, FIRE's dt0 and its velocity resets (P <= 0).\n\n"
+        "(1/s) and its step, FIRE's dt0 and its velocity resets (P <= 0)."
+        + (f" The {trees_only(results)}." if loop_scenes(results) else "")
+        + "\n\n"
         + table(
             [
                 "scene",
@@ -924,6 +1125,8 @@ def baselines_section(results: R.Results) -> str:
         factors = results.config.damping_factors
         rows = []
         for name, d in results.scenes.items():
+            if d.damping is None:
+                continue
             for method in ("viscous", "mass_damping"):
                 main = d.runs[method]
                 cells = [f"`{name}`" if method == "viscous" else "", R.BASELINE_LABELS[method]]
@@ -963,7 +1166,8 @@ def baselines_section(results: R.Results) -> str:
         "\nNewton from the start: iterations, the residual it ends with, where it lands (a root: "
         "its stability and smallest stiffness eigenvalue, its distance from the reference q*), "
         "the largest entry of q in absolute value (rad or m: a step off to 1e15 rad means the "
-        "stiffness matrix was near singular at the start) and Python's wall time.\n\n"
+        "stiffness matrix was near singular at the start) and Python's wall time. On the scenes "
+        "with closed loops it is the reduced Newton, each step moved back onto the loops.\n\n"
         + table(
             [
                 "scene",
@@ -1018,7 +1222,14 @@ def cost_section(results: R.Results) -> str:
         "medians to the bare step. Every run starts at rest 0.3 rad from neutral in every joint; "
         "the solver runs with kt = 0.99 and `max_e = 0`, so that it damps at every peak but "
         "never stops and its velocity never reaches subnormal numbers (see the file's header). "
-        f"Models: {info}.\n\n"
+        f"Models: {info}."
+        + (
+            " Trees only: the cost of a step with closed loops, against the pendulum's in the same "
+            "run, is in the Closed loops section."
+            if loop_scenes(results)
+            else ""
+        )
+        + "\n\n"
         + table(["", *names], rows, right=tuple(range(1, len(names) + 1)))
         + "\n"
     )
@@ -1104,12 +1315,13 @@ def write(results: R.Results, output: Path) -> None:
     text = (
         header(results)
         + conclusions(results)
-        + summary_rules()
+        + summary_rules(results)
         + scenes_table(results)
         + "\n"
         + summary_table(results)
         + "\n"
         + figures_section(results, figures)
+        + closed_loops_section(results)
         + energy_section(results)
         + kt_section(results, figures)
         + stopping_section(results, figures)
@@ -1167,9 +1379,11 @@ def readme_block(results: R.Results) -> str:
         )
         + ").",
     ]
-    for key in ("viscous", "mass_damping", "fire"):
+    for key in BASELINES:
         ratios, never = [], []
         for name, d in results.scenes.items():
+            if key not in d.runs:
+                continue
             tk, tb = time_to(d.runs["kd_exact"]), time_to(d.runs[key])
             if tb is None or tk is None:
                 never.append(name)
@@ -1187,6 +1401,8 @@ def readme_block(results: R.Results) -> str:
         if never:
             text += ("; " if ratios else "") + f"not reached on {', '.join(never)}"
         lines.append(text + ".")
+    if loop_scenes(results):
+        lines.append(f"- The {trees_only(results)}.")
     kinds = {}
     for name, d in results.scenes.items():
         run = d.runs["newton_ls"]
@@ -1203,6 +1419,29 @@ def readme_block(results: R.Results) -> str:
         + f"; kinetic damping rests stable or neutral on {len(settled)} of the "
         f"{len(results.scenes)} scenes."
     )
+    names = loop_scenes(results)
+    if names:
+        parts = []
+        for name in names:
+            d = results.scenes[name]
+            hit = d.runs["kd_exact"].reach("residual", LEVEL)
+            ratio = per_step_ratio(results, name)
+            parts.append(
+                f"{name} "
+                + (f"{fmt_steps(hit[0])} steps, {fmt_time(hit[1])}" if hit else "not reached")
+                + (
+                    f" ({ratio:.1f} times the pendulum's time per step)"
+                    if math.isfinite(ratio)
+                    else ""
+                )
+            )
+        worst = max(worst_constraint_error(results.scenes[n]) for n in names)
+        lines.append(
+            f"- **Closed loops** (constrained dynamics, projections onto the loops): to a "
+            f"residual of {LEVEL:g} along the allowed motions, "
+            + "; ".join(parts)
+            + f"; final constraint error at most {fmt_e(worst)} m over every KD run."
+        )
     lines.append(README_END)
     wrapped = []
     for line in lines:

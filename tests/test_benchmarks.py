@@ -58,6 +58,7 @@ def test_the_report_and_its_figures_are_written(quick):
         "## Baselines",
         "## Cost of one step",
         "## Scaling with chain length",
+        "## Closed loops",
     ):
         assert section in text
     assert results.machine["cpu"] in text and results.machine["date"] in text
@@ -148,3 +149,38 @@ def test_sweeps_and_scaling_are_complete(quick):
     for cost in results.step_cost.values():
         assert cost["settled_steps"] == cost["steps"]  # the solver ran every step it was timed
         assert all(math.isfinite(x) and x > 0 for x in cost["ns_per_step"]["bare"])
+
+
+def test_the_loop_scene_is_measured_on_the_closed_mechanism(quick):
+    results, output = quick
+    text = (output / "benchmarks.md").read_text()
+    assert "fourbar" in report.QUICK.scenes
+    d = results.scenes["fourbar"]
+    assert d.loops >= 1 and 1 <= d.mobility < d.nv
+    # Its start is on the loops, where the solver starts; the force scale is taken there.
+    assert d.statics.loop_error(d.statics.q0) <= 1e-10
+    assert d.ref.constraint_error <= 1e-10
+    # KD curves, the reduced Newton, the kt sweep; no baselines (unconstrained ABA), said so.
+    assert set(d.runs) == {"kd_exact", "kd_simplified", "newton", "newton_ls"}
+    assert d.damping is None and not d.damping_sweep
+    assert len(d.sweeps["kt"]) == 2 * len(results.config.kts)
+    for key in ("kd_exact", "kd_simplified"):
+        run = d.runs[key]
+        assert run.status == "converged", key
+        assert run.residual <= 1e-10 and run.stability == "stable", key
+        assert run.landing.from_reference <= 1e-9, key
+        # The report's own measure of the loops agrees with the solver's, and both are tiny.
+        assert run.extra["constraint_error"] <= 1e-10, key
+        assert run.extra["solver_constraint_error"] <= 1e-10, key
+        assert run.extra["constraint_error_along"] <= 1e-10, key
+    for run in (r for sweep in d.sweeps.values() for r in sweep):
+        assert run.extra["constraint_error"] <= 1e-10, run.label
+    for key in ("newton", "newton_ls"):
+        run = d.runs[key]
+        assert run.status == "root" and run.stability == "stable", key
+        assert run.extra["constraint_error"] <= 1e-10, key
+    # In the report: its summary rows, its figure, the closed-loops paragraph and the note.
+    assert "| `fourbar` | KD exact |" in text
+    assert "(benchmarks/fourbar.png)" in text
+    assert "- **Closed loops**:" in text
+    assert "baselines run on trees only" in text

@@ -11,7 +11,9 @@ benchmarks/baselines.cpp, built here with CMake against the installed package) a
 method from the same start (the baselines on trees only: they run unconstrained ABA, which
 cannot hold a closed loop). Then the sweeps of the settings (kt, err, ds, max_e, backtracking,
 fixed against automatic dt), the cost of one step against a bare ``pinocchio::aba`` +
-``integrate`` step (benchmarks/step_cost.cpp) and the scaling with chain length.
+``integrate`` step (benchmarks/step_cost.cpp; with closed loops against a bare
+``pinocchio::constraintDynamics`` + ``integrate`` step, benchmarks/loop_step_cost.cpp) and the
+scaling with chain length.
 
 The error of a configuration q is measured two ways:
 
@@ -582,7 +584,8 @@ def run_kd(
 
 
 def build_programs(build_dir: Path, log: Callable[[str], None]) -> Path:
-    """Configure and build benchmarks/ (step_cost, baselines) against the installed package."""
+    """Configure and build benchmarks/ (step_cost, loop_step_cost, baselines) against the
+    installed package."""
     cmake = shutil.which("cmake", path=str(Path(sys.executable).parent)) or shutil.which("cmake")
     if cmake is None:
         raise RuntimeError("cmake is not installed (pip install cmake ninja)")
@@ -804,6 +807,24 @@ def run_step_cost(program: Path, urdf: Path, steps: int, repeats: int) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+def run_loop_step_cost(program: Path, statics: Statics, steps: int, repeats: int) -> dict:
+    """benchmarks/loop_step_cost on a scene with loops: its URDF, its loops by frame name and
+    its start (the program moves it onto the loops as the solver does); gravity alone."""
+    scene = statics.scene
+    if scene.locked or scene.urdf is None:  # the program builds the whole URDF's model
+        raise RuntimeError(f"loop_step_cost: {scene.name} needs a URDF and no locked joints")
+    args = [str(program), str(scene.urdf), str(steps), str(repeats), "--json"]
+    args += ["--q0", ",".join(repr(float(x)) for x in scene.q0())]
+    for loop in scene.loops:
+        fields = [loop.a_frame, *map(repr, map(float, loop.a_point))]
+        fields += [loop.b_frame, *map(repr, map(float, loop.b_point)), loop.kind]
+        args += ["--loop", ",".join(fields)]
+    proc = subprocess.run(args, capture_output=True, text=True)
+    if proc.returncode != 0 or proc.stderr.strip():
+        raise RuntimeError(f"loop_step_cost {scene.name} failed: {proc.stderr}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
 # --- the plan ---------------------------------------------------------------------------------
 
 
@@ -888,6 +909,8 @@ class Results:
     config: Config
     scenes: dict[str, SceneData] = field(default_factory=dict)
     step_cost: dict[str, dict] = field(default_factory=dict)
+    # benchmarks/loop_step_cost per scene with loops.
+    loop_step_cost: dict[str, dict] = field(default_factory=dict)
     scaling: list[dict] = field(default_factory=list)
     machine: dict = field(default_factory=dict)
     seconds: float = 0.0
@@ -898,6 +921,7 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
     tasks: list[tuple[str, Callable[[], None]]] = []
     baselines = programs / "baselines"
     step_cost = programs / "step_cost"
+    loop_step_cost = programs / "loop_step_cost"
     reps, sreps = config.repeats, config.sweep_repeats
 
     for name in config.scenes:
@@ -1022,6 +1046,17 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
             )
 
         tasks.append((f"step cost: {name}", cost))
+    for name in (n for n in config.scenes if make_scene(n).scene.loops):
+
+        def loop_cost(name=name):
+            results.loop_step_cost[name] = run_loop_step_cost(
+                loop_step_cost,
+                results.scenes[name].statics,
+                config.step_cost_steps,
+                config.step_cost_repeats,
+            )
+
+        tasks.append((f"step cost: {name} (closed loops)", loop_cost))
 
     # Scaling with chain length.
     for n in config.chain_lengths:

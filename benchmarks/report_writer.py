@@ -149,13 +149,14 @@ def worst_constraint_error(d: R.SceneData) -> float:
     )
 
 
-def per_step_ratio(results: R.Results, name: str, base: str = "pendulum") -> float:
-    """KD's time per step (exact energy, main run) on a scene over the pendulum's."""
-    if base not in results.scenes:
+def loop_cost_ratio(results: R.Results, name: str, key: str = "exact") -> float:
+    """The solver's step on a scene with loops over a bare ``pinocchio::constraintDynamics`` +
+    ``integrate`` step (benchmarks/loop_step_cost, medians); nan when not measured."""
+    cost = results.loop_step_cost.get(name)
+    if cost is None:
         return math.nan
-    return results.scenes[name].runs["kd_exact"].per_step / (
-        results.scenes[base].runs["kd_exact"].per_step
-    )
+    c = cost["ns_per_step"]
+    return statistics.median(c[key]) / statistics.median(c["bare"])
 
 
 # --- figures -----------------------------------------------------------------------------------
@@ -792,7 +793,8 @@ def conclusions(results: R.Results) -> str:
 
 def closed_loops_short(results: R.Results) -> list[str]:
     """The "Closed loops" paragraph of the short section: steps and time to the level on each
-    loop scene, the constraint error at the end, the cost per step against the pendulum's."""
+    loop scene, the constraint error at the end, the cost of a step against a bare constrained
+    step."""
     names = loop_scenes(results)
     if not names:
         return []
@@ -806,11 +808,12 @@ def closed_loops_short(results: R.Results) -> list[str]:
             if hit is not None
             else f"not reached ({run.status}, residual {fmt_e(run.residual)})"
         )
-        ratio = per_step_ratio(results, name)
+        ratio = loop_cost_ratio(results, name)
         cost = (
-            f"; {fmt_time(run.per_step)} per step, {ratio:.1f} times the pendulum's"
+            f"; a step costs {ratio:.2f} times a bare `pinocchio::constraintDynamics` + "
+            "`integrate` step"
             if math.isfinite(ratio)
-            else f"; {fmt_time(run.per_step)} per step"
+            else ""
         )
         parts.append(
             f"`{name}` ({d.loops} loop{'s' if d.loops != 1 else ''}, nv {d.nv}, mobility "
@@ -826,12 +829,11 @@ def closed_loops_short(results: R.Results) -> list[str]:
         f"{LEVEL:g} (projected onto the motions the loops allow): "
         + "; ".join(parts)
         + f". The largest final constraint error over every KD run on these scenes (main runs "
-        f"and sweeps) is {fmt_e(worst)} m, {verdict} {bound:g} m. A step's cost includes "
-        "Pinocchio's constrained dynamics (`pinocchio::constraintDynamics` on the loops) plus "
-        "the projections of q onto the loops and of v onto the motions they allow, and the "
-        "solve's set-up (the assembly of the start, the step estimates, the final stability "
-        "check); both times per step from the same run of this report (whole solve / steps, "
-        "exact energy). Newton from the start is the reduced Newton (see How it is measured)."
+        f"and sweeps) is {fmt_e(worst)} m, {verdict} {bound:g} m. The solver's step adds to "
+        "Pinocchio's constrained dynamics the projections of q onto the loops and of v onto the "
+        "motions they allow (`benchmarks/loop_step_cost.cpp`, medians of interleaved repeats; "
+        "the bare step holds the loops with Baumgarte's correction instead). Newton from the "
+        "start is the reduced Newton (see How it is measured)."
     ]
 
 
@@ -844,7 +846,6 @@ def closed_loops_section(results: R.Results) -> str:
         d = results.scenes[name]
         for key in ("kd_exact", "kd_simplified"):
             run = d.runs[key]
-            ratio = per_step_ratio(results, name)
             rows.append(
                 [
                     f"`{name}`" if key == "kd_exact" else "",
@@ -855,8 +856,7 @@ def closed_loops_section(results: R.Results) -> str:
                     fmt_e(run.extra["constraint_error"]),
                     fmt_e(run.extra["solver_constraint_error"]),
                     fmt_e(run.extra["constraint_error_along"]),
-                    fmt_time(run.per_step)
-                    + (f" ({ratio:.1f})" if math.isfinite(ratio) and key == "kd_exact" else ""),
+                    fmt_time(run.per_step),
                     fmt_e(worst_constraint_error(d)) if key == "kd_exact" else "",
                 ]
             )
@@ -867,10 +867,10 @@ def closed_loops_section(results: R.Results) -> str:
         f"(`max_e = {R.DEEP_MAX_E:g}`) the steps and time to a residual of {LEVEL:g}, the final "
         "constraint error (largest loop error of the final q, m) measured here from Pinocchio's "
         "frame placements and as the solver reports it (`Result.constraint_error`), the largest "
-        "over the traced run's samples, the time per step (whole solve / steps; in brackets, "
-        "over the pendulum's KD step in the same run: constrained dynamics plus the projections "
-        "onto the loops against a bare tree step) and the largest final constraint error over "
-        "every KD run on the scene (these and all the sweeps'). The "
+        "over the traced run's samples, the time per step (whole solve / steps: the solve's "
+        "set-up included, the assembly of the start, the step estimates, the final stability "
+        "check) and the largest final constraint error over every KD run on the scene (these "
+        "and all the sweeps'). The "
         + trees_only(results)
         + "; Newton from the start is the reduced Newton (summary above, baselines section).\n\n"
         + table(
@@ -884,11 +884,69 @@ def closed_loops_section(results: R.Results) -> str:
                 "constraint error",
                 "solver's",
                 "largest along the run",
-                "time per step (x pendulum)",
+                "time per step",
                 "largest over every KD run",
             ],
             rows,
             right=(2, 4, 5, 6, 7, 8, 9, 10),
+        )
+        + "\n"
+        + loop_cost_table(results)
+    )
+
+
+def loop_cost_table(results: R.Results) -> str:
+    """benchmarks/loop_step_cost: the solver's step on each loop scene against a bare
+    constrained step, with the open tree's bare ABA step for scale."""
+    names = [n for n in loop_scenes(results) if n in results.loop_step_cost]
+    if not names:
+        return ""
+    rows = []
+    for name in names:
+        cost = results.loop_step_cost[name]
+        c = cost["ns_per_step"]
+        cells = [
+            fmt_spread([x * 1e-9 for x in c[key]])
+            + f", **{loop_cost_ratio(results, name, key):.2f}**"
+            for key in ("bare_tree", "exact", "simplified")
+        ]
+        rows.append(
+            [
+                f"`{name}`",
+                f"{cost['nv']}, {cost['rows']}",
+                fmt_spread([x * 1e-9 for x in c["bare"]]),
+                *cells,
+                f"{cost['settled_steps']:,}",
+                fmt_e(cost["constraint_error"]),
+            ]
+        )
+    first = results.loop_step_cost[names[0]]
+    return (
+        "\nThe cost of one step (`benchmarks/loop_step_cost.cpp`, in the same run, "
+        f"{first['steps']:,} steps, {len(first['ns_per_step']['bare'])} interleaved repeats): a "
+        "bare `pinocchio::constraintDynamics` + `pinocchio::integrate` step with the solver's "
+        "constraint models and proximal settings, holding the loops with Baumgarte's correction "
+        "(Pinocchio's corrector gains) instead of projections, against the solver's step "
+        "(constrained dynamics, both energy measures, peak detection, integration, the "
+        "projections of q onto the loops and of v onto the motions they allow), and a bare "
+        "`pinocchio::aba` step on the open tree (the loops cut) for scale; median (min-max) and "
+        "in bold the ratio of the medians to the bare constrained step. Every run starts at rest "
+        "on the loops at the scene's start under gravity alone; the solver runs with kt = 0.99 "
+        "and `max_e = 0` (it never stops early: the steps it took are in the table, and its "
+        "constraint error at the end).\n\n"
+        + table(
+            [
+                "scene",
+                "nv, loop equations",
+                "bare constraintDynamics",
+                "bare aba, open tree",
+                "pinsettle (exact)",
+                "pinsettle (simplified)",
+                "solver's steps",
+                "constraint error (m)",
+            ],
+            rows,
+            right=(2, 3, 4, 5, 6, 7),
         )
         + "\n"
     )
@@ -1224,8 +1282,8 @@ def cost_section(results: R.Results) -> str:
         "never stops and its velocity never reaches subnormal numbers (see the file's header). "
         f"Models: {info}."
         + (
-            " Trees only: the cost of a step with closed loops, against the pendulum's in the same "
-            "run, is in the Closed loops section."
+            " Trees only: the cost of a step with closed loops, against a bare "
+            "`pinocchio::constraintDynamics` step, is in the Closed loops section."
             if loop_scenes(results)
             else ""
         )
@@ -1425,22 +1483,20 @@ def readme_block(results: R.Results) -> str:
         for name in names:
             d = results.scenes[name]
             hit = d.runs["kd_exact"].reach("residual", LEVEL)
-            ratio = per_step_ratio(results, name)
+            ratio = loop_cost_ratio(results, name)
             parts.append(
                 f"{name} "
                 + (f"{fmt_steps(hit[0])} steps, {fmt_time(hit[1])}" if hit else "not reached")
-                + (
-                    f" ({ratio:.1f} times the pendulum's time per step)"
-                    if math.isfinite(ratio)
-                    else ""
-                )
+                + (f" (a step: {ratio:.2f})" if math.isfinite(ratio) else "")
             )
         worst = max(worst_constraint_error(results.scenes[n]) for n in names)
         lines.append(
             f"- **Closed loops** (constrained dynamics, projections onto the loops): to a "
             f"residual of {LEVEL:g} along the allowed motions, "
             + "; ".join(parts)
-            + f"; final constraint error at most {fmt_e(worst)} m over every KD run."
+            + f"; final constraint error at most {fmt_e(worst)} m over every KD run. A step "
+            "costs, in brackets, that many times a bare `pinocchio::constraintDynamics` + "
+            "`integrate` step (`benchmarks/loop_step_cost.cpp`)."
         )
     lines.append(README_END)
     wrapped = []

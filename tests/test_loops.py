@@ -13,115 +13,48 @@ import numpy as np
 import pinocchio
 import pinsettle
 import pytest
-from pinsettle._scene import JointLoad
+from scene_reference import Reference
 from scipy.optimize import minimize
 
 ROBOTS = Path(__file__).resolve().parent.parent / "robots"
-LOOP_SCENES = ["fourbar", "slider_crank", "parallel_gripper"]
+LOOP_SCENES = list(loop_reference.MECHANISMS)
 
 
 def load(name: str) -> pinsettle.Scene:
     return pinsettle.load_scene(ROBOTS / f"{name}.toml")
 
 
-# --- the physics written out with Pinocchio's frames, nothing of pinsettle's ------------------
+# --- the physics written out with Pinocchio's frames (tests/scene_reference.py) ---------------
 
 
-def _point(model, data, frame: str, point) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """World position of a point of a frame, its linear and angular Jacobians (world axes)."""
-    fid = model.getFrameId(frame)
-    placement = data.oMf[fid]
-    world = placement.act(np.asarray(point, dtype=float))
-    J = pinocchio.getFrameJacobian(model, data, fid, pinocchio.LOCAL_WORLD_ALIGNED)
-    return world, J[:3] - pinocchio.skew(world - placement.translation) @ J[3:], J[3:]
+def reference(name: str) -> Reference:
+    return Reference.from_toml(ROBOTS / f"{name}.toml")
 
 
-def kinematics(scene: pinsettle.Scene, q: np.ndarray):
-    model = scene.model
-    data = model.createData()
-    pinocchio.computeJointJacobians(model, data, q)
-    pinocchio.updateFramePlacements(model, data)
-    return model, data
+def loop_jacobian(ref: Reference, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return ref.loop_jacobian(ref.full, q)
 
 
-def static_force(scene: pinsettle.Scene, q: np.ndarray) -> np.ndarray:
-    """Gravity minus springs and loads (dim model.nv): zero on a tree at rest."""
-    model, data = kinematics(scene, q)
-    force = pinocchio.computeGeneralizedGravity(model, data, q).copy()
-    for s in scene.joint_springs:
-        j = model.getJointId(s.joint)
-        force[model.idx_vs[j]] += s.stiffness * (q[model.idx_qs[j]] - s.rest)
-    for s in scene.springs:
-        xa, Ja, _ = _point(model, data, s.a_frame, s.a_point)
-        xb, Jb, _ = _point(model, data, s.b_frame, s.b_point)
-        d = xa - xb
-        length = np.linalg.norm(d)
-        force -= (Ja - Jb).T @ (-s.stiffness * (length - s.rest_length) * d / length)
-    for load in scene.loads:
-        if isinstance(load, JointLoad):
-            j = model.getJointId(load.joint)
-            force[model.idx_vs[j] : model.idx_vs[j] + model.nvs[j]] -= np.array(load.effort)
-        else:
-            _, Jl, Ja = _point(model, data, load.frame, load.point)
-            force -= Jl.T @ np.array(load.force) + Ja.T @ np.array(load.torque)
-    return force
-
-
-def loop_jacobian(scene: pinsettle.Scene, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Loop errors and their Jacobian: relative position (and rotation for a weld)."""
-    model, data = kinematics(scene, q)
-    errors, rows = [], []
-    for loop in scene.loops:
-        xa, Ja, Wa = _point(model, data, loop.a_frame, loop.a_point)
-        xb, Jb, Wb = _point(model, data, loop.b_frame, loop.b_point)
-        errors.append(xa - xb)
-        rows.append(Ja - Jb)
-        if loop.kind == "frame":
-            Ra = data.oMf[model.getFrameId(loop.a_frame)].rotation
-            Rb = data.oMf[model.getFrameId(loop.b_frame)].rotation
-            errors.append(pinocchio.log3(Ra @ Rb.T))
-            rows.append(Wa - Wb)
-    return np.concatenate(errors), np.vstack(rows)
-
-
-def allowed_motions(scene: pinsettle.Scene, q: np.ndarray) -> np.ndarray:
+def allowed_motions(ref: Reference, q: np.ndarray) -> np.ndarray:
     """Orthonormal basis of the null space of the loop Jacobian (numpy's SVD)."""
-    _, J = loop_jacobian(scene, q)
+    _, J = loop_jacobian(ref, q)
     _, s, vt = np.linalg.svd(J)
     rank = int(np.sum(s > 1e-9 * s[0]))
     return vt[rank:].T
 
 
-def reduced_residual(scene: pinsettle.Scene, q: np.ndarray) -> float:
-    N = allowed_motions(scene, q)
-    return float(np.max(np.abs(N.T @ static_force(scene, q))))
+def reduced_residual(ref: Reference, q: np.ndarray) -> float:
+    N = allowed_motions(ref, q)
+    return float(np.max(np.abs(N.T @ ref.force(q))))
 
 
-def potential(scene: pinsettle.Scene, q: np.ndarray) -> float:
-    """Potential energy: gravity, springs, and the constant loads' work (conservative here:
-    joint efforts on revolute/prismatic joints and world-fixed forces without torque)."""
-    model, data = kinematics(scene, q)
-    energy = pinocchio.computePotentialEnergy(model, data, q)
-    for s in scene.joint_springs:
-        j = model.getJointId(s.joint)
-        energy += 0.5 * s.stiffness * (q[model.idx_qs[j]] - s.rest) ** 2
-    for s in scene.springs:
-        xa, _, _ = _point(model, data, s.a_frame, s.a_point)
-        xb, _, _ = _point(model, data, s.b_frame, s.b_point)
-        energy += 0.5 * s.stiffness * (np.linalg.norm(xa - xb) - s.rest_length) ** 2
-    for load in scene.loads:
-        if isinstance(load, JointLoad):
-            j = model.getJointId(load.joint)
-            energy -= float(np.dot(load.effort, q[model.idx_qs[j] : model.idx_qs[j] + 1]))
-        else:
-            assert not any(load.torque), "a torque load has no potential written here"
-            x, _, _ = _point(model, data, load.frame, load.point)
-            energy -= float(np.dot(load.force, x))
-    return energy
+def potential(ref: Reference, q: np.ndarray) -> float:
+    """Gravity, springs, and the constant loads' potential (conservative here)."""
+    return ref.potential_reduced(ref.full, q, loads=True)
 
 
 def slsqp_equilibrium(
-    scene: pinsettle.Scene, q_start: np.ndarray, free: np.ndarray | None = None
+    ref: Reference, q_start: np.ndarray, free: np.ndarray | None = None
 ) -> np.ndarray:
     """Minimum of the potential subject to the loops (scipy SLSQP) from q_start, over the
     configuration entries ``free`` (all by default; the others stay as in q_start)."""
@@ -134,11 +67,11 @@ def slsqp_equilibrium(
 
     # SLSQP needs independent equations: drop the rows no motion changes (the out-of-plane
     # rows of a planar loop).
-    rows = np.linalg.norm(loop_jacobian(scene, q_start)[1][:, free], axis=1) > 1e-9
+    rows = np.linalg.norm(loop_jacobian(ref, q_start)[1][:, free], axis=1) > 1e-9
     result = minimize(
-        lambda x: potential(scene, full(x)),
+        lambda x: potential(ref, full(x)),
         q_start[free],
-        constraints=[{"type": "eq", "fun": lambda x: loop_jacobian(scene, full(x))[0][rows]}],
+        constraints=[{"type": "eq", "fun": lambda x: loop_jacobian(ref, full(x))[0][rows]}],
         method="SLSQP",
         options={"ftol": 1e-16, "maxiter": 1000},
     )
@@ -151,28 +84,28 @@ def slsqp_equilibrium(
 @pytest.fixture(scope="module", params=LOOP_SCENES)
 def solved(request):
     scene = load(request.param)
-    return scene, pinsettle.solve(scene, polish=True)
+    return scene, pinsettle.solve(scene, polish=True), reference(request.param)
 
 
 def test_loop_scene_converges_on_its_loops(solved) -> None:
-    scene, r = solved
+    scene, r, ref = solved
     assert r.converged, r.summary()
     assert r.loops == len(scene.loops) >= 1
     assert r.mobility == 1
     assert r.constraint_error < 1e-10
     # Recomputed outside the solver: the loops close and the static force has no component
     # along the motions they allow, although the tree alone is far from balanced.
-    assert np.max(np.abs(loop_jacobian(scene, r.q)[0])) < 1e-10
-    scale = np.max(np.abs(static_force(scene, scene.assemble()[0])))
-    assert reduced_residual(scene, r.q) < 1e-9 * scale
-    assert np.max(np.abs(static_force(scene, r.q))) > 1e-3 * scale
+    assert np.max(np.abs(loop_jacobian(ref, r.q)[0])) < 1e-10
+    scale = np.max(np.abs(ref.force(scene.assemble()[0])))
+    assert reduced_residual(ref, r.q) < 1e-9 * scale
+    assert np.max(np.abs(ref.force(r.q))) > 1e-3 * scale
     assert r.stability == "stable"
 
 
 def test_loop_scene_matches_closed_form(solved) -> None:
     """Planar position analysis and the potential's stationary point in one angle
     (tests/loop_reference.py: numpy and scipy only)."""
-    scene, r = solved
+    scene, r, _ = solved
     mechanism = loop_reference.MECHANISMS[scene.name]()
     ref = mechanism.equilibrium(r.joints[mechanism.driver], 0.1)
     assert ref.pop("stable") is True
@@ -206,24 +139,24 @@ def test_loop_scene_header_states_the_closed_form(name: str) -> None:
 
 def test_loop_scene_matches_constrained_minimisation(solved) -> None:
     """An independent route: scipy's SLSQP on the potential with the loop equations."""
-    scene, r = solved
-    q_ref = slsqp_equilibrium(scene, r.q + 0.02)
+    _, r, ref = solved
+    q_ref = slsqp_equilibrium(ref, r.q + 0.02)
     assert np.max(np.abs(q_ref - r.q)) < 1e-5
 
 
 def test_loop_reduced_stiffness_is_the_potentials_curvature(solved) -> None:
     """K restricted to the loops against the second difference of the potential along the
     path projected onto the loops (a different route from the solver's reactions)."""
-    scene, r = solved
+    scene, r, ref = solved
     report = pinsettle.assess_stability(scene, r.q)
     assert report.stiffness_matrix.shape == (1, 1)
     n = report.basis[:, 0]
-    theirs = allowed_motions(scene, r.q)[:, 0]
+    theirs = allowed_motions(ref, r.q)[:, 0]
     assert np.allclose(n, theirs * np.sign(n @ theirs), atol=1e-9)
 
     def along(s: float) -> float:
         q = pinocchio.integrate(scene.model, r.q, s * n)
-        return potential(scene, scene.assemble(q)[0])
+        return potential(ref, scene.assemble(q)[0])
 
     h = 1e-4
     curvature = (along(h) - 2 * along(0.0) + along(-h)) / h**2
@@ -263,7 +196,7 @@ def test_redundant_point_loop_rank() -> None:
     """A planar loop closed by a 3-D point constraint: 3 equations, 2 independent."""
     scene = load("fourbar")
     q = scene.assemble()[0]
-    _, J = loop_jacobian(scene, q)
+    _, J = loop_jacobian(reference("fourbar"), q)
     assert J.shape == (3, 3)
     assert np.linalg.matrix_rank(J, tol=1e-9 * np.linalg.norm(J)) == 2
     assert scene.mobility() == 1
@@ -276,8 +209,9 @@ def test_weld_loop_against_constrained_minimisation(tmp_path: Path) -> None:
     q_weld = np.zeros(model.nq)
     q_weld[:5] = [1.2, -0.6, -0.5, -0.4, 0.3]  # joint5 makes link5 level with the world
     q_weld[4] = -sum(q_weld[:4])
+    locked = [f"joint{k}" for k in range(6, 21)]
     scene = pinsettle.Scene(model)
-    scene.lock(*[f"joint{k}" for k in range(6, 21)])
+    scene.lock(*locked)
     data = model.createData()
     pinocchio.framesForwardKinematics(model, data, q_weld)
     where = data.oMf[model.getFrameId("link5")].translation
@@ -287,7 +221,10 @@ def test_weld_loop_against_constrained_minimisation(tmp_path: Path) -> None:
     r = pinsettle.solve(scene, polish=True)
     assert r.converged and r.mobility == 2, r.summary()
     assert r.constraint_error < 1e-10
-    q_ref = slsqp_equilibrium(scene, r.q, free=np.arange(5))
+    ref = Reference(
+        model, locked=locked, loops=[("link5", np.zeros(3), "universe", where, "frame")]
+    )
+    q_ref = slsqp_equilibrium(ref, r.q, free=np.arange(5))
     assert np.max(np.abs(q_ref - r.q)) < 1e-5
     assert r.stability in ("stable", "neutral")
 

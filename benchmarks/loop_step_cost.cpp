@@ -21,17 +21,16 @@
 
 #define PINOCCHIO_DISABLE_UNSUPPORTED_WARNINGS // constrained dynamics: Pinocchio 3's API
 
+#include "bare-step.hpp"
+
 #include <pinsettle/pinsettle.hpp>
 
-#include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/cholesky.hpp>
 #include <pinocchio/algorithm/constrained-dynamics.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdlib>
-#include <cstring>
 #include <iostream>
 #include <sstream>
 #include <stdexcept>
@@ -40,15 +39,8 @@
 
 namespace
 {
-  typedef std::chrono::steady_clock Clock;
   typedef pinocchio::RigidConstraintModel ConstraintModel;
   typedef pinocchio::RigidConstraintData ConstraintData;
-
-  double median(std::vector<double> values)
-  {
-    std::sort(values.begin(), values.end());
-    return values[values.size() / 2];
-  }
 
   std::vector<std::string> split(const std::string & text)
   {
@@ -86,30 +78,9 @@ namespace
       f[8] == "point" ? pinsettle::LoopKind::Point : pinsettle::LoopKind::Frame);
   }
 
-  // The open tree's step: semi-implicit Euler on pinocchio::aba.
-  double bareTreeStep(
-    const pinocchio::Model & model, const Eigen::VectorXd & q0, long steps, double dt)
-  {
-    pinocchio::Data data(model);
-    Eigen::VectorXd q = q0, q_next(model.nq);
-    Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), dq(model.nv);
-    const Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
-    const Clock::time_point start = Clock::now();
-    for (long k = 0; k < steps; ++k)
-    {
-      pinocchio::aba(model, data, q, v, tau);
-      v.noalias() += dt * data.ddq;
-      dq.noalias() = dt * v;
-      pinocchio::integrate(model, q, dq, q_next);
-      q.swap(q_next);
-    }
-    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-    if (!q.allFinite())
-      std::cerr << "bare tree step diverged\n";
-    return seconds / static_cast<double>(steps);
-  }
-
-  // The closed mechanism's bare step: semi-implicit Euler on pinocchio::constraintDynamics.
+  // The closed mechanism's bare step: semi-implicit Euler on pinocchio::constraintDynamics,
+  // with the constraint models and proximal settings of LoopStepper (cpp/src/loops.cpp), which
+  // keeps them private; a change there belongs here too.
   double bareLoopStep(
     const pinocchio::Model & model,
     const pinsettle::LoopConstraints & loops,
@@ -141,22 +112,13 @@ namespace
     const double scale = (J * Minv * J.transpose()).diagonal().maxCoeff();
     pinocchio::ProximalSettings prox(1e-14, std::max(1e-12 * scale, 1e-300), 20);
 
-    Eigen::VectorXd q = q0, q_next(model.nq);
-    Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), dq(model.nv);
     const Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
-    const Clock::time_point start = Clock::now();
-    for (long k = 0; k < steps; ++k)
-    {
-      pinocchio::constraintDynamics(model, data, q, v, tau, models, datas, prox);
-      v.noalias() += dt * data.ddq;
-      dq.noalias() = dt * v;
-      pinocchio::integrate(model, q, dq, q_next);
-      q.swap(q_next);
-    }
-    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-    if (!q.allFinite())
-      std::cerr << "bare constrained step diverged\n";
-    return seconds / static_cast<double>(steps);
+    return bench::timeBareStep(
+      model, data, q0, steps, dt,
+      [&](const Eigen::VectorXd & q, const Eigen::VectorXd & v) {
+        pinocchio::constraintDynamics(model, data, q, v, tau, models, datas, prox);
+      },
+      "bare constrained step");
   }
 
   long settled_steps = 0;
@@ -228,7 +190,7 @@ namespace
     std::vector<double> tree, bare, exact, simplified;
     for (int r = 0; r < repeats; ++r) // interleaved, so that machine noise hits all alike
     {
-      tree.push_back(bareTreeStep(model, q0, steps, dt));
+      tree.push_back(bench::timeBareAbaStep(model, q0, steps, dt, "bare tree step"));
       bare.push_back(bareLoopStep(model, loops, q0, steps, dt));
       exact.push_back(settleStep(model, loops, q0, steps, pinsettle::EnergyMeasure::Exact));
       simplified.push_back(
@@ -236,25 +198,20 @@ namespace
     }
     if (json) // per-step times of every repeat (ns), for benchmarks/report.py
     {
-      auto list = [](const std::vector<double> & t) {
-        std::string out = "[";
-        for (std::size_t k = 0; k < t.size(); ++k)
-          out += (k ? ", " : "") + std::to_string(t[k] * 1e9);
-        return out + "]";
-      };
       std::cout << "{\"nq\": " << model.nq << ", \"nv\": " << model.nv
                 << ", \"rows\": " << loops.rows() << ", \"steps\": " << steps
                 << ", \"settled_steps\": " << settled_steps << ", \"dt\": " << dt
                 << ", \"assembly_distance\": " << moved
                 << ", \"constraint_error\": " << constraint_error
-                << ", \"ns_per_step\": {\"bare_tree\": " << list(tree)
-                << ", \"bare\": " << list(bare) << ", \"exact\": " << list(exact)
-                << ", \"simplified\": " << list(simplified) << "}}\n";
+                << ", \"ns_per_step\": {\"bare_tree\": " << bench::jsonList(tree)
+                << ", \"bare\": " << bench::jsonList(bare)
+                << ", \"exact\": " << bench::jsonList(exact)
+                << ", \"simplified\": " << bench::jsonList(simplified) << "}}\n";
       return 0;
     }
-    const double b = median(bare);
+    const double b = bench::median(bare);
     auto row = [&](const char * name, const std::vector<double> & t) {
-      const double m = median(t);
+      const double m = bench::median(t);
       std::cout << name << " " << m * 1e9 << " ns/step  ratio " << m / b << "\n";
     };
     std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << loops.rows()

@@ -18,13 +18,12 @@
 //   step_cost ROBOT.urdf [steps] [repeats] [--json]
 //
 
+#include "bare-step.hpp"
+
 #include <pinsettle/pinsettle.hpp>
 
-#include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 
-#include <algorithm>
-#include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <iostream>
@@ -33,41 +32,11 @@
 
 namespace
 {
-  typedef std::chrono::steady_clock Clock;
-
-  double median(std::vector<double> values)
-  {
-    std::sort(values.begin(), values.end());
-    return values[values.size() / 2];
-  }
-
-  // The baseline: semi-implicit Euler on pinocchio::aba, nothing else.
   // The start of every run: at rest, 0.3 rad (or m) from neutral in every degree of freedom.
   Eigen::VectorXd start(const pinocchio::Model & model)
   {
     return pinocchio::integrate(
       model, pinocchio::neutral(model), Eigen::VectorXd::Constant(model.nv, 0.3));
-  }
-
-  double bareStep(const pinocchio::Model & model, long steps, double dt)
-  {
-    pinocchio::Data data(model);
-    Eigen::VectorXd q = start(model), q_next(model.nq);
-    Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), dq(model.nv);
-    const Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
-    const Clock::time_point start = Clock::now();
-    for (long k = 0; k < steps; ++k)
-    {
-      pinocchio::aba(model, data, q, v, tau);
-      v.noalias() += dt * data.ddq;
-      dq.noalias() = dt * v;
-      pinocchio::integrate(model, q, dq, q_next);
-      q.swap(q_next);
-    }
-    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-    if (!q.allFinite())
-      std::cerr << "baseline diverged\n";
-    return seconds / static_cast<double>(steps);
   }
 
   // Steps the last settle run took (max_e = 0 never stops a moving mechanism early).
@@ -122,32 +91,28 @@ int main(int argc, char ** argv)
   std::vector<double> bare, exact, simplified, empty, springs, point;
   for (int r = 0; r < repeats; ++r) // interleaved, so that machine noise hits all alike
   {
-    bare.push_back(bareStep(model, steps, dt));
+    bare.push_back(bench::timeBareAbaStep(model, start(model), steps, dt, "baseline"));
     exact.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact));
     simplified.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Simplified));
     empty.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &none));
     springs.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &joint_springs));
     point.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &point_spring));
   }
-  const double b = median(bare);
+  const double b = bench::median(bare);
   if (json) // per-step times of every repeat (s), for benchmarks/report.py
   {
-    auto list = [](const std::vector<double> & t) {
-      std::string out = "[";
-      for (std::size_t k = 0; k < t.size(); ++k)
-        out += (k ? ", " : "") + std::to_string(t[k] * 1e9);
-      return out + "]";
-    };
     std::cout << "{\"nq\": " << model.nq << ", \"nv\": " << model.nv << ", \"steps\": " << steps
               << ", \"settled_steps\": " << settled_steps << ", \"dt\": " << dt
-              << ", \"ns_per_step\": {\"bare\": " << list(bare) << ", \"exact\": " << list(exact)
-              << ", \"simplified\": " << list(simplified) << ", \"no_elements\": " << list(empty)
-              << ", \"joint_springs\": " << list(springs) << ", \"point_spring\": " << list(point)
-              << "}}\n";
+              << ", \"ns_per_step\": {\"bare\": " << bench::jsonList(bare)
+              << ", \"exact\": " << bench::jsonList(exact)
+              << ", \"simplified\": " << bench::jsonList(simplified)
+              << ", \"no_elements\": " << bench::jsonList(empty)
+              << ", \"joint_springs\": " << bench::jsonList(springs)
+              << ", \"point_spring\": " << bench::jsonList(point) << "}}\n";
     return 0;
   }
   auto row = [&](const char * name, const std::vector<double> & t) {
-    const double m = median(t);
+    const double m = bench::median(t);
     std::cout << name << " " << m * 1e9 << " ns/step  ratio " << m / b << "\n";
   };
   std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << steps

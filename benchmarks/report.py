@@ -924,10 +924,11 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
     loop_step_cost = programs / "loop_step_cost"
     reps, sreps = config.repeats, config.sweep_repeats
 
+    benches = {name: make_scene(name) for name in config.scenes}  # built once
     for name in config.scenes:
 
         def setup(name=name):
-            bench = make_scene(name)
+            bench = benches[name]
             statics = Statics(bench.scene)
             results.scenes[name] = SceneData(
                 bench,
@@ -1046,7 +1047,7 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
             )
 
         tasks.append((f"step cost: {name}", cost))
-    for name in (n for n in config.scenes if make_scene(n).scene.loops):
+    for name in (n for n in config.scenes if benches[n].scene.loops):
 
         def loop_cost(name=name):
             results.loop_step_cost[name] = run_loop_step_cost(

@@ -40,73 +40,51 @@ import math
 import os
 import platform
 import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from datetime import date
 from pathlib import Path
 
 import numpy as np
 import pinocchio
 import pinsettle
-from pinsettle import _core
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "robots"))
 sys.path.insert(0, str(HERE))
+import report_writer  # noqa: E402  (benchmarks/report_writer.py: figures and markdown)
 import stress  # noqa: E402  (benchmarks/stress.py: the heavy-and-light model)
 from make_chain import chain_urdf  # noqa: E402  (robots/make_chain.py)
-
-#: Residual levels of the summary, relative to the scene's force scale.
-RESIDUAL_LEVELS = (1e-6, 1e-10)
-#: Distance levels (rad or m) of the energy-measure comparison.
-DISTANCE_LEVELS = (1e-3, 1e-6, 1e-9)
-KTS = (0.0, 0.25, 0.5, 0.75, 0.9)
-ERRS = (0.0, 1e-12, 1e-8, 1e-4, 1e-2)
-DSS = (10, 30, 100, 300, 1000)
-MAX_ES = (1e-8, 1e-12, 1e-16, 1e-20, 1e-24)
-CHAIN_LENGTHS = (5, 10, 20, 50, 100, 200)
-#: The bound of the stopping rule in the runs whose curves are plotted: far below every level,
-#: so that the curve shows how the error falls, down to round-off.
-DEEP_MAX_E = 1e-26
-#: The baselines run until their residual is below this fraction of the force scale.
-BASELINE_TARGET = 1e-13
-#: Largest number of samples kept per curve (the solver's trace decimates beyond it).
-CURVE_SAMPLES = 4096
-MAX_STEPS = 3_000_000
-#: Kinetic-damping runs on a scene take at most this many times the steps of the run that found
-#: its reference equilibrium (and at least STEP_BUDGET_MIN).
-STEP_BUDGET_FACTOR = 10
-STEP_BUDGET_MIN = 20_000
-#: ... except in the fixed-against-automatic-dt sweep, whose runs get at least this many
-#: seconds' worth of steps (at the reference run's time per step).
-DT_SWEEP_SECONDS = 2.0
-#: Budget of one baseline run: steps and wall clock (s).
-BASELINE_MAX_STEPS = 4_000_000
-BASELINE_MAX_TIME = 5.0
-#: ... and of the runs with other coefficients than the rule's (no curve).
-BASELINE_SIDE_TIME = 2.0
-#: Timed repeats stop once they took this long in all (s): long runs are timed fewer times.
-REPEAT_BUDGET = 2.0
-#: Viscous damping coefficients tried besides the rule's c, as multiples of it.
-DAMPING_FACTORS = (0.25, 4.0)
-DT_SAFETY = pinsettle.Settings().dt_safety
-
+from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants and records)
+    BASELINE_LABELS,
+    BASELINE_MAX_STEPS,
+    BASELINE_MAX_TIME,
+    BASELINE_SIDE_TIME,
+    BASELINE_TARGET,
+    CHAIN_LENGTHS,
+    CURVE_SAMPLES,
+    DEEP_MAX_E,
+    DT_SAFETY,
+    DT_SWEEP_SECONDS,
+    MAX_STEPS,
+    REPEAT_BUDGET,
+    BenchScene,
+    Config,
+    Curve,
+    Damping,
+    Landing,
+    Reference,
+    Results,
+    Run,
+    SceneData,
+)
+from scene_statics import Statics  # noqa: E402  (benchmarks/scene_statics.py)
 
 # --- scenes ---------------------------------------------------------------------------------
-
-
-@dataclass
-class BenchScene:
-    name: str
-    scene: pinsettle.Scene
-    description: str
-    urdf: Path | None = None  # for step_cost, when the model is a URDF of its own
 
 
 def _library(name: str) -> BenchScene:
@@ -168,135 +146,6 @@ def make_scene(name: str) -> BenchScene:
 
 
 # --- the static force, distances and exact equilibria ----------------------------------------
-
-
-class Statics:
-    """A scene's static force on its free joints, compiled once (``Scene.static_force`` compiles
-    the scene again for every q when joints are locked), and distances between poses.
-
-    With closed loops: ``q0`` is the start moved onto the loops (where the solver starts), the
-    force is projected onto the motions the loops allow, and ``step`` moves its result back onto
-    the loops."""
-
-    def __init__(self, scene: pinsettle.Scene) -> None:
-        self.scene = scene
-        self.full = scene.model
-        self.compiled = scene.compile()
-        self.model = self.compiled.model
-        self.elements = self.compiled.elements
-        self.loops = self.compiled.loops  # None for a tree
-        self.data = self.model.createData()
-        self.full_data = self.full.createData()
-        self.q0, self.assembly_distance = scene.assemble(scene.q0())
-        self.mobility = scene.mobility(self.q0) if self.loops else self.model.nv
-        self.force_scale = float(np.max(np.abs(self.force(self.q0))))
-        # Tangent entries that are angles of revolute joints: compared modulo 2 pi.
-        angle = np.zeros(self.full.nv, dtype=bool)
-        for j in range(1, self.full.njoints):
-            if self.full.nvs[j] == 1 and self.full.joints[j].shortname().startswith("JointModelR"):
-                angle[self.full.idx_vs[j]] = True
-        self.angle = angle[self.compiled.v_index]
-        self.simple = self.full.nq == self.full.nv  # difference is a plain subtraction
-
-    def force(self, q: np.ndarray) -> np.ndarray:
-        """tau_static(q) on the free joints, as ``Scene.static_force`` (with loops: projected
-        onto the motions they allow at q). Without elements and loops it is Pinocchio's
-        generalized gravity, as in pinsettle::computeStaticForce, on a Data kept here
-        (pinsettle's binding builds a pinocchio::Data per call, which on a 200-link chain costs
-        0.1 s)."""
-        if self.loops:
-            return _core.static_force(
-                self.model, q[self.compiled.q_index], self.elements, self.loops
-            )
-        if self.elements is None:
-            return pinocchio.computeGeneralizedGravity(
-                self.model, self.data, q[self.compiled.q_index]
-            ).copy()
-        return _core.static_force(self.model, q[self.compiled.q_index], self.elements)
-
-    def residual(self, q: np.ndarray) -> float:
-        """Relative residual: max |tau_static(q)| / force scale."""
-        return float(np.max(np.abs(self.force(q)))) / self.force_scale
-
-    def tangent(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-        """qb - qa on the free joints (dim model.nv of the reduced model)."""
-        return pinocchio.difference(self.full, qa, qb)[self.compiled.v_index]
-
-    def distances(self, q_ref: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """max |q - q_ref| over the free joints for each row of ``rows`` (angles modulo 2 pi)."""
-        if self.simple:
-            d = (rows - q_ref)[:, self.compiled.v_index]
-        else:
-            d = np.array([self.tangent(q_ref, row) for row in rows])
-        d[:, self.angle] = np.remainder(d[:, self.angle] + math.pi, 2 * math.pi) - math.pi
-        return np.max(np.abs(d), axis=1)
-
-    def distance(self, qa: np.ndarray, qb: np.ndarray) -> float:
-        return float(self.distances(qa, qb[None, :])[0])
-
-    def step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """q moved by dq (free joints), then back onto the loops; all nan when the loops cannot
-        be closed from there."""
-        full = np.zeros(self.full.nv)
-        full[self.compiled.v_index] = dq
-        return self.project(pinocchio.integrate(self.full, q, full))
-
-    def project(self, q: np.ndarray) -> np.ndarray:
-        """q moved onto the loops (``Scene.assemble``); q itself for a tree."""
-        if not self.loops or not np.all(np.isfinite(q)):
-            return q
-        try:
-            reduced, _ = _core.assemble_loops(self.model, q[self.compiled.q_index], self.loops)
-        except ValueError:
-            return np.full_like(q, math.nan)
-        return self.compiled.full_q(np.asarray(reduced))
-
-    def basis(self, q: np.ndarray) -> np.ndarray:
-        """Orthonormal basis (nv x mobility) of the motions the loops allow at q (the loops'
-        Jacobian's null space); the identity for a tree."""
-        if not self.loops:
-            return np.eye(self.model.nv)
-        return _core.loops(self.model, q[self.compiled.q_index], self.loops)["basis"]
-
-    def loop_error(self, q: np.ndarray) -> float:
-        """Largest loop error at q (m; rad for the rotation of a frame loop), from Pinocchio's
-        frame placements on the full model: nothing of pinsettle's loop code. 0 for a tree."""
-        if not self.scene.loops:
-            return 0.0
-        if not np.all(np.isfinite(q)):
-            return math.inf
-        pinocchio.framesForwardKinematics(self.full, self.full_data, q)
-        errors = []
-        for loop in self.scene.loops:
-            a = self.full_data.oMf[self.full.getFrameId(loop.a_frame)]
-            b = self.full_data.oMf[self.full.getFrameId(loop.b_frame)]
-            errors.append(a.act(np.asarray(loop.a_point)) - b.act(np.asarray(loop.b_point)))
-            if loop.kind == "frame":
-                errors.append(pinocchio.log3(a.rotation @ b.rotation.T))
-        return float(np.max(np.abs(np.concatenate(errors))))
-
-    def stiffness(self, q: np.ndarray) -> pinsettle.StabilityReport:
-        """K (with loops: reduced, mobility x mobility, in the coordinates of ``basis``)."""
-        return pinsettle.assess_stability(self.scene, q)
-
-    def newton_step(self, q: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
-        """Newton's step from q (dim nv of the free joints): dq = B lstsq(K, -B^T f), K and B
-        from ``pinsettle.assess_stability`` (K reduced to the motions the loops allow, B their
-        basis; the identity for a tree), rank cut 1e-10 so that neutral directions are left
-        alone."""
-        f = self.force(q) if f is None else f
-        report = self.stiffness(q)
-        B = report.basis
-        return B @ np.linalg.lstsq(report.stiffness_matrix, -(B.T @ f), rcond=1e-10)[0]
-
-    def time_scale(self, q: np.ndarray, scale_stiff_modes: bool = False) -> dict:
-        return _core.time_scale(
-            self.model, q[self.compiled.q_index], self.elements, scale_stiff_modes, self.loops
-        )
-
-    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
-        M = pinocchio.crba(self.model, self.data, q[self.compiled.q_index])
-        return np.triu(M) + np.triu(M, 1).T
 
 
 def newton(
@@ -376,30 +225,6 @@ def fd_newton_step(statics: Statics, q: np.ndarray, h: float = 1e-6) -> float:
     return float(np.max(np.abs(step)))
 
 
-@dataclass
-class Reference:
-    """The exact equilibrium q* of a scene: kinetic damping with polish=True and a tiny max_e,
-    Newton-refined to round-off, checked stable (or neutral) and checked by an independent
-    finite-difference Newton step."""
-
-    q: np.ndarray
-    residual: float  # relative
-    stability: str
-    neutral_directions: int
-    min_eigenvalue: float
-    fd_step: float  # size of the independent Newton step from q* (rad or m)
-    steps: int  # of the kinetic-damping run that found it
-    seconds_per_step: float  # of that run
-    constraint_error: float = 0.0  # largest loop error of q (m), Statics.loop_error
-
-    @property
-    def step_budget(self) -> int:
-        """The most steps any kinetic-damping run on the scene may take: a setting that stops
-        it from converging (a large err) or a bound below round-off (a tiny max_e with the
-        simplified measure) ends at that many steps, with status max_steps."""
-        return max(STEP_BUDGET_MIN, STEP_BUDGET_FACTOR * self.steps)
-
-
 def reference(statics: Statics) -> Reference:
     r = pinsettle.solve(statics.scene, polish=True, max_e=DEEP_MAX_E, max_steps=MAX_STEPS)
     if not r.converged or r.stability not in ("stable", "neutral"):
@@ -421,17 +246,6 @@ def reference(statics: Statics) -> Reference:
     )
 
 
-@dataclass
-class Landing:
-    """Where a run comes to rest: its final pose Newton-refined to round-off (None when the run
-    ended too far from any equilibrium for that), the stability there and its distance from
-    the scene's reference q*."""
-
-    q: np.ndarray | None
-    stability: str
-    from_reference: float  # rad or m; nan when q is None
-
-
 def landing(statics: Statics, ref: Reference, q_final: np.ndarray) -> Landing:
     if not np.all(np.isfinite(q_final)) or not statics.residual(q_final) <= 1e-4:
         return Landing(None, "-", math.nan)
@@ -444,68 +258,9 @@ def landing(statics: Statics, ref: Reference, q_final: np.ndarray) -> Landing:
 # --- runs and their curves --------------------------------------------------------------------
 
 
-@dataclass
-class Curve:
-    """The error along a run: step index, relative residual and distance of each sample."""
-
-    steps: np.ndarray
-    residual: np.ndarray
-    distance: np.ndarray
-
-
 def curve_of(statics: Statics, target: np.ndarray, steps: np.ndarray, rows: np.ndarray) -> Curve:
     residual = np.array([statics.residual(row) for row in rows])
     return Curve(np.asarray(steps, dtype=float), residual, statics.distances(target, rows))
-
-
-def stays_below(values: np.ndarray, level: float) -> int | None:
-    """Index of the first sample from which every value is <= level; None if the last is not."""
-    above = np.flatnonzero(~(values <= level))
-    if above.size == 0:
-        return 0
-    if above[-1] == values.size - 1:
-        return None
-    return int(above[-1]) + 1
-
-
-@dataclass
-class Run:
-    """One method on one scene: the outcome, the timed repeats and (optionally) the curve."""
-
-    scene: str
-    method: str  # "kd", "viscous", "fire", "newton"
-    label: str
-    settings: dict
-    status: str
-    steps: int
-    seconds: list[float]  # wall time of each timed repeat (s)
-    residual: float  # relative, at the end
-    distance: float  # from the landing pose (or the reference when none), at the end
-    stability: str  # of the landing pose
-    landing: Landing
-    peaks: int = 0
-    curve: Curve | None = None
-    extra: dict = field(default_factory=dict)
-
-    @property
-    def time(self) -> float:
-        return statistics.median(self.seconds)
-
-    @property
-    def per_step(self) -> float:
-        return self.time / self.steps if self.steps else math.nan
-
-    def reach(self, quantity: str, level: float) -> tuple[float, float] | None:
-        """(steps, seconds) from which the residual or distance stays <= level; seconds map
-        steps by the run's measured time per step."""
-        if self.curve is None:
-            return None
-        values = getattr(self.curve, quantity)
-        k = stays_below(values, level)
-        if k is None:
-            return None
-        steps = float(self.curve.steps[k])
-        return steps, steps * self.per_step
 
 
 def _target(statics: Statics, ref: Reference, land: Landing) -> np.ndarray:
@@ -664,16 +419,6 @@ def slowest_mode(statics: Statics, ref: Reference) -> tuple[float, np.ndarray]:
     return math.sqrt(w2[k]), phi[:, k]
 
 
-@dataclass
-class Damping:
-    """The two viscous baselines' coefficients: joint dampers c (every joint) and the
-    mass-proportional rate c, both damping the slowest mode critically."""
-
-    omega: float  # slowest mode (rad/s)
-    joint: float  # N m s/rad (or N s/m): 2 omega / |phi|^2
-    mass: float  # 1/s: 2 omega
-
-
 def damping_rule(statics: Statics, ref: Reference) -> Damping:
     omega, phi = slowest_mode(statics, ref)
     return Damping(omega, 2.0 * omega / float(phi @ phi), 2.0 * omega)
@@ -689,13 +434,6 @@ def damping_rate(statics: Statics, method: str, c: float) -> Callable[[np.ndarra
     if method == "mass_damping":
         return lambda q: c
     return lambda q: 0.0
-
-
-BASELINE_LABELS = {
-    "viscous": "viscous (joint dampers)",
-    "mass_damping": "viscous (mass-proportional)",
-    "fire": "FIRE",
-}
 
 
 def run_baseline(
@@ -856,21 +594,6 @@ class Progress:
         self.stream.flush()
 
 
-@dataclass
-class Config:
-    scenes: Sequence[str]
-    chain_lengths: Sequence[int]
-    repeats: int  # timed repeats of the main runs
-    sweep_repeats: int
-    kts: Sequence[float] = KTS
-    errs: Sequence[float] = ERRS
-    dss: Sequence[int] = DSS
-    max_es: Sequence[float] = MAX_ES
-    damping_factors: Sequence[float] = DAMPING_FACTORS
-    step_cost_steps: int = 20000
-    step_cost_repeats: int = 11
-
-
 FULL = Config(SCENE_NAMES, CHAIN_LENGTHS, repeats=5, sweep_repeats=3)
 QUICK = Config(
     ("pendulum", "fourbar"),
@@ -885,35 +608,6 @@ QUICK = Config(
     step_cost_steps=2000,
     step_cost_repeats=3,
 )
-
-
-@dataclass
-class SceneData:
-    bench: BenchScene
-    statics: Statics
-    ref: Reference
-    description: str = ""
-    force_scale: float = math.nan
-    nv: int = 0
-    loops: int = 0  # loop closures
-    mobility: int = 0  # degrees of freedom (nv less the independent loop equations)
-    runs: dict[str, Run] = field(default_factory=dict)  # main runs by key
-    damping: Damping | None = None
-    # The viscous baselines with other coefficients: (method, factor of the rule's c) -> run.
-    damping_sweep: dict[tuple[str, float], Run] = field(default_factory=dict)
-    sweeps: dict[str, list[Run]] = field(default_factory=dict)
-
-
-@dataclass
-class Results:
-    config: Config
-    scenes: dict[str, SceneData] = field(default_factory=dict)
-    step_cost: dict[str, dict] = field(default_factory=dict)
-    # benchmarks/loop_step_cost per scene with loops.
-    loop_step_cost: dict[str, dict] = field(default_factory=dict)
-    scaling: list[dict] = field(default_factory=list)
-    machine: dict = field(default_factory=dict)
-    seconds: float = 0.0
 
 
 def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
@@ -1119,7 +813,6 @@ def generate(
 ) -> Results:
     """Run everything and write output/benchmarks.md and output/benchmarks/*.png; with
     ``update_readme``, also the README's speed section (between its bench:summary markers)."""
-    import report_writer  # benchmarks/report_writer.py: figures and markdown
 
     def log(msg: str) -> None:
         if not quiet:
@@ -1177,5 +870,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.modules.setdefault("report", sys.modules["__main__"])  # report_writer imports it
     sys.exit(main())

@@ -13,11 +13,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import report as R
+import pinsettle
+import report_data as D
 
 #: Values below this are drawn at it on the log axes (exact zeros happen at round-off).
 FLOOR = 1e-17
-LEVEL = R.RESIDUAL_LEVELS[-1]  # the level the conclusions compare at
+LEVEL = D.RESIDUAL_LEVELS[-1]  # the level the conclusions compare at
 
 
 # --- formatting ---------------------------------------------------------------------------------
@@ -52,11 +53,11 @@ def fmt_e(x: float) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.1e}"
 
 
-def reach(run: R.Run, quantity: str, level: float) -> tuple[float, float] | None:
+def reach(run: D.Run, quantity: str, level: float) -> tuple[float, float] | None:
     return run.reach(quantity, level)
 
 
-def reach_cell(run: R.Run, quantity: str, level: float, spread: bool = True) -> tuple[str, str]:
+def reach_cell(run: D.Run, quantity: str, level: float, spread: bool = True) -> tuple[str, str]:
     """(steps, time) cells for the step from which the error stays below level."""
     hit = run.reach(quantity, level)
     if hit is None:
@@ -70,7 +71,7 @@ def reach_cell(run: R.Run, quantity: str, level: float, spread: bool = True) -> 
     )
 
 
-def outcome_time(run: R.Run) -> str:
+def outcome_time(run: D.Run) -> str:
     """Time to the level, or what happened instead (the status, the residual left)."""
     t = time_to(run)
     if t is not None:
@@ -78,14 +79,14 @@ def outcome_time(run: R.Run) -> str:
     return f"not reached ({run.status} at {run.steps:,} steps, residual {fmt_e(run.residual)})"
 
 
-def outcome_steps_time(run: R.Run) -> str:
+def outcome_steps_time(run: D.Run) -> str:
     hit = run.reach("residual", LEVEL)
     if hit is not None:
         return f"{fmt_steps(hit[0])}, {fmt_time(hit[1])}"
     return f"not reached ({run.status} at {run.steps:,} steps, residual {fmt_e(run.residual)})"
 
 
-def peaks_to(run: R.Run, level: float = LEVEL) -> str:
+def peaks_to(run: D.Run, level: float = LEVEL) -> str:
     """Damping events before the residual stays below level."""
     steps = steps_to(run, level)
     if steps is None:
@@ -93,7 +94,7 @@ def peaks_to(run: R.Run, level: float = LEVEL) -> str:
     return f"{int(np.sum(run.extra['damping_steps'] < steps)):,}"
 
 
-def landed(run: R.Run) -> str:
+def landed(run: D.Run) -> str:
     if run.landing.q is None:
         return "no rest"
     return run.landing.stability
@@ -104,12 +105,12 @@ def geomean(values: Sequence[float]) -> float:
     return math.exp(statistics.fmean(math.log(v) for v in values)) if values else math.nan
 
 
-def time_to(run: R.Run, level: float = LEVEL) -> float | None:
+def time_to(run: D.Run, level: float = LEVEL) -> float | None:
     hit = run.reach("residual", level)
     return None if hit is None else hit[1]
 
 
-def steps_to(run: R.Run, level: float = LEVEL) -> float | None:
+def steps_to(run: D.Run, level: float = LEVEL) -> float | None:
     hit = run.reach("residual", level)
     return None if hit is None else hit[0]
 
@@ -117,12 +118,12 @@ def steps_to(run: R.Run, level: float = LEVEL) -> float | None:
 BASELINES = ("viscous", "mass_damping", "fire")
 
 
-def loop_scenes(results: R.Results) -> list[str]:
+def loop_scenes(results: D.Results) -> list[str]:
     """The scenes with closed loops, in the report's order."""
     return [name for name, d in results.scenes.items() if d.loops]
 
 
-def trees_only(results: R.Results) -> str:
+def trees_only(results: D.Results) -> str:
     """The sentence that says why the loop scenes have no baselines ('' when there are none)."""
     names = loop_scenes(results)
     if not names:
@@ -135,13 +136,13 @@ def trees_only(results: R.Results) -> str:
     )
 
 
-def kd_runs(d: R.SceneData) -> list[R.Run]:
+def kd_runs(d: D.SceneData) -> list[D.Run]:
     """Every kinetic-damping run on a scene: the main runs and the sweeps'."""
     runs = [r for r in d.runs.values() if r.method == "kd"]
     return runs + [r for sweep in d.sweeps.values() for r in sweep if r.method == "kd"]
 
 
-def worst_constraint_error(d: R.SceneData) -> float:
+def worst_constraint_error(d: D.SceneData) -> float:
     """Largest final loop error (m) over every KD run on the scene, as measured by the report
     and as reported by the solver."""
     return max(
@@ -149,7 +150,7 @@ def worst_constraint_error(d: R.SceneData) -> float:
     )
 
 
-def loop_cost_ratio(results: R.Results, name: str, key: str = "exact") -> float:
+def loop_cost_ratio(results: D.Results, name: str, key: str = "exact") -> float:
     """The solver's step on a scene with loops over a bare ``pinocchio::constraintDynamics`` +
     ``integrate`` step (benchmarks/loop_step_cost, medians); nan when not measured."""
     cost = results.loop_step_cost.get(name)
@@ -172,7 +173,7 @@ STYLE = {
 }
 
 
-def scene_figure(d: R.SceneData, path: Path) -> None:
+def scene_figure(d: D.SceneData, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -198,7 +199,7 @@ def scene_figure(d: R.SceneData, path: Path) -> None:
         ax.set_yscale("log")
         ax.grid(True, which="major", alpha=0.3)
     for ax in axes[1]:
-        for level in R.RESIDUAL_LEVELS:
+        for level in D.RESIDUAL_LEVELS:
             ax.axhline(level, color="grey", lw=0.8, ls=":")
     axes[0, 0].set_ylim(FLOOR / 2, 1e2)
     axes[1, 0].set_ylim(FLOOR / 2, 1e2)
@@ -231,7 +232,7 @@ def scene_color(k: int):
     return matplotlib.colormaps["tab20"]((2 * (k - 10) + 1) % 20)
 
 
-def kt_figure(results: R.Results, path: Path) -> None:
+def kt_figure(results: D.Results, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -270,7 +271,7 @@ def kt_figure(results: R.Results, path: Path) -> None:
     plt.close(fig)
 
 
-def max_e_figure(results: R.Results, path: Path) -> None:
+def max_e_figure(results: D.Results, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -295,7 +296,7 @@ def max_e_figure(results: R.Results, path: Path) -> None:
     plt.close(fig)
 
 
-def scaling_figure(results: R.Results, path: Path) -> None:
+def scaling_figure(results: D.Results, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -321,7 +322,7 @@ def scaling_figure(results: R.Results, path: Path) -> None:
         n,
         [steps_to(row["runs"][1]) or np.nan for row in rows],
         marker="s",
-        label=f"to residual {LEVEL:g} (max_e = {R.DEEP_MAX_E:g})",
+        label=f"to residual {LEVEL:g} (max_e = {D.DEEP_MAX_E:g})",
     )
     b.set_xlabel("chain length (joints)")
     b.set_ylabel("steps")
@@ -345,7 +346,7 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]], right: Sequence[
     return "\n".join(lines) + "\n"
 
 
-def header(results: R.Results) -> str:
+def header(results: D.Results) -> str:
     m = results.machine
     load = (
         f"1-minute load average {m['load_start'][0]:.2f} before the run and "
@@ -361,7 +362,7 @@ by that command.
 """
 
 
-def summary_rules(results: R.Results) -> str:
+def summary_rules(results: D.Results) -> str:
     names = ", ".join(f"`{n}`" for n in loop_scenes(results)) or "none here"
     return f"""## How it is measured
 
@@ -374,32 +375,32 @@ final pose refined by Newton's method to round-off (the stiffness matrix of
 scene with isolated equilibria that is the scene's reference equilibrium (the tables say how far
 from it each run landed); the UR5 and the Panda rest on a family of equilibria (a base turning
 about the vertical, wrist turns), and each run is measured against the member it comes to.
-The reference q* of a scene is kinetic damping with `polish=True` and `max_e = {R.DEEP_MAX_E:g}`,
+The reference q* of a scene is kinetic damping with `polish=True` and `max_e = {D.DEEP_MAX_E:g}`,
 Newton-refined, checked stable or neutral, and checked independently by one Newton step with a
 central-difference Jacobian of the static force (`check step` below: the size of that step).
 
 **Curves and time.** Kinetic damping (KD) runs with the default settings (kt = 0.5,
-`dt = "auto"`, `err`, `ds`) but `max_e = {R.DEEP_MAX_E:g}`, so that the run goes on down to
+`dt = "auto"`, `err`, `ds`) but `max_e = {D.DEEP_MAX_E:g}`, so that the run goes on down to
 round-off and the curve shows how the error falls; the stopping rule's own trade-off is the
 `max_e` sweep below. The curve comes from a run with `trace_every = 1` and
-`trace_configurations = True` (at most {R.CURVE_SAMPLES} samples: the trace halves its samples
+`trace_configurations = True` (at most {D.CURVE_SAMPLES} samples: the trace halves its samples
 when full); its trajectory is checked identical to the timed runs', which trace nothing. **Steps
 are mapped to wall time by the run's measured time per step** (`wall_time / steps` of the timed
-runs, the median of up to 5 repeats, fewer for runs over {R.REPEAT_BUDGET:g} s; the spread
+runs, the median of up to 5 repeats, fewer for runs over {D.REPEAT_BUDGET:g} s; the spread
 quoted is min-max over the repeats). KD's time per step is the whole solve's: its set-up (the
 first estimate of the automatic step), the step estimates along the way and the final stability
 check are in it; the baselines' loops have no set-up. "Time to a level" is the time from which
 the error stays below it to the end of the run (a swing through q* does not count). Every KD run
-on a scene is limited to {R.STEP_BUDGET_FACTOR} times the steps of the run that found the
-scene's reference (at least {R.STEP_BUDGET_MIN:,}; the dt sweep's runs to at least
-{R.DT_SWEEP_SECONDS:g} s): a setting that keeps it from converging ends there, `max_steps`.
+on a scene is limited to {D.STEP_BUDGET_FACTOR} times the steps of the run that found the
+scene's reference (at least {D.STEP_BUDGET_MIN:,}; the dt sweep's runs to at least
+{D.DT_SWEEP_SECONDS:g} s): a setting that keeps it from converging ends there, `max_steps`.
 
 **Baselines**, on the same Pinocchio dynamics, C++ (`benchmarks/baselines.cpp`, built against
 the installed package: `pinocchio::aba`, `pinsettle::ForceElements`, the static force as
 `pinsettle::computeStaticForce` computes it, timed inside the loop like the solver's
-`wall_time`), semi-implicit Euler, until the residual is below {R.BASELINE_TARGET:g} of the force
-scale (checked every 64 steps; FIRE has it every step) or {R.BASELINE_MAX_STEPS:,} steps or
-{R.BASELINE_MAX_TIME:g} s:
+`wall_time`), semi-implicit Euler, until the residual is below {D.BASELINE_TARGET:g} of the force
+scale (checked every 64 steps; FIRE has it every step) or {D.BASELINE_MAX_STEPS:,} steps or
+{D.BASELINE_MAX_TIME:g} s:
 
 - *viscous, joint dampers*: `a = ABA(q, v, tau - c v)`, the same c on every joint: what users of
   physics simulators do to let a robot settle. c damps the slowest mode of the mechanism
@@ -409,11 +410,11 @@ scale (checked every 64 steps; FIRE has it every step) or {R.BASELINE_MAX_STEPS:
   relaxation's classic form: every mode decays at the rate c / 2; `c = 2 omega` damps the slowest
   critically.
 - *FIRE* (Bitzek et al., 2006) with its classic parameters: N_min 5, f_inc 1.1, f_dec 0.5,
-  alpha_start 0.1, f_alpha 0.99, dt_max 10 dt0 (with dt0 below, {10 * R.DT_SAFETY:g} times the
+  alpha_start 0.1, f_alpha 0.99, dt_max 10 dt0 (with dt0 below, {10 * D.DT_SAFETY:g} times the
   stability limit: FIRE counts on its resets there); power `P = F . v` with `F = -tau_static(q)`
   (one extra RNEA per step), velocity mixing `v <- (1 - alpha) v + alpha |v| F / |F|` in joint
   coordinates.
-- Their step: dt_safety ({R.DT_SAFETY:g}, the solver's default) times the stability limit of
+- Their step: dt_safety ({D.DT_SAFETY:g}, the solver's default) times the stability limit of
   semi-implicit Euler with the damping, `4 / (r + sqrt(r^2 + 4 omega_max^2))`, r the fastest decay
   rate the damping gives (c times the largest eigenvalue of M^-1 for joint dampers, c for
   mass-proportional damping, 0 for FIRE, whose dt0 it is), the worse of the start and q*, without
@@ -442,7 +443,7 @@ baselines run on trees only.
 """
 
 
-def scenes_table(results: R.Results) -> str:
+def scenes_table(results: D.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
         ref = d.ref
@@ -488,7 +489,7 @@ METHOD_ORDER = (
 )
 
 
-def summary_table(results: R.Results) -> str:
+def summary_table(results: D.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
         for key in METHOD_ORDER:
@@ -496,7 +497,7 @@ def summary_table(results: R.Results) -> str:
                 continue
             run = d.runs[key]
             cells = [f"`{name}`" if key == "kd_exact" else "", run.label]
-            for level in R.RESIDUAL_LEVELS:
+            for level in D.RESIDUAL_LEVELS:
                 cells += list(reach_cell(run, "residual", level))
             far = run.landing.from_reference
             where = landed(run)
@@ -510,14 +511,14 @@ def summary_table(results: R.Results) -> str:
                 where,
             ]
             rows.append(cells)
-    lv = [f"{x:g}" for x in R.RESIDUAL_LEVELS]
+    lv = [f"{x:g}" for x in D.RESIDUAL_LEVELS]
     return (
         "## Summary\n\n"
         "Steps and wall time from which the relative residual stays below "
         f"{lv[0]} and {lv[1]} (median over the repeats, min-max in brackets); the run's end: "
         "status, distance from its rest q*, residual, and where it rests (the stability of q*). "
         "KD runs use `max_e = "
-        f"{R.DEEP_MAX_E:g}` here (see above); Newton's times are Python's. For the scenes with "
+        f"{D.DEEP_MAX_E:g}` here (see above); Newton's times are Python's. For the scenes with "
         "closed loops, the final constraint error (largest loop error, m) and the reduced "
         "Newton; "
         + (trees_only(results) or "the baselines run on trees only")
@@ -542,12 +543,12 @@ def summary_table(results: R.Results) -> str:
     )
 
 
-def _pairs(d: R.SceneData, kts: Sequence[float]) -> list[tuple[float, R.Run, R.Run]]:
+def _pairs(d: D.SceneData, kts: Sequence[float]) -> list[tuple[float, D.Run, D.Run]]:
     by = {(r.settings["energy"], r.settings["kt"]): r for r in d.sweeps["kt"]}
     return [(kt, by[("exact", kt)], by[("simplified", kt)]) for kt in kts]
 
 
-def energy_tally(results: R.Results, kts: Sequence[float]) -> dict:
+def energy_tally(results: D.Results, kts: Sequence[float]) -> dict:
     """Steps to the level, simplified against exact, over the scenes and the given kt."""
     ratios, fewer, more, equal, missing = [], 0, 0, 0, []
     for name, d in results.scenes.items():
@@ -573,7 +574,7 @@ def energy_tally(results: R.Results, kts: Sequence[float]) -> dict:
     }
 
 
-def cost_ratio(results: R.Results, name: str = "ur5") -> float:
+def cost_ratio(results: D.Results, name: str = "ur5") -> float:
     cost = results.step_cost.get(name)
     if not cost:
         return math.nan
@@ -581,7 +582,7 @@ def cost_ratio(results: R.Results, name: str = "ur5") -> float:
     return statistics.median(c["simplified"]) / statistics.median(c["exact"])
 
 
-def kt_scores(results: R.Results, energy: str) -> dict[float, list[float]]:
+def kt_scores(results: D.Results, energy: str) -> dict[float, list[float]]:
     """For each kt: steps to the level over the scene's best kt, per scene (inf: not reached)."""
     score: dict[float, list[float]] = {kt: [] for kt in results.config.kts}
     for d in results.scenes.values():
@@ -603,7 +604,7 @@ def best_kt(score: dict[float, list[float]]) -> float:
     return min(score, key=key)
 
 
-def conclusions(results: R.Results) -> str:
+def conclusions(results: D.Results) -> str:
     scenes = results.scenes
     out = ["## In short\n"]
     # Energy measure: steps (deterministic) over every scene and kt pair, and the cost per step.
@@ -658,7 +659,7 @@ def conclusions(results: R.Results) -> str:
                 continue
             ratios.append(tb / tk)
             (faster if tk < tb else slower).append(name)
-        label = R.BASELINE_LABELS[key]
+        label = D.BASELINE_LABELS[key]
         text = f"- **{label}** against KD (exact energy), time to a residual of {LEVEL:g}: "
         if ratios:
             text += (
@@ -791,7 +792,7 @@ def conclusions(results: R.Results) -> str:
     return "\n".join(out) + "\n\n"
 
 
-def closed_loops_short(results: R.Results) -> list[str]:
+def closed_loops_short(results: D.Results) -> list[str]:
     """The "Closed loops" paragraph of the short section: steps and time to the level on each
     loop scene, the constraint error at the end, the cost of a step against a bare constrained
     step."""
@@ -825,7 +826,7 @@ def closed_loops_short(results: R.Results) -> list[str]:
     verdict = "below" if worst < bound else "**above**"
     return [
         f"- **Closed loops**: kinetic damping (exact energy, default kt = "
-        f"{R.pinsettle.Settings().kt:g}) to a residual of "
+        f"{pinsettle.Settings().kt:g}) to a residual of "
         f"{LEVEL:g} (projected onto the motions the loops allow): "
         + "; ".join(parts)
         + f". The largest final constraint error over every KD run on these scenes (main runs "
@@ -837,7 +838,7 @@ def closed_loops_short(results: R.Results) -> list[str]:
     ]
 
 
-def closed_loops_section(results: R.Results) -> str:
+def closed_loops_section(results: D.Results) -> str:
     names = loop_scenes(results)
     if not names:
         return ""
@@ -864,7 +865,7 @@ def closed_loops_section(results: R.Results) -> str:
         "## Closed loops\n\n"
         "The scenes with `[[loop]]`: loop closures and mobility (degrees of freedom), how far "
         "the start moved to close the loops (rad or m), and for kinetic damping "
-        f"(`max_e = {R.DEEP_MAX_E:g}`) the steps and time to a residual of {LEVEL:g}, the final "
+        f"(`max_e = {D.DEEP_MAX_E:g}`) the steps and time to a residual of {LEVEL:g}, the final "
         "constraint error (largest loop error of the final q, m) measured here from Pinocchio's "
         "frame placements and as the solver reports it (`Result.constraint_error`), the largest "
         "over the traced run's samples, the time per step (whole solve / steps: the solve's "
@@ -895,7 +896,7 @@ def closed_loops_section(results: R.Results) -> str:
     )
 
 
-def loop_cost_table(results: R.Results) -> str:
+def loop_cost_table(results: D.Results) -> str:
     """benchmarks/loop_step_cost: the solver's step on each loop scene against a bare
     constrained step, with the open tree's bare ABA step for scale."""
     names = [n for n in loop_scenes(results) if n in results.loop_step_cost]
@@ -952,7 +953,7 @@ def loop_cost_table(results: R.Results) -> str:
     )
 
 
-def figures_section(results: R.Results, figures: str) -> str:
+def figures_section(results: D.Results, figures: str) -> str:
     parts = [
         "## Error against wall time and against steps\n\n"
         "One figure per scene: distance (top) and relative residual (bottom) against wall time "
@@ -966,31 +967,31 @@ def figures_section(results: R.Results, figures: str) -> str:
     return "\n".join(parts) + "\n"
 
 
-def energy_section(results: R.Results) -> str:
+def energy_section(results: D.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
         e, s = d.runs["kd_exact"], d.runs["kd_simplified"]
         cells = [f"`{name}`"]
         cells.append(f"{e.per_step * 1e9:.0f} / {s.per_step * 1e9:.0f}")
         cells.append(f"{peaks_to(e)} / {peaks_to(s)}")
-        for level in R.DISTANCE_LEVELS:
+        for level in D.DISTANCE_LEVELS:
             a, b = e.reach("distance", level), s.reach("distance", level)
             cells.append(f"{fmt_steps(a and a[0])} / {fmt_steps(b and b[0])}")
-        for level in R.RESIDUAL_LEVELS:
+        for level in D.RESIDUAL_LEVELS:
             a, b = e.reach("residual", level), s.reach("residual", level)
             cells.append(f"{fmt_steps(a and a[0])} / {fmt_steps(b and b[0])}")
         a, b = time_to(e), time_to(s)
         cells.append(f"{fmt_time(a)} / {fmt_time(b)}")
         rows.append(cells)
     head = ["scene", "ns per step", f"peaks before residual {LEVEL:g}"]
-    head += [f"steps to distance {x:g}" for x in R.DISTANCE_LEVELS]
-    head += [f"steps to residual {x:g}" for x in R.RESIDUAL_LEVELS]
+    head += [f"steps to distance {x:g}" for x in D.DISTANCE_LEVELS]
+    head += [f"steps to residual {x:g}" for x in D.RESIDUAL_LEVELS]
     head += [f"time to residual {LEVEL:g}"]
     text = (
         "## Exact against simplified energy\n\n"
         "The peak detector's signal: the exact kinetic energy `sum 1/2 m v^2 + 1/2 w^T I w` (J) "
         "against the simplified `sum v^2 + w^2`. Each cell is exact / simplified, kt = 0.5, "
-        f"`max_e = {R.DEEP_MAX_E:g}` (in each measure's own unit; the levels are reached long "
+        f"`max_e = {D.DEEP_MAX_E:g}` (in each measure's own unit; the levels are reached long "
         "before either stops). Time per step is the whole solve's `wall_time / steps` (median of "
         "the repeats), estimates of the automatic step and stability checks included.\n\n"
         + table(head, rows, right=tuple(range(1, len(head))))
@@ -1023,7 +1024,7 @@ def energy_section(results: R.Results) -> str:
     return text + "\n"
 
 
-def kt_section(results: R.Results, figures: str) -> str:
+def kt_section(results: D.Results, figures: str) -> str:
     kts = results.config.kts
     rows = []
     for name, d in results.scenes.items():
@@ -1036,7 +1037,7 @@ def kt_section(results: R.Results, figures: str) -> str:
     return (
         "## kt\n\n"
         f"Time to a residual of {LEVEL:g} (exact / simplified energy; `max_e = "
-        f"{R.DEEP_MAX_E:g}`, other settings default; median of the repeats):\n\n"
+        f"{D.DEEP_MAX_E:g}`, other settings default; median of the repeats):\n\n"
         + table(
             ["scene", *[f"kt = {kt:g}" for kt in kts]], rows, right=tuple(range(1, len(kts) + 1))
         )
@@ -1044,7 +1045,7 @@ def kt_section(results: R.Results, figures: str) -> str:
     )
 
 
-def stopping_section(results: R.Results, figures: str) -> str:
+def stopping_section(results: D.Results, figures: str) -> str:
     text = (
         "## The stopping rule: err, ds, max_e\n\n"
         "Each setting varied alone, the others at their defaults (kt = 0.5, exact energy, "
@@ -1076,7 +1077,7 @@ def stopping_section(results: R.Results, figures: str) -> str:
     return text
 
 
-def backtrack_section(results: R.Results) -> str:
+def backtrack_section(results: D.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
         for energy in ("exact", "simplified"):
@@ -1094,7 +1095,7 @@ def backtrack_section(results: R.Results) -> str:
         "## Peak backtracking\n\n"
         "`backtrack = True` moves the configuration back to the parabola-interpolated peak "
         f"before damping. Steps and time to a residual of {LEVEL:g}, and the peaks (damping "
-        f"events) of the whole run (`max_e = {R.DEEP_MAX_E:g}`):\n\n"
+        f"events) of the whole run (`max_e = {D.DEEP_MAX_E:g}`):\n\n"
         + table(
             [
                 "scene",
@@ -1113,7 +1114,7 @@ def backtrack_section(results: R.Results) -> str:
     )
 
 
-def dt_section(results: R.Results) -> str:
+def dt_section(results: D.Results) -> str:
     labels = [r.label for r in next(iter(results.scenes.values())).sweeps["dt"]]
     rows = []
     for name, d in results.scenes.items():
@@ -1125,7 +1126,7 @@ def dt_section(results: R.Results) -> str:
     return (
         "## Fixed against automatic dt\n\n"
         f"Steps and time to a residual of {LEVEL:g} (exact energy, kt = 0.5, "
-        f"`max_e = {R.DEEP_MAX_E:g}`): `auto` (the default: re-estimated as the mechanism moves, "
+        f"`max_e = {D.DEEP_MAX_E:g}`): `auto` (the default: re-estimated as the mechanism moves, "
         "stiff modes slowed), `auto, unscaled` (`scale_stiff_modes = False`), `fixed, start` "
         "(`dt` fixed at the automatic step's first estimate, stiff modes slowed: the step "
         "at the start; a fixed step has no scaling, no re-estimates and no bound on the turn per "
@@ -1135,7 +1136,7 @@ def dt_section(results: R.Results) -> str:
     )
 
 
-def baselines_section(results: R.Results) -> str:
+def baselines_section(results: D.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
         if d.damping is None:  # closed loops: no baselines
@@ -1187,7 +1188,7 @@ def baselines_section(results: R.Results) -> str:
                 continue
             for method in ("viscous", "mass_damping"):
                 main = d.runs[method]
-                cells = [f"`{name}`" if method == "viscous" else "", R.BASELINE_LABELS[method]]
+                cells = [f"`{name}`" if method == "viscous" else "", D.BASELINE_LABELS[method]]
                 for factor in (*factors[:1], 1.0, *factors[1:]):
                     r = main if factor == 1.0 else d.damping_sweep[(method, factor)]
                     status = "" if r.status == "converged" else f" **{r.status}**"
@@ -1195,8 +1196,8 @@ def baselines_section(results: R.Results) -> str:
                 rows.append(cells)
         text += (
             f"\nThe damping coefficient against the rule's c: steps and time to the baselines' "
-            f"target (residual {R.BASELINE_TARGET:g} of the force scale), or the status when "
-            f"the run stopped first (budget {R.BASELINE_SIDE_TIME:g} s off the rule):\n\n"
+            f"target (residual {D.BASELINE_TARGET:g} of the force scale), or the status when "
+            f"the run stopped first (budget {D.BASELINE_SIDE_TIME:g} s off the rule):\n\n"
             + table(
                 ["scene", "method", *[f"{x:g} c" for x in (*factors[:1], 1.0, *factors[1:])]],
                 rows,
@@ -1255,7 +1256,7 @@ COST_ROWS = (
 )
 
 
-def cost_section(results: R.Results) -> str:
+def cost_section(results: D.Results) -> str:
     names = list(results.step_cost)
     rows = []
     for key, label in COST_ROWS:
@@ -1293,7 +1294,7 @@ def cost_section(results: R.Results) -> str:
     )
 
 
-def scaling_section(results: R.Results, figures: str) -> str:
+def scaling_section(results: D.Results, figures: str) -> str:
     rows = []
     for row in results.scaling:
         default, deep = row["runs"]
@@ -1335,7 +1336,7 @@ def scaling_section(results: R.Results, figures: str) -> str:
         "energy, kt = 0.5. Per step: the bare step and the solver's step of `step_cost` (ratio in "
         "brackets), and the whole default solve's `wall_time / steps`. Then the default solve "
         "(`max_e = 1e-12`): steps, time, final distance; and with "
-        f"`max_e = {R.DEEP_MAX_E:g}`: steps and time to a residual of {LEVEL:g}.\n\n"
+        f"`max_e = {D.DEEP_MAX_E:g}`: steps and time to a residual of {LEVEL:g}.\n\n"
         + table(
             [
                 "links",
@@ -1357,7 +1358,7 @@ def scaling_section(results: R.Results, figures: str) -> str:
     )
 
 
-def write(results: R.Results, output: Path) -> None:
+def write(results: D.Results, output: Path) -> None:
     """output/benchmarks.md and output/benchmarks/*.png."""
     figures = "benchmarks"
     fig_dir = output / figures
@@ -1398,7 +1399,7 @@ README_BEGIN = "<!-- bench:summary (written by benchmarks/report.py) -->"
 README_END = "<!-- /bench:summary -->"
 
 
-def readme_block(results: R.Results) -> str:
+def readme_block(results: D.Results) -> str:
     """The README's speed section: the main ratios of the report, as measured."""
     m = results.machine
     names = list(results.step_cost)
@@ -1447,7 +1448,7 @@ def readme_block(results: R.Results) -> str:
                 never.append(name)
             else:
                 ratios.append(tb / tk)
-        label = R.BASELINE_LABELS[key]
+        label = D.BASELINE_LABELS[key]
         text = f"- **{label}** (same dynamics, C++" + (
             ", c from the slowest mode at the answer): " if key != "fire" else "): "
         )
@@ -1510,7 +1511,7 @@ def readme_block(results: R.Results) -> str:
     return "\n".join(wrapped)
 
 
-def update_readme(results: R.Results, readme: Path) -> bool:
+def update_readme(results: D.Results, readme: Path) -> bool:
     """Replace the block between the markers; False when the README has none."""
     text = readme.read_text(encoding="utf-8")
     start, end = text.find(README_BEGIN), text.find(README_END)

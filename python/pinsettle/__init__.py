@@ -12,9 +12,9 @@ import importlib.metadata as _metadata
 import pinocchio  # noqa: F401  (registers the converters that pinsettle._core reads models with)
 
 from ._scene import Scene, SceneError, load_scene
+from ._settings import Settings
 from ._solve import (
     Result,
-    Settings,
     StabilityReport,
     Trace,
     assess_stability,

@@ -11,6 +11,9 @@ import webbrowser
 from pathlib import Path
 
 import numpy as np
+import pinocchio
+
+import pinsettle
 
 
 def _step(text: str) -> float | str:
@@ -62,10 +65,6 @@ def _setting_overrides(args: argparse.Namespace) -> dict:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    import pinocchio
-
-    import pinsettle
-
     model = pinsettle.load_robot(args.robot)
     q0 = pinocchio.neutral(model)
     result = pinsettle.solve(model, q0, **_setting_overrides(args))
@@ -99,8 +98,6 @@ def _parse_start(items: list[str]) -> dict[str, float | list[float]]:
 
 def _load_scene(args: argparse.Namespace) -> tuple:
     """The scene of args.scene and the start of its --start flags (None: the scene's own)."""
-    import pinsettle
-
     scene = pinsettle.load_scene(pinsettle.scene_path(args.scene))
     if not args.start:
         return scene, None
@@ -112,8 +109,6 @@ def _load_scene(args: argparse.Namespace) -> tuple:
 
 
 def _solve(args: argparse.Namespace) -> int:
-    import pinsettle
-
     scene, q0 = _load_scene(args)
     result = pinsettle.solve(scene, q0, **_setting_overrides(args))
     if args.json:
@@ -156,7 +151,7 @@ def _serve(viz: object) -> None:
 
 
 def _play(args: argparse.Namespace) -> int:
-    import pinsettle
+    # Here, not at the top: the other commands never load the playback module.
     from pinsettle.play import TRACE_SETTINGS, play, require
 
     require()  # before solving: a missing extra is a one-line message, exit 2
@@ -198,8 +193,6 @@ def _play(args: argparse.Namespace) -> int:
 
 
 def _scenes(args: argparse.Namespace) -> int:
-    import pinsettle
-
     for name in pinsettle.scene_names():
         scene_file = pinsettle.scene_path(name)
         description = pinsettle._scene._description(scene_file)
@@ -208,8 +201,6 @@ def _scenes(args: argparse.Namespace) -> int:
 
 
 def _robots(args: argparse.Namespace) -> int:
-    import pinsettle
-
     for name in pinsettle.robot_names():
         floating = pinsettle.robots.ROBOTS[name][1]
         print(f"{name:<28} {'floating base' if floating else 'fixed base'}")
@@ -217,8 +208,6 @@ def _robots(args: argparse.Namespace) -> int:
 
 
 def _cmake_dir(args: argparse.Namespace) -> int:
-    import pinsettle
-
     print(pinsettle.get_cmake_dir())
     return 0
 

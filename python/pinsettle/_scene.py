@@ -19,12 +19,14 @@ import numpy as np
 import pinocchio
 
 from . import _core
+from ._checks import as_vector, unknown_key_message
+from ._settings import SETTING_TYPES, Settings, make_settings, set_setting
+from .robots import load_robot, load_urdf, robot_urdf
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
-from ._solve import SETTING_TYPES, Settings, _unknown_key_message, make_settings, set_setting
 
 
 class SceneError(ValueError):
@@ -180,8 +182,6 @@ class Scene:
     @classmethod
     def from_urdf(cls, path: str | Path, *, floating: bool = False, **kwargs: Any) -> Scene:
         """A scene of the mechanism in a URDF file (meshes are not loaded)."""
-        from .robots import load_urdf
-
         scene = cls(load_urdf(path, floating=floating), **kwargs)
         scene.urdf = Path(path)
         return scene
@@ -189,8 +189,6 @@ class Scene:
     @classmethod
     def from_robot(cls, name: str, *, floating: bool = False, **kwargs: Any) -> Scene:
         """A scene of a robot shipped by example-robot-data (see ``pinsettle.robot_names()``)."""
-        from .robots import load_robot, robot_urdf
-
         scene = cls(load_robot(name, floating=floating), **kwargs)
         scene.urdf = robot_urdf(name)
         return scene
@@ -296,7 +294,7 @@ class Scene:
             unknown = [k for k in end if k not in ("frame", "point")]
             if unknown:
                 raise SceneError(
-                    f"{name}: " + _unknown_key_message("key", unknown[0], ["frame", "point"])
+                    f"{name}: " + unknown_key_message("key", unknown[0], ["frame", "point"])
                 )
             if "frame" not in end:
                 raise SceneError(f"{name}: missing key 'frame'")
@@ -404,9 +402,7 @@ class Scene:
         Raises:
             SceneError: the loops cannot be assembled from there (the message names the loop).
         """
-        from ._solve import _as_vector
-
-        q = self.q0() if q is None else _as_vector(q, "q", self.model.nq, "model.nq")
+        q = self.q0() if q is None else as_vector(q, "q", self.model.nq, "model.nq")
         compiled = self.compile(q)
         if not compiled.loops:
             return q.copy(), 0.0
@@ -461,9 +457,7 @@ class Scene:
         configuration q: gravity minus springs and loads (dim of the reduced model's nv). With
         loops, its component along the motions the loops allow at q (the constraint reactions
         take the rest): zero at an equilibrium of the closed mechanism."""
-        from ._solve import _as_vector
-
-        q = _as_vector(q, "q", self.model.nq, "model.nq")
+        q = as_vector(q, "q", self.model.nq, "model.nq")
         compiled = self.compile(q)
         return _core.static_force(
             compiled.model, q[compiled.q_index], compiled.elements, compiled.loops
@@ -473,9 +467,7 @@ class Scene:
         """The loops' constraint errors at the full configuration q, stacked (3 per point loop:
         p_a - p_b in world axes, m; 6 per frame loop: that and the rotation vector of
         R_a R_b^T, rad); empty without loops."""
-        from ._solve import _as_vector
-
-        q = _as_vector(q, "q", self.model.nq, "model.nq")
+        q = as_vector(q, "q", self.model.nq, "model.nq")
         compiled = self.compile(q)
         if not compiled.loops:
             return np.zeros(0)
@@ -654,7 +646,7 @@ _LOOP_KEYS = ["a", "b", "kind"]
 def _check_keys(table: Mapping[str, Any], known: list[str], where: str) -> None:
     for key in table:
         if key not in known:
-            raise SceneError(f"{where}: " + _unknown_key_message("key", key, known))
+            raise SceneError(f"{where}: " + unknown_key_message("key", key, known))
 
 
 def _table(data: Mapping[str, Any], key: str, where: str) -> dict[str, Any]:
@@ -732,8 +724,6 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         urdf = m["urdf"]
         if not isinstance(urdf, str):
             raise SceneError(f"[model] urdf must be a path (str), got {urdf!r}")
-        from .robots import load_urdf
-
         urdf_path = path.parent / urdf
         try:
             model = load_urdf(urdf_path, floating=floating)
@@ -743,8 +733,6 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         robot = m["robot"]
         if not isinstance(robot, str):
             raise SceneError(f"[model] robot must be a name (str), got {robot!r}")
-        from .robots import load_robot, robot_urdf
-
         try:
             model = load_robot(robot, floating=floating)
             urdf_path = robot_urdf(robot)
@@ -840,7 +828,7 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
     solver = _table(data, "solver", "[solver]")
     for key, value in solver.items():
         if key not in SETTING_TYPES:
-            raise SceneError("[solver]: " + _unknown_key_message("key", key, list(SETTING_TYPES)))
+            raise SceneError("[solver]: " + unknown_key_message("key", key, list(SETTING_TYPES)))
         try:
             set_setting(scene.settings, key, value)
         except (TypeError, ValueError) as error:

@@ -1,8 +1,8 @@
-"""The Python face of the C++ solver: settings, result and ``solve``."""
+"""The Python face of the C++ solver: ``solve``, its result and the static checks (the
+settings are in ``_settings``)."""
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -11,97 +11,9 @@ import numpy as np
 import pinocchio
 
 from . import _core
-
-#: Settings keys with the Python type each one takes (used for clear messages).
-SETTING_TYPES: dict[str, str] = {
-    "dt": "float or 'auto'",
-    "dt_safety": "float",
-    "kt": "float",
-    "err": "float",
-    "ds": "int",
-    "max_e": "float",
-    "max_steps": "int",
-    "max_time": "float",
-    "energy": "str ('exact' or 'simplified')",
-    "backtrack": "bool",
-    "polish": "bool",
-    "scale_stiff_modes": "bool",
-    "trace_every": "int",
-    "trace_capacity": "int",
-    "trace_configurations": "bool",
-    "check_every": "int",
-}
-
-
-def _unknown_key_message(kind: str, key: str, known: list[str]) -> str:
-    close = difflib.get_close_matches(key, known, n=1)
-    hint = f" (did you mean '{close[0]}'?)" if close else ""
-    return f"unknown {kind} '{key}'{hint}; known {kind}s: {', '.join(known)}"
-
-
-class Settings(_core.Settings):
-    """Solver settings, inputs only: the solver never writes them back.
-
-    ``Settings(kt=0.3, dt=5e-4)`` sets fields by name; an unknown name or a value of the wrong
-    type raises ``TypeError``, a value out of range raises ``ValueError`` when solving (or on
-    ``check()``), naming the field and its allowed range.
-
-    Fields: ``dt`` time step (s), or 'auto' (the default: ``dt_safety`` times the stability
-    limit 2 / omega_max of the mechanism linearised where it is, re-estimated as it moves);
-    ``dt_safety`` in (0, 1]; ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the
-    rest get a larger effective mass, equilibria unchanged); ``polish`` (Newton steps after
-    convergence); ``kt`` velocity scale at each energy peak, in [0, 1); ``err`` relative peak
-    threshold; ``ds`` stopping window (steps); ``max_e`` bound on the sum of the last ``ds``
-    energy samples (J for the exact measure); ``max_steps``; ``max_time`` (s); ``energy``
-    ('exact' or 'simplified'); ``backtrack`` (back up to the interpolated peak before damping);
-    ``trace_every`` (0: no trace); ``trace_capacity``; ``trace_configurations`` (record q in the
-    trace, for playback); ``check_every`` (steps between checks of the clock and Ctrl-C).
-    """
-
-    def __init__(self, **fields: Any) -> None:
-        super().__init__()
-        for key, value in fields.items():
-            set_setting(self, key, value)
-
-    def replace(self, **fields: Any) -> Settings:
-        """A copy with some fields changed."""
-        return make_settings(self, fields)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {key: getattr(self, key) for key in SETTING_TYPES}
-
-    def __repr__(self) -> str:
-        body = ", ".join(f"{k}={v!r}" for k, v in self.to_dict().items())
-        return f"Settings({body})"
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, _core.Settings):
-            return NotImplemented
-        return all(getattr(self, k) == getattr(other, k) for k in SETTING_TYPES)
-
-    __hash__ = None  # type: ignore[assignment]
-
-
-def set_setting(settings: _core.Settings, key: str, value: Any) -> None:
-    """Set one field with a message that names it when the key or the type is wrong."""
-    if key not in SETTING_TYPES:
-        raise TypeError(_unknown_key_message("setting", key, list(SETTING_TYPES)))
-    kind = SETTING_TYPES[key]
-    is_bool = isinstance(value, (bool, np.bool_))
-    if is_bool != (kind == "bool"):
-        raise TypeError(f"setting '{key}' expects {kind}, got {type(value).__name__} {value!r}")
-    if kind == "int" and isinstance(value, (int, np.integer)) and not -(2**63) <= value < 2**63:
-        raise ValueError(f"setting '{key}' must fit in a 64-bit integer, got {value}")
-    if kind.startswith("float") and isinstance(value, (int, np.integer)):
-        value = float(value)
-    if is_bool:
-        value = bool(value)
-    try:
-        setattr(settings, key, value)
-    except TypeError:
-        raise TypeError(
-            f"setting '{key}' expects {SETTING_TYPES[key]}, got {type(value).__name__} {value!r}"
-        ) from None
+from ._checks import as_vector
+from ._scene import Scene, joint_values
+from ._settings import Settings, make_settings
 
 
 @dataclass(frozen=True)
@@ -269,45 +181,6 @@ class Result:
         }
 
 
-def _as_vector(value: Any, name: str, size: int, size_name: str) -> np.ndarray:
-    if isinstance(value, (str, bytes)) or np.iscomplexobj(value):
-        raise TypeError(
-            f"{name} must be a 1-D array of {size_name} = {size} real numbers, "
-            f"got {type(value).__name__}"
-        )
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(
-            f"{name} must be a 1-D array of {size_name} = {size} real numbers, "
-            f"got {type(value).__name__} {value!r}"
-        ) from None
-    if arr.ndim != 1 or arr.shape[0] != size:
-        raise ValueError(f"{name} must have shape ({size},) ({size_name}), got {arr.shape}")
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        raise ValueError(f"{name}[{bad[0]}] is {arr[bad[0]]}; every entry must be finite")
-    return arr
-
-
-def make_settings(settings: Any, overrides: Mapping[str, Any]) -> Settings:
-    """The settings of a solve: a copy of ``settings`` (None, Settings or a dict) with
-    ``overrides`` applied."""
-    if settings is None:
-        out = Settings()
-    elif isinstance(settings, _core.Settings):
-        out = Settings(**{k: getattr(settings, k) for k in SETTING_TYPES})
-    elif isinstance(settings, Mapping):
-        out = Settings(**settings)
-    else:
-        raise TypeError(
-            f"settings must be a pinsettle.Settings, a dict or None, got {type(settings).__name__}"
-        )
-    for key, value in overrides.items():
-        set_setting(out, key, value)
-    return out
-
-
 def _check_model(model: Any) -> None:
     if not isinstance(model, pinocchio.Model):
         raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
@@ -318,7 +191,7 @@ def kinetic_energies(model: pinocchio.Model, q: Any, v: Any) -> tuple[float, flo
     equal to 1/2 v^T M(q) v) and the simplified sum |v|^2 + |w|^2 over the bodies."""
     _check_model(model)
     return _core.kinetic_energies(
-        model, _as_vector(q, "q", model.nq, "model.nq"), _as_vector(v, "v", model.nv, "model.nv")
+        model, as_vector(q, "q", model.nq, "model.nq"), as_vector(v, "v", model.nv, "model.nv")
     )
 
 
@@ -326,13 +199,11 @@ def static_force(model: pinocchio.Model, q: Any) -> np.ndarray:
     """rnea(q, 0, 0): the net static generalized force under gravity (dim model.nv, N m or N).
     For a scene, ``scene.static_force(q)`` includes its springs and loads."""
     _check_model(model)
-    return _core.static_force(model, _as_vector(q, "q", model.nq, "model.nq"))
+    return _core.static_force(model, as_vector(q, "q", model.nq, "model.nq"))
 
 
 def static_residual(model: Any, q: Any) -> float:
     """max |net static generalized force| (N m or N) of a model under gravity or of a scene."""
-    from ._scene import Scene
-
     if isinstance(model, Scene):
         return model.residual(q)
     force = static_force(model, q)
@@ -366,17 +237,15 @@ def assess_stability(model: Any, q: Any) -> StabilityReport:
     """Stability of a rest at ``q`` of a ``pinocchio.Model`` under gravity or of a ``Scene``
     (all its elements; K on the free joints). Gravity's part of K comes from Pinocchio's
     analytic derivatives, the elements' part from central finite differences."""
-    from ._scene import Scene
-
     if isinstance(model, Scene):
-        q = _as_vector(q, "q", model.model.nq, "model.nq")
+        q = as_vector(q, "q", model.model.nq, "model.nq")
         compiled = model.compile(q)
         raw = _core.stiffness(
             compiled.model, q[compiled.q_index], compiled.elements, compiled.loops
         )
     else:
         _check_model(model)
-        raw = _core.stiffness(model, _as_vector(q, "q", model.nq, "model.nq"))
+        raw = _core.stiffness(model, as_vector(q, "q", model.nq, "model.nq"))
     return StabilityReport(**raw)
 
 
@@ -408,8 +277,6 @@ def solve(
         ValueError: a setting out of range, or a ``q0``/``v0`` of the wrong size, with a
             non-finite entry or a non-normalised quaternion; the message names it.
     """
-    from ._scene import Scene, joint_values
-
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
     if isinstance(model, Scene):
@@ -417,9 +284,9 @@ def solve(
         full = scene.model
         s = make_settings(scene.settings if settings is None else settings, overrides)
         s.check()
-        q_full = scene.q0() if q0 is None else _as_vector(q0, "q0", full.nq, "model.nq")
+        q_full = scene.q0() if q0 is None else as_vector(q0, "q0", full.nq, "model.nq")
         compiled = scene.compile(None if q0 is None else q_full)
-        v_full = np.zeros(full.nv) if v0 is None else _as_vector(v0, "v0", full.nv, "model.nv")
+        v_full = np.zeros(full.nv) if v0 is None else as_vector(v0, "v0", full.nv, "model.nv")
         locked_v = np.delete(v_full, compiled.v_index)
         if np.any(locked_v != 0.0):
             raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
@@ -444,8 +311,8 @@ def solve(
             raise ValueError("model has no degree of freedom: nothing to settle")
         s = make_settings(settings, overrides)
         s.check()
-        q = pinocchio.neutral(model) if q0 is None else _as_vector(q0, "q0", model.nq, "model.nq")
-        v = np.zeros(model.nv) if v0 is None else _as_vector(v0, "v0", model.nv, "model.nv")
+        q = pinocchio.neutral(model) if q0 is None else as_vector(q0, "q0", model.nq, "model.nq")
+        v = np.zeros(model.nv) if v0 is None else as_vector(v0, "v0", model.nv, "model.nv")
         raw = _core.solve(model, q, v, s, callback)
         raw["loops"] = 0
         naming = model

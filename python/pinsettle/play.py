@@ -31,8 +31,10 @@ from typing import Any
 import numpy as np
 import pinocchio
 
-from ._scene import Scene
+from ._scene import Scene, load_scene
 from ._solve import Result, solve
+from .robots import robots_dir
+from .scenes import scene_path
 
 #: What ``play`` installs: the optional extra.
 VIZ_INSTALL = "pip install 'pinsettle[viz]'"
@@ -204,8 +206,6 @@ def _visual_model(scene: Scene) -> pinocchio.GeometryModel | None:
         return None
     package_dirs = [str(Path(urdf).resolve().parent), str(Path(urdf).resolve().parent.parent)]
     try:
-        from .robots import robots_dir
-
         package_dirs.insert(0, str(robots_dir().parents[1]))  # .../share: example-robot-data/...
     except FileNotFoundError:
         pass
@@ -743,9 +743,6 @@ def _as_scene(scene: Any) -> Scene:
     if isinstance(scene, pinocchio.Model):
         return Scene(scene)
     if isinstance(scene, (str, os.PathLike)):
-        from ._scene import load_scene
-        from .scenes import scene_path
-
         return load_scene(scene_path(scene))
     raise TypeError(
         "scene must be a pinsettle.Scene, a pinocchio.Model, a scene file or a scene name, "

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pinocchio
 
-from ._solve import _unknown_key_message
+from ._checks import unknown_key_message
 
 # name -> (URDF path below example-robot-data/robots, root attached by a free-flyer joint)
 ROBOTS: dict[str, tuple[str, bool]] = {
@@ -69,7 +69,7 @@ def robot_names() -> list[str]:
 def robot_urdf(name: str) -> Path:
     """Path of the URDF of a robot of example-robot-data, by name."""
     if not isinstance(name, str) or name not in ROBOTS:
-        raise ValueError(_unknown_key_message("robot", str(name), robot_names()))
+        raise ValueError(unknown_key_message("robot", str(name), robot_names()))
     return robots_dir() / ROBOTS[name][0]
 
 

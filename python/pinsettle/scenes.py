@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._solve import _unknown_key_message
+from ._checks import unknown_key_message
 
 
 def scenes_dir() -> Path:
@@ -34,5 +34,5 @@ def scene_path(scene: str | Path) -> Path:
         raise FileNotFoundError(f"scene file not found: {path}")
     raise FileNotFoundError(
         f"no scene file '{scene}' here and no such scene in the library: "
-        + _unknown_key_message("scene", name, scene_names())
+        + unknown_key_message("scene", name, scene_names())
     )

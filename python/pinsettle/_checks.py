@@ -1,0 +1,38 @@
+"""Argument checks whose messages name what was wrong, shared by every module of the package.
+
+It imports nothing of the package, so that any module can use it without an import circle.
+"""
+
+from __future__ import annotations
+
+import difflib
+from typing import Any
+
+import numpy as np
+
+
+def unknown_key_message(kind: str, key: str, known: list[str]) -> str:
+    close = difflib.get_close_matches(key, known, n=1)
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
+    return f"unknown {kind} '{key}'{hint}; known {kind}s: {', '.join(known)}"
+
+
+def as_vector(value: Any, name: str, size: int, size_name: str) -> np.ndarray:
+    if isinstance(value, (str, bytes)) or np.iscomplexobj(value):
+        raise TypeError(
+            f"{name} must be a 1-D array of {size_name} = {size} real numbers, "
+            f"got {type(value).__name__}"
+        )
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"{name} must be a 1-D array of {size_name} = {size} real numbers, "
+            f"got {type(value).__name__} {value!r}"
+        ) from None
+    if arr.ndim != 1 or arr.shape[0] != size:
+        raise ValueError(f"{name} must have shape ({size},) ({size_name}), got {arr.shape}")
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise ValueError(f"{name}[{bad[0]}] is {arr[bad[0]]}; every entry must be finite")
+    return arr

@@ -9,6 +9,7 @@ import sys
 import time
 import webbrowser
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio
@@ -58,7 +59,7 @@ def _add_start_flag(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _setting_overrides(args: argparse.Namespace) -> dict:
+def _setting_overrides(args: argparse.Namespace) -> dict[str, Any]:
     keys = ["energy", "kt", "dt", "dt_safety", "err", "ds", "max_e", "max_steps", "max_time"]
     keys += ["backtrack", "polish", "scale_stiff_modes"]
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
@@ -96,7 +97,7 @@ def _parse_start(items: list[str]) -> dict[str, float | list[float]]:
     return out
 
 
-def _load_scene(args: argparse.Namespace) -> tuple:
+def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray | None]:
     """The scene of args.scene and the start of its --start flags (None: the scene's own)."""
     scene = pinsettle.load_scene(pinsettle.scene_path(args.scene))
     if not args.start:
@@ -133,7 +134,7 @@ def _speed(text: str) -> float:
         ) from None
 
 
-def _serve(viz: object) -> None:
+def _serve(viz: Any) -> None:
     """Keep the live server up until Ctrl-C or SIGTERM (then the caller closes it)."""
 
     def stop(signum: int, frame: object) -> None:
@@ -265,7 +266,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        status: int = args.func(args)
+        return status
     except (ValueError, TypeError, FileNotFoundError, IsADirectoryError) as error:
         print(f"pinsettle: error: {error}", file=sys.stderr)
         return 2

@@ -1,11 +1,17 @@
 """Type stubs of the C++ extension pinsettle._core (see pinsettle._solve for the public API)."""
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypedDict, type_check_only
 
 import numpy as np
 import numpy.typing as npt
 import pinocchio
+
+# The force elements and loop closures as pinsettle._scene._Compiled resolves them: tuples of
+# indices, points (arrays) and numbers, by kind ('joint_springs', 'springs', 'joint_loads',
+# 'point_loads').
+_Elements = dict[str, list[tuple[Any, ...]]]
+_Loops = list[tuple[Any, ...]]
 
 class Settings:
     dt: float | str
@@ -27,40 +33,65 @@ class Settings:
     def __init__(self, other: Settings | None = ...) -> None: ...
     def check(self) -> None: ...
 
+# The dicts the functions return (plain dicts at run time: these names exist only here).
+@type_check_only
+class _Stiffness(TypedDict):
+    stiffness_matrix: npt.NDArray[np.float64]
+    verdict: str
+    min_eigenvalue: float
+    neutral_directions: int
+    tolerance: float
+    eigenvalues: npt.NDArray[np.float64]
+    softest_direction: npt.NDArray[np.float64]
+    basis: npt.NDArray[np.float64]
+
+@type_check_only
+class _TimeScale(TypedDict):
+    omega_max: float
+    omega_unscaled: float
+    scaled_modes: int
+    damping_rate: float
+    critical_step: float
+
+@type_check_only
+class _LoopState(TypedDict):
+    error: npt.NDArray[np.float64]
+    jacobian: npt.NDArray[np.float64]
+    rank: int
+    basis: npt.NDArray[np.float64]
+
 def solve(
     model: pinocchio.Model,
-    q0: npt.NDArray[np.float64],
-    v0: npt.NDArray[np.float64],
+    q0: npt.ArrayLike,
+    v0: npt.ArrayLike,
     settings: Settings,
     callback: Callable[[], bool] | None = ...,
-    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
-    loops: list[tuple[Any, ...]] | None = ...,
+    elements: _Elements | None = ...,
+    loops: _Loops | None = ...,
 ) -> dict[str, Any]: ...
 def kinetic_energies(
-    model: pinocchio.Model, q: npt.NDArray[np.float64], v: npt.NDArray[np.float64]
+    model: pinocchio.Model, q: npt.ArrayLike, v: npt.ArrayLike
 ) -> tuple[float, float]: ...
 def static_force(
     model: pinocchio.Model,
-    q: npt.NDArray[np.float64],
-    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
-    loops: list[tuple[Any, ...]] | None = ...,
+    q: npt.ArrayLike,
+    elements: _Elements | None = ...,
+    loops: _Loops | None = ...,
 ) -> npt.NDArray[np.float64]: ...
 def stiffness(
     model: pinocchio.Model,
-    q: npt.NDArray[np.float64],
-    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
-    loops: list[tuple[Any, ...]] | None = ...,
-) -> dict[str, Any]: ...
+    q: npt.ArrayLike,
+    elements: _Elements | None = ...,
+    loops: _Loops | None = ...,
+) -> _Stiffness: ...
 def time_scale(
     model: pinocchio.Model,
-    q: npt.NDArray[np.float64],
-    elements: dict[str, list[tuple[Any, ...]]] | None = ...,
+    q: npt.ArrayLike,
+    elements: _Elements | None = ...,
     scale_stiff_modes: bool = ...,
-    loops: list[tuple[Any, ...]] | None = ...,
-) -> dict[str, float]: ...
-def loops(
-    model: pinocchio.Model, q: npt.NDArray[np.float64], loops: list[tuple[Any, ...]]
-) -> dict[str, Any]: ...
+    loops: _Loops | None = ...,
+) -> _TimeScale: ...
+def loops(model: pinocchio.Model, q: npt.ArrayLike, loops: _Loops) -> _LoopState: ...
 def assemble_loops(
-    model: pinocchio.Model, q: npt.NDArray[np.float64], loops: list[tuple[Any, ...]] | None
+    model: pinocchio.Model, q: npt.ArrayLike, loops: _Loops | None
 ) -> tuple[npt.NDArray[np.float64], float]: ...

@@ -13,25 +13,32 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from tornado.httpserver import HTTPServer
+    from tornado.web import Application
 
 HOST = "127.0.0.1"
 
 
-def _bridge_class():
+def _bridge_class() -> type[Any]:
     from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
-    class LoopbackBridge(ZMQWebSocketBridge):
+    class LoopbackBridge(ZMQWebSocketBridge):  # type: ignore[misc]  # meshcat: no types
         """meshcat's bridge with its web server bound to 127.0.0.1 (not every interface)."""
 
-        def make_app(self):
-            app = super().make_app()
+        def make_app(self) -> Application:
+            app: Application = super().make_app()
             listen = app.listen
 
-            def listen_on_loopback(port, **kwargs):
-                kwargs["address"] = HOST
-                return listen(port, **kwargs)
+            def listen_on_loopback(
+                port: int, address: str | None = None, **kwargs: Any
+            ) -> HTTPServer:
+                return listen(port, HOST, **kwargs)  # whatever address was asked for
 
-            app.listen = listen_on_loopback  # the bridge looks the method up on the instance
+            # The bridge looks the method up on the instance (mypy forbids assigning a method).
+            app.listen = listen_on_loopback  # type: ignore[method-assign]
             return app
 
     return LoopbackBridge

@@ -127,12 +127,12 @@ def _close(name: str, known: Sequence[str], kind: str) -> str:
 
 
 def _joint_kind(model: pinocchio.Model, j: int) -> str:
-    return model.joints[j].shortname()
+    return str(model.joints[j].shortname())
 
 
 def _is_angle_pair(model: pinocchio.Model, j: int) -> bool:
     """A continuous (unbounded revolute) joint: one DoF stored as (cos, sin)."""
-    return model.nvs[j] == 1 and model.nqs[j] == 2
+    return bool(model.nvs[j] == 1 and model.nqs[j] == 2)
 
 
 # --- the scene --------------------------------------------------------------------------------
@@ -210,7 +210,7 @@ class Scene:
         known = list(self.model.names)[1:]
         if joint not in known:
             raise SceneError(f"{name}: " + _close(joint, known, "joint"))
-        return self.model.getJointId(joint)
+        return int(self.model.getJointId(joint))
 
     def _frame_name(self, frame: Any, name: str) -> str:
         if not isinstance(frame, str):
@@ -356,6 +356,7 @@ class Scene:
             if effort is None:
                 raise SceneError(f"load on joint '{joint}': missing 'effort'")
             nv = self.model.nvs[j]
+            value: tuple[float, ...]
             if nv == 1:
                 value = (_number(effort, "effort"),)
             else:
@@ -428,7 +429,7 @@ class Scene:
 
     def q0(self) -> np.ndarray:
         """The start configuration of the full model (dim model.nq)."""
-        q = pinocchio.neutral(self.model)
+        q: np.ndarray = pinocchio.neutral(self.model)
         for joint, value in self._start.items():
             j = self.model.getJointId(joint)
             q[self.model.idx_qs[j] : self.model.idx_qs[j] + self.model.nqs[j]] = value
@@ -543,7 +544,7 @@ class _Compiled:
                     + "); such a spring exerts no net effort"
                 )
 
-        spec: dict[str, list] = {
+        spec: dict[str, list[tuple[Any, ...]]] = {
             "joint_springs": [
                 (model.getJointId(s.joint), s.stiffness, s.rest, s.damping)
                 for s in scene.joint_springs
@@ -607,7 +608,7 @@ class _Compiled:
             raise SceneError(str(error)) from None
 
     def full_q(self, q: np.ndarray) -> np.ndarray:
-        out = self.q_ref.copy()
+        out: np.ndarray = self.q_ref.copy()
         out[self.q_index] = q
         return out
 

@@ -26,7 +26,7 @@ import webbrowser
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 import pinocchio
@@ -35,6 +35,9 @@ from ._scene import Scene, load_scene
 from ._solve import Result, solve
 from .robots import robots_dir
 from .scenes import scene_path
+
+if TYPE_CHECKING:  # for annotations only: pyzmq comes with meshcat, when playing
+    import zmq
 
 #: What ``play`` installs: the optional extra.
 VIZ_INSTALL = "pip install 'pinsettle[viz]'"
@@ -90,6 +93,14 @@ def require(*modules: str) -> None:
 
 
 # --- the timeline: which poses are shown when -------------------------------------------------
+
+
+@overload
+def check_speed(speed: None) -> None: ...
+@overload
+def check_speed(speed: float) -> float: ...
+@overload
+def check_speed(speed: object) -> float | None: ...
 
 
 def check_speed(speed: Any) -> float | None:
@@ -358,7 +369,7 @@ def _helix(
 def _normal_mesh_class() -> type:
     import meshcat.geometry as mg
 
-    class MeshWithNormals(mg.TriangularMeshGeometry):
+    class MeshWithNormals(mg.TriangularMeshGeometry):  # type: ignore[misc]  # meshcat: no types
         """meshcat's triangle mesh with vertex normals (for a lit material)."""
 
         __slots__ = ["normals"]
@@ -367,8 +378,8 @@ def _normal_mesh_class() -> type:
             super().__init__(vertices, faces)
             self.normals = np.asarray(normals, dtype=np.float32)
 
-        def lower(self, object_data: Any) -> dict:
-            data = super().lower(object_data)
+        def lower(self, object_data: Any) -> dict[str, Any]:
+            data: dict[str, Any] = super().lower(object_data)
             data["data"]["attributes"]["normal"] = mg.pack_numpy_array(self.normals.T)
             return data
 
@@ -419,6 +430,7 @@ class _LiveServer:
                     chunk = os.read(self.process.stdout.fileno(), 4096)
                     if not chunk:
                         self.process.wait(timeout=5)
+                        assert self.process.stderr is not None
                         errors = self.process.stderr.read().decode(errors="replace").strip()
                         last = errors.splitlines()[-1] if errors else "no message"
                         raise RuntimeError(
@@ -460,7 +472,7 @@ class _Window:
         self.animation: bytes | None = None
         self.server = server
         self.web_url = server.web_url if server else None
-        self.socket = None
+        self.socket: zmq.Socket[bytes] | None = None
         if server is not None:
             import zmq
 
@@ -629,7 +641,7 @@ def _script_json(value: Any) -> str:
     return json.dumps(value).replace("<", "\\u003c").replace(">", "\\u003e")
 
 
-def _html(commands: list[bytes], animation: bytes | None, overlay: dict | None) -> str:
+def _html(commands: list[bytes], animation: bytes | None, overlay: dict[str, Any] | None) -> str:
     """A self-contained page: meshcat's viewer (inline), the scene's commands applied in
     order, the animation in its own <script id="pinsettle-animation">, an optional overlay."""
     import meshcat
@@ -669,7 +681,7 @@ def _html(commands: list[bytes], animation: bytes | None, overlay: dict | None) 
 def _visualizer_class() -> type:
     from pinocchio.visualize import MeshcatVisualizer
 
-    class PlaybackVisualizer(MeshcatVisualizer):
+    class PlaybackVisualizer(MeshcatVisualizer):  # type: ignore[misc]  # pinocchio: no types
         """Pinocchio's ``MeshcatVisualizer`` holding one playback (see ``pinsettle.play``).
 
         ``url`` is the live page (None without a server), ``html()`` the self-contained
@@ -723,7 +735,7 @@ def _visualizer_class() -> type:
         def __exit__(self, *exc: object) -> None:
             self.close()
 
-        def _overlay(self) -> dict:
+        def _overlay(self) -> dict[str, Any]:
             result = self.result
             status = f"{result.status}: {result.steps} steps, {result.peaks} damping events"
             return {
@@ -810,7 +822,7 @@ def _build(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
     key_frames = (timeline.times * FPS).tolist()
 
     def add_pose_tracks(path: Any, matrices: np.ndarray) -> None:
-        tracks = {"position": [], "quaternion": [], "scale": []}
+        tracks: dict[str, list[list[float]]] = {"position": [], "quaternion": [], "scale": []}
         for matrix in matrices:
             position, quaternion, scale = _decompose(matrix)
             tracks["position"].append(position)

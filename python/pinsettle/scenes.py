@@ -3,6 +3,7 @@ package, by name."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from ._checks import unknown_key_message
@@ -21,7 +22,7 @@ def scene_names() -> list[str]:
     return sorted(p.stem for p in scenes_dir().glob("*.toml"))
 
 
-def scene_path(scene: str | Path) -> Path:
+def scene_path(scene: str | os.PathLike[str]) -> Path:
     """A scene file: ``scene`` itself when it is an existing file, otherwise a scene of the
     library by name (``"pendulum"`` or ``"pendulum.toml"``)."""
     path = Path(scene)

@@ -15,10 +15,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
-#include <limits>
-#include <chrono>
 #include <cmath>
-#include <numeric>
 #include <sstream>
 #include <stdexcept>
 
@@ -147,6 +144,8 @@ namespace pinsettle
   , q_next_(model.nq)
   , tau_(Eigen::VectorXd::Zero(model.nv))
   , fext_(model.joints.size(), pinocchio::Force::Zero())
+  , window_(1, 0.)
+  , step_control_(model, loops_)
   {
     if (loops_ != nullptr)
     {
@@ -181,53 +180,6 @@ namespace pinsettle
     return solve(q0, Eigen::VectorXd::Zero(model_.nv), settings, forces, abort);
   }
 
-  namespace
-  {
-    // Keeps every other sample so that a full trace covers the run at twice the stride.
-    void decimate(std::vector<TraceSample> & trace)
-    {
-      std::size_t kept = 0;
-      for (std::size_t k = 0; k < trace.size(); k += 2)
-        trace[kept++] = trace[k];
-      trace.resize(kept);
-    }
-  } // namespace
-
-  namespace
-  {
-    // Kinetic energy ratio between consecutive steps, held for kBlowUpSteps steps in a row,
-    // that no resolved motion produces: with dt <= 2 / omega_max a physical instability grows
-    // the energy at most e^2 per step; the explicit integrator past its limit grows it faster.
-    constexpr double kBlowUpRatio = 10.;
-    constexpr int kBlowUpSteps = 10;
-    // Energies beyond this are treated like non-finite values (they soon are).
-    constexpr double kHugeEnergy = 1e150;
-    // Step halvings before the run is declared diverged.
-    constexpr int kMaxReductions = 30;
-    // Runaway test: the energy released and the distance travelled since the last reset must
-    // both grow by kRunawayRatio or more over each of kRunawayDoublings consecutive doublings of
-    // the run length.
-    constexpr double kRunawayRatio = 1.5;
-    constexpr int kRunawayDoublings = 10;
-    // The automatic step is re-estimated once the configuration moved this far (rad or m)
-    // since the last estimate.
-    constexpr double kFarMove = 0.1;
-    // Whether q is farther than distance (rad or m, max norm) from q_ref; work holds the tangent
-    // difference (dim model.nv), so that nothing is allocated.
-    bool movedBeyond(
-      const pinocchio::Model & model,
-      const Eigen::VectorXd & q_ref,
-      const Eigen::VectorXd & q,
-      Eigen::VectorXd & work,
-      double distance)
-    {
-      pinocchio::difference(model, q_ref, q, work);
-      return work.lpNorm<Eigen::Infinity>() > distance;
-    }
-    // Automatic step when nothing pulls, pushes or damps (its value does not matter then).
-    constexpr double kRestStep = 1e-3;
-  } // namespace
-
   Result Solver::solve(
     const Eigen::VectorXd & q0,
     const Eigen::VectorXd & v0,
@@ -235,9 +187,78 @@ namespace pinsettle
     const ForceModel * forces,
     const AbortCallback & abort)
   {
-    typedef std::chrono::steady_clock Clock;
-    const Clock::time_point start = Clock::now();
+    RunClock clock; // the wall time includes the checks and the set-up
+    Result result;
+    start(q0, v0, settings, forces, result);
+    clock.configure(settings, abort);
 
+    // A run that stops after evaluating the dynamics of a step counts that step.
+    Status status = Status::MaxSteps;
+    for (; step_ < settings.max_steps; ++step_)
+    {
+      if (clock.isDue(step_))
+      {
+        if (clock.mustStop(status))
+          break;
+        reestimateStep();
+      }
+      const StepEnergies e = evaluateDynamics();
+      if (guard_.isDiverging(e.exact, e.simplified, data.ddq, peaks_.hasPrevious()))
+      {
+        if (rollBack(result))
+          continue;
+        status = Status::Diverged;
+        ++step_;
+        break;
+      }
+      trace_.sample(step_, time_, e.exact, e.simplified, q_);
+      if (isRunaway(e, result))
+      {
+        status = Status::NoEquilibrium;
+        ++step_;
+        break;
+      }
+      if (isAssessedAtRest(e))
+      {
+        if (rest_.accepts())
+        {
+          status = Status::Converged;
+          ++step_;
+          break;
+        }
+        if (rest_.isUnstable())
+        {
+          pushOff(result);
+          continue;
+        }
+      }
+      if (peaks_.isPeak(e.signal))
+      {
+        damp(e, result);
+        continue; // re-evaluate the dynamics at the damped state
+      }
+      peaks_.record(e.signal);
+      if (!integrate())
+      {
+        if (rollBack(result))
+          continue;
+        status = Status::Diverged;
+        ++step_;
+        break;
+      }
+    }
+    finish(status, result);
+    result.wall_time = clock.elapsed();
+    return result;
+  }
+
+  void Solver::start(
+    const Eigen::VectorXd & q0,
+    const Eigen::VectorXd & v0,
+    const Settings & settings,
+    const ForceModel * forces,
+    Result & result)
+  {
     checkSettings(settings);
     if (model_.nv == 0)
       throw std::invalid_argument("model has no degree of freedom: nothing to settle");
@@ -247,460 +268,207 @@ namespace pinsettle
     if (forces != nullptr && forces->empty())
       forces = nullptr; // nothing to apply: step exactly like the bare core
 
-    const pinocchio::Model & model = model_;
-    const double err = settings.err;
-    const double max_e = settings.max_e;
-    const bool exact = settings.energy == EnergyMeasure::Exact;
-    const bool use_fext = forces != nullptr && forces->hasExternalForces();
-    const bool check_clock = std::isfinite(settings.max_time);
-    const bool tracing = settings.trace_every > 0;
-    const bool auto_dt = settings.dt == 0.;
-    double kt = settings.kt; // lowered to 0 when partial damping cannot hold a runaway
-
-    Result result;
+    settings_ = &settings;
+    forces_ = forces;
+    use_fext_ = forces != nullptr && forces->hasExternalForces();
+    kt_ = settings.kt;
+    step_ = 0;
+    time_ = 0.;
     q_ = q0;
-    pinocchio::normalize(model, q_); // q0 is normalised within 1e-6; make it exact
+    pinocchio::normalize(model_, q_); // q0 is normalised within 1e-6; make it exact
     v_ = v0;
-    result.mobility = model.nv;
-    if (loops_ != nullptr)
-    {
-      // Closed mechanism: start assembled, with a velocity the loops allow.
-      result.assembly_distance = assembleLoops(model, data, *loops_, q_);
-      const LoopMotion motion = computeLoopMotion(model, data, *loops_, q_);
-      result.mobility = static_cast<int>(motion.basis.cols());
-      if (result.mobility == 0)
-      {
-        std::ostringstream msg;
-        msg << "the loops leave the mechanism no degree of freedom (" << motion.rank
-            << " independent loop equations on model.nv = " << model.nv
-            << " joint velocities): it is a structure, with nothing to settle";
-        throw std::invalid_argument(msg.str());
-      }
-      v_ = motion.basis * (motion.basis.transpose() * v_);
-      stepper_->init(data, q_);
-    }
     tau_.setZero();
+    result.mobility = model_.nv;
+    if (loops_ != nullptr)
+      assemble(result);
 
-    // Stopping window: the last ds samples of the driving energy, as a ring buffer.
-    const std::size_t ds = static_cast<std::size_t>(settings.ds);
-    window_.assign(ds, 0.);
-    std::size_t window_pos = 0, window_count = 0;
+    peaks_ = PeakDetector(settings.err);
+    window_ = StoppingWindow(settings.ds, settings.max_e);
+    rest_.start(settings.ds, std::max(10. * settings.max_e, 1e-30), settings.energy);
+    trace_.start(settings);
+    runaway_.start(model_.nv, settings.ds);
+    step_control_.start(settings, forces);
+    if (step_control_.isAutomatic())
+      runaway_.addSwitchLoss(step_control_.estimate(data, q_, v_, step_));
+    guard_.start(q_, v_, time_);
+  }
 
-    std::int64_t trace_stride = settings.trace_every;
-    if (trace_stride > 0) // never more samples than the run can record
-      result.trace.reserve(
-        static_cast<std::size_t>(
-          std::min(settings.trace_capacity, settings.max_steps / trace_stride + 1)));
-
-    // e_prev2, e_prev: the two samples before the current one; fresh counts samples since the
-    // last damping event (the three-sample rule needs three samples of one undamped stretch).
-    double e_prev2 = 0., e_prev = 0.;
-    int fresh = 0;
-    // Steps in a row with exactly zero energy: a start at exact rest, where "energy decreasing"
-    // never holds and the stopping rule alone would run to max_steps.
-    std::int64_t still = 0;
-    // Step of the last stability assessment.
-    std::int64_t last_assessed = 0;
-    double time = 0.;
-    Status status = Status::MaxSteps;
-    std::int64_t step = 0;
-    StabilityReport report;
-
-    // Time step: fixed, or estimated from the time scales and re-estimated after large moves.
-    double dt = settings.dt, step_scale = 1.;
-    double h = dt; // the step actually taken last (dt, or less while moving fast)
-    std::int64_t estimated_at = 0;
-    const std::int64_t estimate_spacing =
-      std::max<std::int64_t>(settings.ds, static_cast<std::int64_t>(model.nv) * model.nv / 4);
-    // Kinetic energy of the added inertia of the scaled stiff modes (J).
-    const auto addedEnergy = [&](const TimeScale & scale) {
-      if (scale.stiff_masses.size() == 0)
-        return 0.;
-      return 0.5 * (scale.stiff_momenta * v_).cwiseAbs2().dot(scale.stiff_masses);
-    };
-    double switch_loss = 0.; // kinetic energy taken when the scaled modes change (J)
-    const auto estimateStep = [&]() {
-      const double added_before = addedEnergy(time_scale_);
-      time_scale_ = loops_ != nullptr
-                      ? computeTimeScale(model, data, *loops_, q_, forces)
-                      : computeTimeScale(model, data, q_, forces, settings.scale_stiff_modes);
-      const TimeScale & scale = time_scale_;
-      const Eigen::Index stiff = scale.stiff_masses.size();
-      // New modes change the kinetic energy at the same velocity; never let that add energy
-      // (it could pump the motion up, estimate after estimate): scale the velocity down
-      // instead, as a damping event would. data.M is fresh from computeTimeScale's crba.
-      const double added_after = addedEnergy(scale);
-      if (added_after > added_before)
-      {
-        const double real = 0.5 * v_.dot(data.M.selfadjointView<Eigen::Upper>() * v_);
-        const double ratio = (real + added_before) / (real + added_after);
-        v_ *= std::sqrt(ratio);
-        switch_loss += (1. - ratio) * (real + added_after);
-      }
-      else
-        switch_loss += added_before - added_after;
-      result.scaled_modes = std::max(result.scaled_modes, static_cast<int>(stiff));
-      stiff_y_.resize(model.nv, stiff);
-      stiff_s_.resize(stiff, stiff);
-      stiff_z_.resize(stiff);
-      stiff_p_.resize(stiff);
-      stiff_llt_ = Eigen::LLT<Eigen::MatrixXd>(stiff);
-      double next = std::isfinite(scale.critical_step)
-                      ? settings.dt_safety * scale.critical_step * step_scale
-                      : kRestStep * step_scale;
-      if (result.dt_estimates > 0)
-        next = std::min(next, 2. * dt); // grow gradually: the new estimate is local too
-      dt = next;
-      q_estimate_ = q_;
-      estimated_at = step;
-      ++result.dt_estimates;
-    };
-    const auto movedFar = [&]() {
-      return step - estimated_at >= estimate_spacing
-             && movedBeyond(model, q_estimate_, q_, moved_, kFarMove);
-    };
-    time_scale_ = TimeScale(); // no stiff-mode scaling with a fixed step
-    if (auto_dt)
-      estimateStep();
-
-    // Divergence guard: the last good state (start, after each damping event or push). A damping
-    // event becomes the new good state only if the stretch before it never grew the energy
-    // kBlowUpRatio-fold in one step: an explosion can pass a peak before it is caught.
-    q_good_ = q_;
-    v_good_ = v_;
-    double time_good = 0., e_exact_prev = 0.;
-    int blow_up = 0;
-    bool tainted = false;
-
-    // Runaway test (no equilibrium): the energy released by the potential since the last reset,
-    // the kinetic energy gained plus the energy taken out, sampled at doublings of the run.
-    std::int64_t reset_step = 0, next_sample = settings.ds;
-    double e_reset = 0., removed = 0., released_sample = 0., drift_sample = 0.;
-    int growing = 0;
-    // Net motion since the reset in tangent coordinates (a continuous joint unwrapped): a
-    // runaway also travels ever further, where a mechanism ringing in place stays put.
-    drift_.setZero(model.nv);
-    moved_.resize(model.nv);
-    const auto resetRunaway = [&](double e_now) {
-      reset_step = step;
-      next_sample = settings.ds;
-      e_reset = e_now;
-      removed = 0.;
-      switch_loss = 0.;
-      released_sample = 0.;
-      drift_sample = 0.;
-      growing = 0;
-      drift_.setZero();
-    };
-    const auto restart = [&]() // samples of an interrupted stretch say nothing any more
+  void Solver::assemble(Result & result)
+  {
+    // Closed mechanism: start assembled, with a velocity the loops allow.
+    result.assembly_distance = assembleLoops(model_, data, *loops_, q_);
+    const LoopMotion motion = computeLoopMotion(model_, data, *loops_, q_);
+    result.mobility = static_cast<int>(motion.basis.cols());
+    if (result.mobility == 0)
     {
-      still = 0;
-      fresh = 0;
-      window_count = 0;
-      blow_up = 0;
-      tainted = false;
-    };
-
-    // Back to the last good state with half the step; false once kMaxReductions are used up.
-    const auto rollBack = [&]() {
-      q_ = q_good_;
-      v_ = v_good_;
-      time = time_good;
-      if (result.dt_reductions == kMaxReductions)
-      {
-        status = Status::Diverged;
-        result.reason = "the integration kept blowing up (non-finite values or explosive energy "
-                        "growth) after the step was halved "
-                        + std::to_string(kMaxReductions) + " times";
-        return false;
-      }
-      ++result.dt_reductions;
-      if (tracing)
-        result.events.push_back(TraceEvent{step, time, EventKind::Rollback});
-      step_scale *= 0.5;
-      dt *= 0.5;
-      if (auto_dt) // the modes of the good state, and no longer step than the halved one
-      {
-        const double halved = dt;
-        estimateStep();
-        dt = std::min(dt, halved);
-      }
-      restart();
-      resetRunaway(0.);
-      return true;
-    };
-
-    for (; step < settings.max_steps; ++step)
-    {
-      if (step > 0 && step % settings.check_every == 0)
-      {
-        if (
-          check_clock
-          && std::chrono::duration<double>(Clock::now() - start).count() > settings.max_time)
-        {
-          status = Status::TimeLimit;
-          break;
-        }
-        if (abort && abort())
-        {
-          status = Status::Aborted;
-          break;
-        }
-        if (auto_dt && movedFar())
-          estimateStep();
-      }
-
-      if (forces != nullptr)
-      {
-        tau_.setZero();
-        if (use_fext)
-          for (pinocchio::Force & f : fext_)
-            f.setZero();
-        forces->computeForces(model, data, q_, v_, tau_, fext_);
-      }
-      if (loops_ != nullptr)
-        stepper_->dynamics(data, q_, v_, tau_, use_fext ? &fext_ : nullptr);
-      else if (use_fext)
-        pinocchio::aba(model, data, q_, v_, tau_, fext_);
-      else
-        pinocchio::aba(model, data, q_, v_, tau_);
-      // Both measures every step, from the body velocities ABA just computed.
-      const double e_exact = computeBodyKineticEnergy(model, data);
-      const double e_simple = computeSimplifiedKineticEnergy(model, data);
-      // With stiff modes scaled, the exact measure includes their added inertia: it is the
-      // energy the scaled system exchanges with its potential.
-      const Eigen::Index stiff = time_scale_.stiff_masses.size();
-      double e_added = 0.;
-      if (stiff > 0)
-      {
-        stiff_p_.noalias() = time_scale_.stiff_momenta * v_;
-        e_added = 0.5 * stiff_p_.cwiseAbs2().dot(time_scale_.stiff_masses);
-      }
-      const double e = exact ? e_exact + e_added : e_simple;
-
-      // Divergence guard: non-finite values, or an energy explosion no resolved motion makes.
-      blow_up =
-        fresh >= 1 && e_exact_prev > 0. && e_exact > kBlowUpRatio * e_exact_prev ? blow_up + 1 : 0;
-      tainted = tainted || blow_up > 0;
-      e_exact_prev = e_exact;
-      if (
-        !std::isfinite(e_exact) || !std::isfinite(e_simple) || e_exact > kHugeEnergy
-        || !data.ddq.allFinite() || blow_up >= kBlowUpSteps)
-      {
-        if (!rollBack())
-        {
-          ++step;
-          break;
-        }
-        continue;
-      }
-
-      if (trace_stride > 0 && step % trace_stride == 0)
-      {
-        if (result.trace.size() == static_cast<std::size_t>(settings.trace_capacity))
-        {
-          decimate(result.trace);
-          trace_stride *= 2;
-        }
-        if (step % trace_stride == 0)
-          result.trace.push_back(
-            TraceSample{
-              step, time, e_exact, e_simple,
-              settings.trace_configurations ? q_ : Eigen::VectorXd()});
-      }
-
-      // No equilibrium: the energy released since the reset keeps growing (by kRunawayRatio or
-      // more per doubling of the run, kRunawayDoublings times in a row): the potential falls
-      // without bound along the motion. Partial damping can lose to a potential that falls by
-      // a fixed amount per turn although a well exists (a pendulum under a constant torque just
-      // below what gravity holds), so the first verdict lowers kt to 0, which stops the
-      // mechanism at every peak, near the bottom of each well it passes; only a second runaway
-      // is reported.
-      if (step - reset_step == next_sample)
-      {
-        const double released = e_exact + e_added - e_reset + removed + switch_loss;
-        const double drift = drift_.lpNorm<Eigen::Infinity>();
-        growing = released_sample > 0. && released >= kRunawayRatio * released_sample
-                      && drift_sample > 0. && drift >= kRunawayRatio * drift_sample
-                    ? growing + 1
-                    : 0;
-        released_sample = released;
-        drift_sample = drift;
-        next_sample *= 2;
-        if (growing >= kRunawayDoublings)
-        {
-          if (kt > 0.)
-          {
-            kt = 0.;
-            result.reason = "kt lowered to 0: with partial damping the released energy kept "
-                            "growing";
-            resetRunaway(e_exact);
-          }
-          else
-          {
-            status = Status::NoEquilibrium;
-            std::ostringstream msg;
-            msg.precision(3);
-            msg << "the potential energy falls without bound: " << released << " J released and "
-                << drift << " (rad or m) travelled in " << (step - reset_step)
-                << " steps with kt = 0, both growing at least " << kRunawayRatio
-                << "x per doubling of the run " << kRunawayDoublings << " times in a row";
-            result.reason = msg.str();
-            ++step;
-            break;
-          }
-        }
-      }
-
-      // Stopping rule: energy decreasing and the sum of the last ds samples <= max_e.
-      window_[window_pos] = e;
-      window_pos = (window_pos + 1) % ds;
-      if (window_count < ds)
-        ++window_count;
-      const bool decreasing = fresh >= 1 && e < e_prev;
-      // e <= max_e is necessary for the sum to be; the exact sum is only formed then, since a
-      // running sum would keep the round-off of the early, large energies.
-      const bool quiet = window_count == ds && e <= max_e
-                         && std::accumulate(window_.begin(), window_.end(), 0.) <= max_e;
-      // Exact rest for a whole window: the start is an equilibrium (stable or not), where
-      // "energy decreasing" never holds.
-      still = e == 0. ? still + 1 : 0;
-      const bool exact_rest = still >= settings.ds;
-      // Creeping: quiet but still rising, as on a start at rest a round-off away from a saddle
-      // or a maximum; checked once a window, since a stable rest soon turns to decreasing.
-      const bool creeping = quiet && !decreasing && step - last_assessed >= settings.ds;
-
-      // At rest: accept a stable or neutral rest; from an unstable one (a saddle or a maximum)
-      // push the mechanism along the most negative stiffness direction with a tiny energy
-      // (10 max_e) and go on: it falls away to where it would really stay.
-      if ((quiet && decreasing) || exact_rest || creeping)
-      {
-        report = assess(q_, forces);
-        report_q_ = q_;
-        last_assessed = step;
-        if (report.verdict != Stability::Unstable && !creeping)
-        {
-          status = Status::Converged;
-          ++step;
-          break;
-        }
-        if (report.verdict == Stability::Unstable)
-        {
-          v_ = report.softest_direction;
-          const std::pair<double, double> unit = computeKineticEnergies(model, data, q_, v_);
-          const double e_unit = exact ? unit.first : unit.second;
-          const double e_push = std::max(10. * max_e, 1e-30);
-          v_ *= e_unit > 0. ? std::sqrt(e_push / e_unit) : 0.;
-          ++result.pushes;
-          if (tracing)
-            result.events.push_back(TraceEvent{step, time, EventKind::Push});
-          q_good_ = q_;
-          v_good_ = v_;
-          time_good = time;
-          restart();
-          resetRunaway(0.);
-          continue;
-        }
-        // Creeping near a stable or neutral rest: not at rest yet, go on.
-      }
-
-      // Peak: the middle of the last three samples exceeds both neighbours by more than err
-      // times itself.
-      if (fresh >= 2 && e_prev - e_prev2 > err * e_prev && e_prev - e > err * e_prev)
-      {
-        ++result.peaks;
-        if (tracing)
-          result.events.push_back(TraceEvent{step, time, EventKind::Damping});
-        if (settings.backtrack)
-        {
-          // Parabola through (-1, e_prev2), (0, e_prev), (1, e): its vertex lies x steps after
-          // the middle sample; the current sample is 1 - x steps past the peak.
-          const double x = (e_prev2 - e) / (2. * (e_prev2 - 2. * e_prev + e));
-          const double back = (1. - x) * h;
-          dq_.noalias() = -back * v_;
-          pinocchio::integrate(model, q_, dq_, q_next_);
-          q_.swap(q_next_);
-          if (loops_ != nullptr)
-            stepper_->project(data, q_, v_);
-          time -= back;
-        }
-        v_ *= kt;
-        removed += (1. - kt * kt) * (e_exact + e_added);
-        fresh = 0;
-        if (!tainted)
-        {
-          q_good_ = q_;
-          v_good_ = v_;
-          time_good = time;
-        }
-        if (auto_dt && movedFar())
-          estimateStep();
-        continue; // re-evaluate the dynamics at the damped state
-      }
-      e_prev2 = e_prev;
-      e_prev = e;
-      ++fresh;
-
-      // Stiff modes scaled: the acceleration under M + W^T diag(d) W instead of M (Woodbury):
-      // a' = a - Y (diag(d)^-1 + W Y)^-1 W a with Y = M^-1 W^T.
-      if (stiff > 0)
-      {
-        const Eigen::MatrixXd & W = time_scale_.stiff_momenta;
-        dq_ = data.ddq; // kept aside from computeMinverse's passes
-        pinocchio::computeMinverse(model, data, q_);
-        stiff_y_.noalias() = data.Minv.selfadjointView<Eigen::Upper>() * W.transpose();
-        stiff_s_.noalias() = W * stiff_y_;
-        stiff_s_.diagonal() += time_scale_.stiff_masses.cwiseInverse();
-        stiff_llt_.compute(stiff_s_);
-        stiff_z_.noalias() = W * dq_;
-        stiff_llt_.solveInPlace(stiff_z_);
-        data.ddq = dq_;
-        data.ddq.noalias() -= stiff_y_ * stiff_z_;
-      }
-
-      // Semi-implicit Euler on the configuration manifold.
-      // The automatic step also bounds the turn per step to dt_safety (rad or m): velocity-
-      // dependent forces (Coriolis, centrifugal) stiffen fast motion, which K does not see.
-      h = dt;
-      if (auto_dt)
-      {
-        const double speed = v_.lpNorm<Eigen::Infinity>();
-        if (speed * h > settings.dt_safety)
-          h = settings.dt_safety / speed;
-      }
-      v_.noalias() += h * data.ddq;
-      dq_.noalias() = h * v_;
-      pinocchio::integrate(model, q_, dq_, q_next_);
-      if (!q_next_.allFinite() || !v_.allFinite())
-      {
-        if (!rollBack())
-        {
-          ++step;
-          break;
-        }
-        continue;
-      }
-      q_.swap(q_next_);
-      if (loops_ != nullptr) // back onto the loops, and a velocity they allow
-        stepper_->project(data, q_, v_);
-      drift_ += dq_;
-      time += h;
+      std::ostringstream msg;
+      msg << "the loops leave the mechanism no degree of freedom (" << motion.rank
+          << " independent loop equations on model.nv = " << model_.nv
+          << " joint velocities): it is a structure, with nothing to settle";
+      throw std::invalid_argument(msg.str());
     }
+    v_ = motion.basis * (motion.basis.transpose() * v_);
+    stepper_->init(data, q_);
+  }
 
+  void Solver::reestimateStep()
+  {
+    if (step_control_.isEstimateDue(q_, step_))
+      runaway_.addSwitchLoss(step_control_.estimate(data, q_, v_, step_));
+  }
+
+  Solver::StepEnergies Solver::evaluateDynamics()
+  {
+    if (forces_ != nullptr)
+    {
+      tau_.setZero();
+      if (use_fext_)
+        for (pinocchio::Force & f : fext_)
+          f.setZero();
+      forces_->computeForces(model_, data, q_, v_, tau_, fext_);
+    }
+    if (loops_ != nullptr)
+      stepper_->dynamics(data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
+    else if (use_fext_)
+      pinocchio::aba(model_, data, q_, v_, tau_, fext_);
+    else
+      pinocchio::aba(model_, data, q_, v_, tau_);
+    // Both measures every step, from the body velocities the dynamics just computed. With stiff
+    // modes scaled, the exact signal includes their added inertia: it is the energy the scaled
+    // system exchanges with its potential.
+    StepEnergies e;
+    e.exact = computeBodyKineticEnergy(model_, data);
+    e.simplified = computeSimplifiedKineticEnergy(model_, data);
+    e.added = step_control_.addedEnergy(v_);
+    e.signal = settings_->energy == EnergyMeasure::Exact ? e.exact + e.added : e.simplified;
+    return e;
+  }
+
+  void Solver::restartStretch()
+  {
+    peaks_.restart();
+    window_.restart();
+    guard_.restart();
+  }
+
+  bool Solver::rollBack(Result & result)
+  {
+    if (!guard_.rollBack(q_, v_, time_))
+    {
+      result.reason = "the integration kept blowing up (non-finite values or explosive energy "
+                      "growth) after the step was halved "
+                      + std::to_string(DivergenceGuard::kMaxReductions) + " times";
+      return false;
+    }
+    trace_.event(step_, time_, EventKind::Rollback);
+    step_control_.halve(data, q_, v_, step_); // what it takes is forgotten by the reset below
+    restartStretch();
+    runaway_.reset(step_, 0.);
+    return true;
+  }
+
+  bool Solver::isRunaway(const StepEnergies & e, Result & result)
+  {
+    if (!runaway_.isDue(step_) || !runaway_.sample(e.exact + e.added))
+      return false;
+    // Partial damping can lose to a potential that falls by a fixed amount per turn although a
+    // well exists (a pendulum under a constant torque just below what gravity holds): the first
+    // verdict lowers kt to 0, which stops the mechanism at every peak, near the bottom of each
+    // well it passes; only a second runaway is reported.
+    if (kt_ > 0.)
+    {
+      kt_ = 0.;
+      result.reason = "kt lowered to 0: with partial damping the released energy kept growing";
+      runaway_.reset(step_, e.exact);
+      return false;
+    }
+    std::ostringstream msg;
+    msg.precision(3);
+    msg << "the potential energy falls without bound: " << runaway_.released()
+        << " J released and " << runaway_.drift() << " (rad or m) travelled in "
+        << runaway_.stepsSinceReset(step_) << " steps with kt = 0, both growing at least "
+        << RunawayMonitor::kRunawayRatio << "x per doubling of the run "
+        << RunawayMonitor::kRunawayDoublings << " times in a row";
+    result.reason = msg.str();
+    return true;
+  }
+
+  bool Solver::isAssessedAtRest(const StepEnergies & e)
+  {
+    window_.record(e.signal);
+    const bool quiet = window_.isQuiet(e.signal);
+    if (!rest_.isDue(quiet, peaks_.isDecreasing(e.signal), window_.isExactRest(), step_))
+      return false;
+    rest_.record(assess(q_, forces_), q_, step_);
+    return true;
+  }
+
+  void Solver::pushOff(Result & result)
+  {
+    rest_.push(model_, data, q_, v_);
+    ++result.pushes;
+    trace_.event(step_, time_, EventKind::Push);
+    guard_.keep(q_, v_, time_);
+    restartStretch();
+    runaway_.reset(step_, 0.);
+  }
+
+  void Solver::damp(const StepEnergies & e, Result & result)
+  {
+    ++result.peaks;
+    trace_.event(step_, time_, EventKind::Damping);
+    if (settings_->backtrack)
+    {
+      const double back = peaks_.stepsPastPeak(e.signal) * step_control_.lastStep();
+      dq_.noalias() = -back * v_;
+      pinocchio::integrate(model_, q_, dq_, q_next_);
+      q_.swap(q_next_);
+      if (loops_ != nullptr)
+        stepper_->project(data, q_, v_);
+      time_ -= back;
+    }
+    v_ *= kt_;
+    runaway_.addRemoved((1. - kt_ * kt_) * (e.exact + e.added));
+    peaks_.restart();
+    guard_.keepIfClean(q_, v_, time_);
+    reestimateStep();
+  }
+
+  bool Solver::integrate()
+  {
+    // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
+    step_control_.correctAcceleration(data, q_);
+    const double h = step_control_.nextStep(v_);
+    integrateSemiImplicitEuler(model_, q_, v_, data.ddq, h, dq_, q_next_);
+    if (!q_next_.allFinite() || !v_.allFinite())
+      return false;
+    q_.swap(q_next_);
+    if (loops_ != nullptr) // back onto the loops, and a velocity they allow
+      stepper_->project(data, q_, v_);
+    runaway_.addMotion(dq_);
+    time_ += h;
+    return true;
+  }
+
+  void Solver::finish(Status status, Result & result)
+  {
     result.status = status;
-    result.steps = step;
-    result.sim_time = time;
-    result.dt = dt;
-    result.trace_stride = trace_stride;
+    result.steps = step_;
+    result.sim_time = time_;
+    result.dt = step_control_.dt();
+    result.dt_estimates = step_control_.estimates();
+    result.dt_reductions = guard_.reductions();
+    result.scaled_modes = step_control_.scaledModes();
+    trace_.finish(result);
     result.q = q_;
     result.v = v_;
-    result.residual = staticForce(q_, forces).lpNorm<Eigen::Infinity>();
+    result.residual = staticForce(q_, forces_).lpNorm<Eigen::Infinity>();
     result.residual_before_polish = result.residual;
-    if (report.verdict == Stability::Unknown || report_q_ != q_)
-      report = assess(q_, forces);
-    if (settings.polish && status == Status::Converged)
-      polish(report, forces, result);
-    const std::pair<double, double> energies = computeKineticEnergies(model, data, result.q, v_);
+    StabilityReport report = rest_.isAssessed(q_) ? rest_.report() : assess(q_, forces_);
+    if (settings_->polish && status == Status::Converged)
+      polish(report, forces_, result);
+    const std::pair<double, double> energies =
+      computeKineticEnergies(model_, data, result.q, v_);
     result.kinetic_energy = energies.first;
     result.simplified_kinetic_energy = energies.second;
     result.stability = report.verdict;
@@ -708,9 +476,9 @@ namespace pinsettle
     result.neutral_directions = report.neutral_directions;
     if (loops_ != nullptr)
       result.constraint_error =
-        computeLoopError(model, data, *loops_, result.q).lpNorm<Eigen::Infinity>();
-    result.wall_time = std::chrono::duration<double>(Clock::now() - start).count();
-    return result;
+        computeLoopError(model_, data, *loops_, result.q).lpNorm<Eigen::Infinity>();
+    settings_ = nullptr;
+    forces_ = nullptr;
   }
 
   void Solver::polish(StabilityReport & report, const ForceModel * forces, Result & result)

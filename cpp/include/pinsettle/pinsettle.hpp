@@ -5,14 +5,17 @@
 #ifndef __pinsettle_pinsettle_hpp__
 #define __pinsettle_pinsettle_hpp__
 
+#include "pinsettle/damping.hpp"
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/forces.hpp"
 #include "pinsettle/loops.hpp"
+#include "pinsettle/monitors.hpp"
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"
+#include "pinsettle/step-control.hpp"
 #include "pinsettle/urdf.hpp"
 
 #endif // ifndef __pinsettle_pinsettle_hpp__

@@ -5,24 +5,21 @@
 #ifndef __pinsettle_solver_hpp__
 #define __pinsettle_solver_hpp__
 
+#include "pinsettle/damping.hpp"
 #include "pinsettle/forces.hpp"
 #include "pinsettle/loops.hpp"
-#include "pinsettle/stability.hpp"
+#include "pinsettle/monitors.hpp"
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
+#include "pinsettle/stability.hpp"
+#include "pinsettle/step-control.hpp"
 
-#include <functional>
 #include <memory>
-#include <vector>
 
 namespace pinsettle
 {
 
   class LoopStepper;
-
-  /// \brief Called every Settings::check_every steps; returning true stops the run with
-  /// Status::Aborted and keeps the current state.
-  typedef std::function<bool()> AbortCallback;
 
   ///
   /// \brief Check a configuration given by a user.
@@ -93,6 +90,11 @@ namespace pinsettle
   /// The solver owns its pinocchio::Data and a workspace sized for the model; the step loop does
   /// not allocate. The model must outlive the solver.
   ///
+  /// Each concern of the loop is a part with its own state: the peak rule (PeakDetector), the
+  /// stopping rule (StoppingWindow), the time step (StepController), the divergence guard
+  /// (DivergenceGuard), the no-equilibrium test (RunawayMonitor), the stability check at rest
+  /// (RestCheck), the trace (TraceRecorder) and the clock (RunClock).
+  ///
   /// With loop closures (LoopConstraints) each step runs Pinocchio's constrained forward dynamics
   /// (pinocchio::constraintDynamics) instead of aba, then projects q onto the loops (Gauss-Newton
   /// to 1e-13) and the velocity onto the motions they allow; the residual, the stability verdict,
@@ -146,6 +148,34 @@ namespace pinsettle
     pinocchio::Data data;
 
   private:
+    /// The energies of one step, from the body velocities of its dynamics.
+    struct StepEnergies
+    {
+      double exact;      // J, the real bodies
+      double simplified; // sum |v|^2 + |w|^2
+      double added;      // J, the scaled stiff modes' added inertia
+      double signal;     // what the peak and stopping rules watch
+    };
+
+    // The steps of a run, in the order the loop takes them.
+    void start(
+      const Eigen::VectorXd & q0,
+      const Eigen::VectorXd & v0,
+      const Settings & settings,
+      const ForceModel * forces,
+      Result & result);
+    void assemble(Result & result);
+    void reestimateStep();
+    StepEnergies evaluateDynamics();
+    void restartStretch();
+    bool rollBack(Result & result);
+    bool isRunaway(const StepEnergies & e, Result & result);
+    bool isAssessedAtRest(const StepEnergies & e);
+    void pushOff(Result & result);
+    void damp(const StepEnergies & e, Result & result);
+    bool integrate();
+    void finish(Status status, Result & result);
+
     // Newton steps from the converged result.q; keeps them only if the rest stays of the same
     // kind (report) and close.
     void polish(StabilityReport & report, const ForceModel * forces, Result & result);
@@ -157,17 +187,27 @@ namespace pinsettle
     const pinocchio::Model & model_;
     const LoopConstraints * loops_;
     std::unique_ptr<LoopStepper> stepper_;
+
+    // The run in progress: its inputs and where it is.
+    const Settings * settings_ = nullptr;
+    const ForceModel * forces_ = nullptr;
+    bool use_fext_ = false;
+    double kt_ = 0.; // lowered to 0 when partial damping cannot hold a runaway
+    std::int64_t step_ = 0;
+    double time_ = 0.;
+
     // Workspace, sized once for the model.
-    Eigen::VectorXd q_, v_, dq_, q_next_, tau_, report_q_, q_estimate_, q_good_, v_good_, drift_,
-      moved_;
-    // The last automatic step estimate (its stiff-mode scaling is applied at every step) and the
-    // workspace of that scaling, sized at each estimate.
-    TimeScale time_scale_;
-    Eigen::MatrixXd stiff_y_, stiff_s_;
-    Eigen::VectorXd stiff_z_, stiff_p_;
-    Eigen::LLT<Eigen::MatrixXd> stiff_llt_;
+    Eigen::VectorXd q_, v_, dq_, q_next_, tau_;
     ForceVector fext_;
-    std::vector<double> window_;
+
+    // The parts of the loop, each with its own state.
+    PeakDetector peaks_;
+    StoppingWindow window_;
+    StepController step_control_;
+    DivergenceGuard guard_;
+    RunawayMonitor runaway_;
+    RestCheck rest_;
+    TraceRecorder trace_;
   };
 
 } // namespace pinsettle

@@ -1,0 +1,317 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_monitors_hpp__
+#define __pinsettle_monitors_hpp__
+
+#include "pinsettle/result.hpp"
+#include "pinsettle/settings.hpp"
+#include "pinsettle/stability.hpp"
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+namespace pinsettle
+{
+
+  /// \brief Called every Settings::check_every steps; returning true stops the run with
+  /// Status::Aborted and keeps the current state.
+  typedef std::function<bool()> AbortCallback;
+
+  ///
+  /// \brief The wall clock and the abort callback, polled every Settings::check_every steps.
+  ///
+  class RunClock
+  {
+  public:
+    /// Starts the clock.
+    RunClock();
+
+    /// \brief Take the budget and the callback of a run (the clock keeps running).
+    void configure(const Settings & settings, const AbortCallback & abort);
+
+    /// \brief Whether step is one at which the clock and the callback are polled.
+    bool isDue(std::int64_t step) const
+    {
+      return step > 0 && step % check_every_ == 0;
+    }
+
+    ///
+    /// \brief Poll the clock, then the callback.
+    /// \param[out] status Status::TimeLimit or Status::Aborted when the run must stop.
+    /// \return Whether the run must stop.
+    ///
+    bool mustStop(Status & status) const;
+
+    /// \brief Seconds since the clock started.
+    double elapsed() const;
+
+  private:
+    typedef std::chrono::steady_clock Clock;
+    Clock::time_point start_;
+    std::int64_t check_every_ = 1;
+    double max_time_ = 0.;
+    bool check_clock_ = false;
+    const AbortCallback * abort_ = nullptr;
+  };
+
+  ///
+  /// \brief Divergence guard: watches each step for non-finite values or an energy explosion
+  /// that no resolved motion makes, and keeps the last good state to roll back to.
+  ///
+  /// The good state is the start, then the state after each push and after each damping event
+  /// whose stretch never grew the energy kBlowUpRatio-fold in one step (an explosion can pass a
+  /// peak before it is caught). The solver halves its step at each roll-back.
+  ///
+  class DivergenceGuard
+  {
+  public:
+    /// Kinetic energy ratio between consecutive steps, held for kBlowUpSteps steps in a row,
+    /// that no resolved motion produces: with dt <= 2 / omega_max a physical instability grows
+    /// the energy at most e^2 per step; the explicit integrator past its limit grows it faster.
+    static constexpr double kBlowUpRatio = 10.;
+    static constexpr int kBlowUpSteps = 10;
+    /// Energies beyond this (J) are treated like non-finite values (they soon are).
+    static constexpr double kHugeEnergy = 1e150;
+    /// Roll-backs before the run is declared diverged.
+    static constexpr int kMaxReductions = 30;
+
+    /// \brief Start a run at the good state (q, v, time); sizes the memory of the state.
+    void start(const Eigen::VectorXd & q, const Eigen::VectorXd & v, double time);
+
+    ///
+    /// \brief Look at one step's values; call once per step, after the dynamics.
+    ///
+    /// \param[in] e_exact The exact kinetic energy (J).
+    /// \param[in] e_simple The simplified energy.
+    /// \param[in] ddq The joint acceleration (dim model.nv).
+    /// \param[in] continued Whether the previous step belongs to the same undamped stretch.
+    /// \return Whether the step blew up: roll back.
+    ///
+    bool isDiverging(double e_exact, double e_simple, const Eigen::VectorXd & ddq, bool continued);
+
+    /// \brief Make (q, v, time) the good state (after a push).
+    void keep(const Eigen::VectorXd & q, const Eigen::VectorXd & v, double time);
+
+    /// \brief Make (q, v, time) the good state unless the stretch that led to it grew
+    /// suspiciously (after a damping event).
+    void keepIfClean(const Eigen::VectorXd & q, const Eigen::VectorXd & v, double time);
+
+    ///
+    /// \brief Restore the good state.
+    /// \return false once kMaxReductions roll-backs were made before this one (the state is
+    ///         restored all the same): the run has diverged.
+    ///
+    bool rollBack(Eigen::VectorXd & q, Eigen::VectorXd & v, double & time);
+
+    /// \brief Forget the growth seen in the interrupted stretch.
+    void restart()
+    {
+      blow_up_ = 0;
+      tainted_ = false;
+    }
+
+    /// \brief Roll-backs made.
+    int reductions() const
+    {
+      return reductions_;
+    }
+
+  private:
+    Eigen::VectorXd q_good_, v_good_;
+    double time_good_ = 0., e_exact_prev_ = 0.;
+    int blow_up_ = 0, reductions_ = 0;
+    bool tainted_ = false;
+  };
+
+  ///
+  /// \brief Runaway monitor (no equilibrium): the energy released by the potential since the
+  /// last reset (kinetic energy gained plus energy taken out) and the net motion since then,
+  /// sampled at doublings of the run length.
+  ///
+  /// When both grow by kRunawayRatio or more over kRunawayDoublings doublings in a row, the
+  /// potential falls without bound along the motion; a mechanism ringing in place stays put.
+  ///
+  class RunawayMonitor
+  {
+  public:
+    static constexpr double kRunawayRatio = 1.5;
+    static constexpr int kRunawayDoublings = 10;
+
+    ///
+    /// \brief Start a run: sizes the memory of the net motion.
+    /// \param[in] nv Tangent dimension (model.nv).
+    /// \param[in] first_sample Steps from a reset to the first sample (Settings::ds).
+    ///
+    void start(Eigen::Index nv, std::int64_t first_sample);
+
+    /// \brief Start counting again at step, with the kinetic energy e (J) there.
+    void reset(std::int64_t step, double e);
+
+    /// \brief Energy taken out by a damping event (J).
+    void addRemoved(double e)
+    {
+      removed_ += e;
+    }
+
+    /// \brief Kinetic energy taken (or given back, negative) by a change of the scaled stiff
+    /// modes (J).
+    void addSwitchLoss(double e)
+    {
+      switch_loss_ += e;
+    }
+
+    /// \brief A step's motion dq (dim model.nv, tangent, rad or m).
+    void addMotion(const Eigen::VectorXd & dq)
+    {
+      drift_ += dq;
+    }
+
+    /// \brief Whether step is a sampling step.
+    bool isDue(std::int64_t step) const
+    {
+      return step - reset_step_ == next_sample_;
+    }
+
+    ///
+    /// \brief Take a sample; call when isDue(step).
+    /// \param[in] e The kinetic energy now (J, the stiff modes' added inertia included).
+    /// \return Whether both the released energy and the net motion grew kRunawayDoublings times
+    ///         in a row: a runaway.
+    ///
+    bool sample(double e);
+
+    /// \brief What the last sample saw: energy released (J), net motion (rad or m, max norm),
+    /// steps since the reset.
+    double released() const
+    {
+      return released_sample_;
+    }
+    double drift() const
+    {
+      return drift_sample_;
+    }
+    std::int64_t stepsSinceReset(std::int64_t step) const
+    {
+      return step - reset_step_;
+    }
+
+  private:
+    std::int64_t first_sample_ = 1, reset_step_ = 0, next_sample_ = 1;
+    double e_reset_ = 0., removed_ = 0., switch_loss_ = 0., released_sample_ = 0.,
+           drift_sample_ = 0.;
+    int growing_ = 0;
+    // Net motion since the reset in tangent coordinates (a continuous joint unwrapped).
+    Eigen::VectorXd drift_;
+  };
+
+  ///
+  /// \brief Rest check: when the energy signals call for a stability assessment, whether the
+  /// assessed rest ends the run, and the push off an unstable one.
+  ///
+  /// The signals: quiet and decreasing (the stopping rule); a whole window at exact rest (a
+  /// start on an equilibrium); quiet but still rising, once a window (creeping away from a
+  /// saddle a round-off off). A stable or neutral rest ends the run unless it was only creeping;
+  /// an unstable one (a saddle, a maximum) is pushed along its most negative stiffness direction
+  /// with a tiny energy, so that it falls away to where the mechanism would really stay.
+  ///
+  class RestCheck
+  {
+  public:
+    ///
+    /// \param[in] window Steps between two assessments of a creeping rest (Settings::ds).
+    /// \param[in] push_energy Energy of a push (unit of the energy signal).
+    /// \param[in] measure The energy signal.
+    ///
+    void start(std::int64_t window, double push_energy, EnergyMeasure measure);
+
+    /// \brief Whether the signals call for an assessment at step.
+    bool isDue(bool quiet, bool decreasing, bool exact_rest, std::int64_t step);
+
+    /// \brief Keep the assessment of q, made at step.
+    void record(const StabilityReport & report, const Eigen::VectorXd & q, std::int64_t step);
+
+    /// \brief Whether the rest just assessed ends the run.
+    bool accepts() const
+    {
+      return report_.verdict != Stability::Unstable && !creeping_;
+    }
+
+    /// \brief Whether the rest just assessed must be pushed off.
+    bool isUnstable() const
+    {
+      return report_.verdict == Stability::Unstable;
+    }
+
+    ///
+    /// \brief The push: v along the assessed softest direction, scaled to the push energy.
+    /// \param[in] q The configuration assessed (dim model.nq).
+    /// \param[out] v The joint velocity (dim model.nv).
+    ///
+    void push(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q,
+      Eigen::VectorXd & v) const;
+
+    /// \brief The last assessment, and whether it was made at q.
+    const StabilityReport & report() const
+    {
+      return report_;
+    }
+    bool isAssessed(const Eigen::VectorXd & q) const
+    {
+      return report_.verdict != Stability::Unknown && report_q_ == q;
+    }
+
+  private:
+    std::int64_t window_ = 1, last_assessed_ = 0;
+    double push_energy_ = 0.;
+    EnergyMeasure measure_ = EnergyMeasure::Exact;
+    bool creeping_ = false;
+    StabilityReport report_;
+    Eigen::VectorXd report_q_;
+  };
+
+  ///
+  /// \brief The optional trace: energy samples every trace_every steps in bounded memory (when
+  /// full, every other sample is dropped and the stride doubles) and every velocity event.
+  ///
+  class TraceRecorder
+  {
+  public:
+    /// \brief Start a run's trace (Settings::trace_every 0: nothing is recorded).
+    void start(const Settings & settings);
+
+    /// \brief Record a sample at step when it falls on the stride.
+    void sample(
+      std::int64_t step,
+      double time,
+      double e_exact,
+      double e_simple,
+      const Eigen::VectorXd & q);
+
+    /// \brief Record a velocity event (when tracing).
+    void event(std::int64_t step, double time, EventKind kind)
+    {
+      if (tracing_)
+        events_.push_back(TraceEvent{step, time, kind});
+    }
+
+    /// \brief Hand the trace over to the result.
+    void finish(Result & result);
+
+  private:
+    bool tracing_ = false, configurations_ = false;
+    std::int64_t stride_ = 0;
+    std::size_t capacity_ = 0;
+    std::vector<TraceSample> samples_;
+    std::vector<TraceEvent> events_;
+  };
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_monitors_hpp__

@@ -1,0 +1,173 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_step_control_hpp__
+#define __pinsettle_step_control_hpp__
+
+#include "pinsettle/loops.hpp"
+#include "pinsettle/settings.hpp"
+#include "pinsettle/stability.hpp"
+
+#include <Eigen/Cholesky>
+
+#include <cstdint>
+
+namespace pinsettle
+{
+
+  ///
+  /// \brief One step of semi-implicit Euler on the configuration manifold:
+  /// v += h a, then q_next = integrate(q, h v).
+  ///
+  /// \param[in] q The configuration (dim model.nq).
+  /// \param[in,out] v The joint velocity (dim model.nv).
+  /// \param[in] a The joint acceleration (dim model.nv).
+  /// \param[in] h The time step (s).
+  /// \param[out] dq The tangent motion h v of the step (dim model.nv).
+  /// \param[out] q_next The new configuration (dim model.nq).
+  ///
+  void integrateSemiImplicitEuler(
+    const pinocchio::Model & model,
+    const Eigen::VectorXd & q,
+    Eigen::VectorXd & v,
+    const Eigen::VectorXd & a,
+    double h,
+    Eigen::VectorXd & dq,
+    Eigen::VectorXd & q_next);
+
+  ///
+  /// \brief The step-size control: a fixed step, or the automatic one with its re-estimates and
+  /// the scaling of stiff modes.
+  ///
+  /// The automatic step is dt_safety times the stability limit of the mechanism linearised where
+  /// it is (computeTimeScale), estimated at the start and again once the configuration has moved
+  /// kFarMove since the last estimate (not sooner than a window later); it grows at most
+  /// twofold per estimate, since an estimate is local too. Each step is further bounded so that
+  /// no joint turns more than dt_safety (rad or m): velocity-dependent forces stiffen fast
+  /// motion, which the stiffness matrix does not see. With stiff-mode scaling, the modes far
+  /// stiffer than the rest get a constant added inertia (TimeScale::stiff_masses): the solver
+  /// corrects each acceleration for it (correctAcceleration) and counts its kinetic energy
+  /// (addedEnergy). A roll-back halves the step for the rest of the run.
+  ///
+  /// Its memory is sized once per model and per estimate; a step allocates nothing.
+  ///
+  class StepController
+  {
+  public:
+    /// Distance (rad or m, max norm) moved since the last estimate that calls for a new one.
+    static constexpr double kFarMove = 0.1;
+    /// Automatic step when nothing pulls, pushes or damps (its value does not matter then).
+    static constexpr double kRestStep = 1e-3;
+
+    /// \param[in] loops Loop closures of the model (they must outlive the controller), or
+    ///            nullptr.
+    StepController(const pinocchio::Model & model, const LoopConstraints * loops);
+
+    ///
+    /// \brief Start a run with the settings' step (a fixed one, or none yet for the automatic
+    /// step: call estimate).
+    ///
+    /// \param[in] forces Applied efforts of the run, or nullptr.
+    ///
+    void start(const Settings & settings, const ForceModel * forces);
+
+    /// \brief Whether the step is automatic (Settings::dt = 0).
+    bool isAutomatic() const
+    {
+      return automatic_;
+    }
+
+    ///
+    /// \brief A new estimate of the automatic step at q.
+    ///
+    /// The scaled stiff modes change the kinetic energy at the same velocity; an estimate never
+    /// lets that add energy (which could pump the motion up, estimate after estimate): v is
+    /// scaled down instead, as a damping event would.
+    ///
+    /// \param[in] q The configuration (dim model.nq).
+    /// \param[in,out] v The joint velocity (dim model.nv).
+    /// \param[in] step The step index, to space the next estimate.
+    /// \return The kinetic energy taken by the change of the scaled modes (J; negative when
+    ///         modes that carried energy were dropped).
+    ///
+    double estimate(
+      pinocchio::Data & data, const Eigen::VectorXd & q, Eigen::VectorXd & v, std::int64_t step);
+
+    /// \brief Whether an automatic step is due for a new estimate: a window since the last one
+    /// and a move of more than kFarMove.
+    bool isEstimateDue(const Eigen::VectorXd & q, std::int64_t step);
+
+    ///
+    /// \brief Halve the step for the rest of the run (after a roll-back to q, v); the
+    /// automatic step is re-estimated there, and kept no longer than the halved one.
+    /// \return As estimate (0 with a fixed step).
+    ///
+    double halve(
+      pinocchio::Data & data, const Eigen::VectorXd & q, Eigen::VectorXd & v, std::int64_t step);
+
+    /// \brief Number of scaled stiff modes of the current estimate.
+    Eigen::Index stiffModes() const
+    {
+      return time_scale_.stiff_masses.size();
+    }
+
+    /// \brief Kinetic energy of the scaled modes' added inertia at the velocity v (J); 0 when
+    /// none are scaled.
+    double addedEnergy(const Eigen::VectorXd & v);
+
+    ///
+    /// \brief The acceleration in data.ddq under M + W^T diag(d) W instead of M (the stiff
+    /// modes' added inertia), by the Woodbury identity: a' = a - Y (diag(d)^-1 + W Y)^-1 W a,
+    /// Y = M^-1 W^T. Nothing happens when no mode is scaled.
+    ///
+    /// \param[in] q The configuration of data.ddq (dim model.nq).
+    ///
+    void correctAcceleration(pinocchio::Data & data, const Eigen::VectorXd & q);
+
+    /// \brief The length of the next step at the velocity v (s): dt, shortened so that no
+    /// joint turns more than dt_safety with the automatic step.
+    double nextStep(const Eigen::VectorXd & v);
+
+    /// \brief The length of the step taken last (s).
+    double lastStep() const
+    {
+      return h_;
+    }
+
+    /// \brief The step in force (s), the estimates made, the most modes scaled by one.
+    double dt() const
+    {
+      return dt_;
+    }
+    int estimates() const
+    {
+      return estimates_;
+    }
+    int scaledModes() const
+    {
+      return scaled_modes_;
+    }
+
+  private:
+    double kineticEnergyOfAdded(const TimeScale & scale, const Eigen::VectorXd & v) const;
+
+    const pinocchio::Model & model_;
+    const LoopConstraints * loops_;
+    const ForceModel * forces_ = nullptr;
+    bool automatic_ = false, scale_stiff_modes_ = false;
+    double dt_safety_ = 0., dt_ = 0., h_ = 0., step_scale_ = 1.;
+    std::int64_t estimated_at_ = 0, estimate_spacing_ = 1;
+    int estimates_ = 0, scaled_modes_ = 0;
+    // The last estimate (its stiff-mode scaling applies to every step) and where it was made.
+    TimeScale time_scale_;
+    Eigen::VectorXd q_estimate_, moved_, a_;
+    // Workspace of the stiff-mode correction, sized at each estimate.
+    Eigen::MatrixXd stiff_y_, stiff_s_;
+    Eigen::VectorXd stiff_z_, stiff_p_;
+    Eigen::LLT<Eigen::MatrixXd> stiff_llt_;
+  };
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_step_control_hpp__

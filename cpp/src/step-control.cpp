@@ -1,0 +1,161 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#include "pinsettle/step-control.hpp"
+
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace pinsettle
+{
+
+  void integrateSemiImplicitEuler(
+    const pinocchio::Model & model,
+    const Eigen::VectorXd & q,
+    Eigen::VectorXd & v,
+    const Eigen::VectorXd & a,
+    double h,
+    Eigen::VectorXd & dq,
+    Eigen::VectorXd & q_next)
+  {
+    v.noalias() += h * a;
+    dq.noalias() = h * v;
+    pinocchio::integrate(model, q, dq, q_next);
+  }
+
+  StepController::StepController(const pinocchio::Model & model, const LoopConstraints * loops)
+  : model_(model)
+  , loops_(loops)
+  , q_estimate_(model.nq)
+  , moved_(model.nv)
+  , a_(model.nv)
+  {
+  }
+
+  void StepController::start(const Settings & settings, const ForceModel * forces)
+  {
+    forces_ = forces;
+    automatic_ = settings.dt == 0.;
+    scale_stiff_modes_ = settings.scale_stiff_modes;
+    dt_safety_ = settings.dt_safety;
+    dt_ = settings.dt;
+    h_ = dt_;
+    step_scale_ = 1.;
+    estimated_at_ = 0;
+    estimate_spacing_ =
+      std::max<std::int64_t>(settings.ds, static_cast<std::int64_t>(model_.nv) * model_.nv / 4);
+    estimates_ = 0;
+    scaled_modes_ = 0;
+    time_scale_ = TimeScale(); // no stiff-mode scaling with a fixed step
+  }
+
+  double StepController::kineticEnergyOfAdded(const TimeScale & scale, const Eigen::VectorXd & v) const
+  {
+    if (scale.stiff_masses.size() == 0)
+      return 0.;
+    return 0.5 * (scale.stiff_momenta * v).cwiseAbs2().dot(scale.stiff_masses);
+  }
+
+  double StepController::estimate(
+    pinocchio::Data & data, const Eigen::VectorXd & q, Eigen::VectorXd & v, std::int64_t step)
+  {
+    const double added_before = kineticEnergyOfAdded(time_scale_, v);
+    time_scale_ = loops_ != nullptr
+                    ? computeTimeScale(model_, data, *loops_, q, forces_)
+                    : computeTimeScale(model_, data, q, forces_, scale_stiff_modes_);
+    const TimeScale & scale = time_scale_;
+    const Eigen::Index stiff = scale.stiff_masses.size();
+    // data.M is fresh from computeTimeScale's crba.
+    const double added_after = kineticEnergyOfAdded(scale, v);
+    double loss;
+    if (added_after > added_before)
+    {
+      const double real = 0.5 * v.dot(data.M.selfadjointView<Eigen::Upper>() * v);
+      const double ratio = (real + added_before) / (real + added_after);
+      v *= std::sqrt(ratio);
+      loss = (1. - ratio) * (real + added_after);
+    }
+    else
+      loss = added_before - added_after;
+    scaled_modes_ = std::max(scaled_modes_, static_cast<int>(stiff));
+    stiff_y_.resize(model_.nv, stiff);
+    stiff_s_.resize(stiff, stiff);
+    stiff_z_.resize(stiff);
+    stiff_p_.resize(stiff);
+    stiff_llt_ = Eigen::LLT<Eigen::MatrixXd>(stiff);
+    double next = std::isfinite(scale.critical_step)
+                    ? dt_safety_ * scale.critical_step * step_scale_
+                    : kRestStep * step_scale_;
+    if (estimates_ > 0)
+      next = std::min(next, 2. * dt_); // grow gradually: the new estimate is local too
+    dt_ = next;
+    q_estimate_ = q;
+    estimated_at_ = step;
+    ++estimates_;
+    return loss;
+  }
+
+  bool StepController::isEstimateDue(const Eigen::VectorXd & q, std::int64_t step)
+  {
+    if (!automatic_ || step - estimated_at_ < estimate_spacing_)
+      return false;
+    pinocchio::difference(model_, q_estimate_, q, moved_);
+    return moved_.lpNorm<Eigen::Infinity>() > kFarMove;
+  }
+
+  double StepController::halve(
+    pinocchio::Data & data, const Eigen::VectorXd & q, Eigen::VectorXd & v, std::int64_t step)
+  {
+    step_scale_ *= 0.5;
+    dt_ *= 0.5;
+    if (!automatic_)
+      return 0.;
+    // The modes of the good state, and no longer a step than the halved one.
+    const double halved = dt_;
+    const double loss = estimate(data, q, v, step);
+    dt_ = std::min(dt_, halved);
+    return loss;
+  }
+
+  double StepController::addedEnergy(const Eigen::VectorXd & v)
+  {
+    if (stiffModes() == 0)
+      return 0.;
+    stiff_p_.noalias() = time_scale_.stiff_momenta * v;
+    return 0.5 * stiff_p_.cwiseAbs2().dot(time_scale_.stiff_masses);
+  }
+
+  void StepController::correctAcceleration(pinocchio::Data & data, const Eigen::VectorXd & q)
+  {
+    if (stiffModes() == 0)
+      return;
+    const Eigen::MatrixXd & W = time_scale_.stiff_momenta;
+    a_ = data.ddq; // kept aside from computeMinverse's passes
+    pinocchio::computeMinverse(model_, data, q);
+    stiff_y_.noalias() = data.Minv.selfadjointView<Eigen::Upper>() * W.transpose();
+    stiff_s_.noalias() = W * stiff_y_;
+    stiff_s_.diagonal() += time_scale_.stiff_masses.cwiseInverse();
+    stiff_llt_.compute(stiff_s_);
+    stiff_z_.noalias() = W * a_;
+    stiff_llt_.solveInPlace(stiff_z_);
+    data.ddq = a_;
+    data.ddq.noalias() -= stiff_y_ * stiff_z_;
+  }
+
+  double StepController::nextStep(const Eigen::VectorXd & v)
+  {
+    h_ = dt_;
+    if (automatic_)
+    {
+      const double speed = v.lpNorm<Eigen::Infinity>();
+      if (speed * h_ > dt_safety_)
+        h_ = dt_safety_ / speed;
+    }
+    return h_;
+  }
+
+} // namespace pinsettle

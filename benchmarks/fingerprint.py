@@ -74,8 +74,13 @@ def fingerprint(result: pinsettle.Result) -> dict:
     trace = result.trace
     if trace is not None:
         out["trace"] = _digest(
-            trace.step, trace.time, trace.kinetic_energy, trace.simplified_kinetic_energy,
-            [trace.stride], trace.q if trace.q is not None else [], trace.event_step,
+            trace.step,
+            trace.time,
+            trace.kinetic_energy,
+            trace.simplified_kinetic_energy,
+            [trace.stride],
+            trace.q if trace.q is not None else [],
+            trace.event_step,
             trace.event_time,
         )
         out["events"] = hashlib.sha256(",".join(trace.event_kind).encode()).hexdigest()[:16]

@@ -58,9 +58,8 @@ namespace pinsettle
   bool DivergenceGuard::isDiverging(
     double e_exact, double e_simple, const Eigen::VectorXd & ddq, bool continued)
   {
-    blow_up_ = continued && e_exact_prev_ > 0. && e_exact > kBlowUpRatio * e_exact_prev_
-                 ? blow_up_ + 1
-                 : 0;
+    blow_up_ =
+      continued && e_exact_prev_ > 0. && e_exact > kBlowUpRatio * e_exact_prev_ ? blow_up_ + 1 : 0;
     tainted_ = tainted_ || blow_up_ > 0;
     e_exact_prev_ = e_exact;
     return !std::isfinite(e_exact) || !std::isfinite(e_simple) || e_exact > kHugeEnergy
@@ -74,8 +73,8 @@ namespace pinsettle
     time_good_ = time;
   }
 
-  void
-  DivergenceGuard::keepIfClean(const Eigen::VectorXd & q, const Eigen::VectorXd & v, double time)
+  void DivergenceGuard::keepIfClean(
+    const Eigen::VectorXd & q, const Eigen::VectorXd & v, double time)
   {
     if (!tainted_)
       keep(q, v, time);
@@ -142,7 +141,8 @@ namespace pinsettle
     return (quiet && decreasing) || exact_rest || creeping_;
   }
 
-  void RestCheck::record(const StabilityReport & report, const Eigen::VectorXd & q, std::int64_t step)
+  void RestCheck::record(
+    const StabilityReport & report, const Eigen::VectorXd & q, std::int64_t step)
   {
     report_ = report;
     report_q_ = q;

@@ -384,11 +384,10 @@ namespace pinsettle
     }
     std::ostringstream msg;
     msg.precision(3);
-    msg << "the potential energy falls without bound: " << runaway_.released()
-        << " J released and " << runaway_.drift() << " (rad or m) travelled in "
-        << runaway_.stepsSinceReset(step_) << " steps with kt = 0, both growing at least "
-        << RunawayMonitor::kRunawayRatio << "x per doubling of the run "
-        << RunawayMonitor::kRunawayDoublings << " times in a row";
+    msg << "the potential energy falls without bound: " << runaway_.released() << " J released and "
+        << runaway_.drift() << " (rad or m) travelled in " << runaway_.stepsSinceReset(step_)
+        << " steps with kt = 0, both growing at least " << RunawayMonitor::kRunawayRatio
+        << "x per doubling of the run " << RunawayMonitor::kRunawayDoublings << " times in a row";
     result.reason = msg.str();
     return true;
   }
@@ -467,8 +466,7 @@ namespace pinsettle
     StabilityReport report = rest_.isAssessed(q_) ? rest_.report() : assess(q_, forces_);
     if (settings_->polish && status == Status::Converged)
       polish(report, forces_, result);
-    const std::pair<double, double> energies =
-      computeKineticEnergies(model_, data, result.q, v_);
+    const std::pair<double, double> energies = computeKineticEnergies(model_, data, result.q, v_);
     result.kinetic_energy = energies.first;
     result.simplified_kinetic_energy = energies.second;
     result.stability = report.verdict;

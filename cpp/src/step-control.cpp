@@ -53,7 +53,8 @@ namespace pinsettle
     time_scale_ = TimeScale(); // no stiff-mode scaling with a fixed step
   }
 
-  double StepController::kineticEnergyOfAdded(const TimeScale & scale, const Eigen::VectorXd & v) const
+  double StepController::kineticEnergyOfAdded(
+    const TimeScale & scale, const Eigen::VectorXd & v) const
   {
     if (scale.stiff_masses.size() == 0)
       return 0.;

@@ -288,11 +288,7 @@ namespace pinsettle
 
     /// \brief Record a sample at step when it falls on the stride.
     void sample(
-      std::int64_t step,
-      double time,
-      double e_exact,
-      double e_simple,
-      const Eigen::VectorXd & q);
+      std::int64_t step, double time, double e_exact, double e_simple, const Eigen::VectorXd & q);
 
     /// \brief Record a velocity event (when tracing).
     void event(std::int64_t step, double time, EventKind kind)

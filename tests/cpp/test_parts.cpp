@@ -279,7 +279,7 @@ BOOST_AUTO_TEST_CASE(divergence_guard_rolls_back_to_the_last_clean_state)
   guard.keepIfClean(one, one, 1.); // clean: kept
   BOOST_CHECK(!guard.isDiverging(1., 1., zero, false));
   BOOST_CHECK(!guard.isDiverging(20., 20., zero, true)); // one suspicious step taints
-  guard.keepIfClean(2. * one, 2. * one, 2.);            // not kept
+  guard.keepIfClean(2. * one, 2. * one, 2.);             // not kept
   Eigen::VectorXd q = 5. * one, v = 5. * one;
   double time = 5.;
   BOOST_CHECK(guard.rollBack(q, v, time));
@@ -321,8 +321,7 @@ BOOST_AUTO_TEST_CASE(runaway_monitor_sees_a_fall_without_bound_and_not_a_ringing
     falling.addMotion(dq);
   }
   // The first sample has nothing to compare with, then kRunawayDoublings growing ones.
-  BOOST_CHECK_EQUAL(
-    confirmed_at, std::int64_t(10) << pinsettle::RunawayMonitor::kRunawayDoublings);
+  BOOST_CHECK_EQUAL(confirmed_at, std::int64_t(10) << pinsettle::RunawayMonitor::kRunawayDoublings);
   BOOST_CHECK_GT(falling.released(), 0.);
   BOOST_CHECK_CLOSE(falling.drift(), x_confirmed, 1e-9); // the motion up to the sample
 
@@ -352,10 +351,10 @@ BOOST_AUTO_TEST_CASE(rest_check_assesses_when_the_signals_say_so)
   pinsettle::RestCheck rest;
   rest.start(100, 1e-11, pinsettle::EnergyMeasure::Exact);
   BOOST_CHECK(!rest.isDue(false, true, false, 500));
-  BOOST_CHECK(!rest.isDue(true, false, false, 50));  // quiet but rising: not a window yet
-  BOOST_CHECK(rest.isDue(true, true, false, 50));    // the stopping rule
-  BOOST_CHECK(rest.isDue(false, false, true, 50));   // a window of exact rest
-  BOOST_CHECK(rest.isDue(true, false, false, 100));  // creeping, once a window
+  BOOST_CHECK(!rest.isDue(true, false, false, 50)); // quiet but rising: not a window yet
+  BOOST_CHECK(rest.isDue(true, true, false, 50));   // the stopping rule
+  BOOST_CHECK(rest.isDue(false, false, true, 50));  // a window of exact rest
+  BOOST_CHECK(rest.isDue(true, false, false, 100)); // creeping, once a window
   pinsettle::StabilityReport stable;
   stable.verdict = pinsettle::Stability::Stable;
   const Eigen::VectorXd q = Eigen::VectorXd::Zero(1);
@@ -385,10 +384,8 @@ BOOST_AUTO_TEST_CASE(rest_check_pushes_an_upright_pendulum_with_the_push_energy)
     BOOST_CHECK(!rest.accepts());
     Eigen::VectorXd v(1);
     rest.push(model, data, upright, v);
-    const std::pair<double, double> e =
-      pinsettle::computeKineticEnergies(model, data, upright, v);
-    BOOST_CHECK_CLOSE(
-      measure == pinsettle::EnergyMeasure::Exact ? e.first : e.second, 1e-11, 1e-9);
+    const std::pair<double, double> e = pinsettle::computeKineticEnergies(model, data, upright, v);
+    BOOST_CHECK_CLOSE(measure == pinsettle::EnergyMeasure::Exact ? e.first : e.second, 1e-11, 1e-9);
   }
 }
 

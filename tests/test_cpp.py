@@ -60,7 +60,9 @@ def cpp_build(tmp_path_factory) -> Path:
     return build
 
 
-@pytest.mark.parametrize("suite", ["test_core", "test_elements", "test_loops", "test_parts"])
+@pytest.mark.parametrize(
+    "suite", ["test_core", "test_elements", "test_loops", "test_parts", "test_models"]
+)
 def test_cpp_boost_tests(cpp_build: Path, suite: str) -> None:
     proc = _run([str(cpp_build / suite), "--report_level=short"])
     assert "failed" not in proc.stdout.lower() or "0 failed" in proc.stdout.lower()

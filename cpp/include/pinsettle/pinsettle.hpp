@@ -10,6 +10,7 @@
 #include "pinsettle/energy.hpp"
 #include "pinsettle/forces.hpp"
 #include "pinsettle/loops.hpp"
+#include "pinsettle/model-checks.hpp"
 #include "pinsettle/monitors.hpp"
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"

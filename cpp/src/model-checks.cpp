@@ -1,0 +1,175 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#include "pinsettle/model-checks.hpp"
+
+#include <pinocchio/multibody.hpp>
+
+#include <algorithm>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+namespace pinsettle
+{
+
+  namespace
+  {
+
+    // Joint types of Pinocchio 4.1's JointCollectionDefault that aba, rnea, crba, the gravity
+    // derivatives, constraintDynamics and integrate all support (composites are checked joint by
+    // joint). A type missing here (a new one) is refused until it has been tried.
+    bool isKnownJointType(const std::string & type)
+    {
+      static const char * const known[] = {
+        "JointModelRX",
+        "JointModelRY",
+        "JointModelRZ",
+        "JointModelFreeFlyer",
+        "JointModelPlanar",
+        "JointModelRevoluteUnaligned",
+        "JointModelSpherical",
+        "JointModelSphericalZYX",
+        "JointModelEllipsoid",
+        "JointModelPX",
+        "JointModelPY",
+        "JointModelPZ",
+        "JointModelPrismaticUnaligned",
+        "JointModelTranslation",
+        "JointModelRUBX",
+        "JointModelRUBY",
+        "JointModelRUBZ",
+        "JointModelRevoluteUnboundedUnaligned",
+        "JointModelHX",
+        "JointModelHY",
+        "JointModelHZ",
+        "JointModelHelicalUnaligned",
+        "JointModelUniversal",
+        "JointModelComposite"};
+      return std::find(std::begin(known), std::end(known), type) != std::end(known);
+    }
+
+    std::string jointName(const pinocchio::Model & model, std::size_t j)
+    {
+      std::ostringstream out;
+      if (j < model.names.size())
+        out << "'" << model.names[j] << "'";
+      else
+        out << "number " << j;
+      return out.str();
+    }
+
+    [[noreturn]] void refuse(const pinocchio::Model & model, std::size_t j, const std::string & why)
+    {
+      throw std::invalid_argument(
+        "model: joint " + jointName(model, j) + " (index " + std::to_string(j) + ") " + why);
+    }
+
+    void refuseMimic(
+      const pinocchio::Model & model, std::size_t j, const pinocchio::JointModelMimic & mimic)
+    {
+      const std::size_t leader = mimic.jmodel().id();
+      const std::string follower = j < model.names.size() ? model.names[j] : std::to_string(j);
+      const std::string leading =
+        leader < model.names.size() ? model.names[leader] : std::to_string(leader);
+      std::ostringstream why;
+      why << "is a mimic joint of '" << leading
+          << "': it couples q_follower = multiplier * q_leader + offset (here q[" << follower
+          << "] = " << mimic.scaling() << " * q[" << leading << "] + " << mimic.offset()
+          << "), and pinsettle does not support mimic joints yet (pinocchio::aba, its forward "
+             "dynamics, does not). Load the URDF with mimic=False "
+             "(pinocchio.buildModelFromUrdf(path, mimic=False), Pinocchio's default) to ignore "
+             "the <mimic> tag as Pinocchio does: the joint then moves on its own";
+      refuse(model, j, why.str());
+    }
+
+    // A joint's own type, then those inside a composite.
+    void checkJoint(
+      const pinocchio::Model & model,
+      std::size_t j,
+      const pinocchio::JointModel & jmodel,
+      bool part_of_composite = false)
+    {
+      const pinocchio::JointModel::JointModelVariant & variant = jmodel.toVariant();
+      if (const auto * mimic = boost::get<pinocchio::JointModelMimic>(&variant))
+        refuseMimic(model, j, *mimic);
+      const std::string type = jmodel.shortname();
+      if (!isKnownJointType(type))
+        refuse(
+          model, j,
+          (part_of_composite ? "is a composite joint with a part of type " : "is of type ") + type
+            + ", which pinsettle does not know: it has not been tried with the algorithms "
+              "pinsettle runs on Pinocchio 4.1");
+      if (const auto * composite = boost::get<pinocchio::JointModelComposite>(&variant))
+        for (const pinocchio::JointModel & part : composite->joints)
+          checkJoint(model, j, part, true);
+    }
+
+    // Tables of the model that Pinocchio's algorithms index without checking.
+    void checkTables(const pinocchio::Model & model)
+    {
+      const std::size_t n = model.joints.size();
+      auto sizeError = [&](const char * table, std::size_t size) {
+        std::ostringstream msg;
+        msg << "model: its tables disagree: " << n << " joints (with the universe) but " << size
+            << " entries in " << table << "; the model was changed by hand after it was built";
+        throw std::invalid_argument(msg.str());
+      };
+      if (n == 0 || model.njoints != static_cast<int>(n))
+        sizeError("njoints", static_cast<std::size_t>(model.njoints));
+      if (model.parents.size() != n)
+        sizeError("parents", model.parents.size());
+      if (model.names.size() != n)
+        sizeError("names", model.names.size());
+      if (model.jointPlacements.size() != n)
+        sizeError("jointPlacements", model.jointPlacements.size());
+      if (model.inertias.size() != n)
+        sizeError("inertias", model.inertias.size());
+      if (model.idx_qs.size() != n || model.nqs.size() != n)
+        sizeError("idx_qs/nqs", std::min(model.idx_qs.size(), model.nqs.size()));
+      if (model.idx_vs.size() != n || model.nvs.size() != n)
+        sizeError("idx_vs/nvs", std::min(model.idx_vs.size(), model.nvs.size()));
+      if (model.nv != model.nvExtended)
+        throw std::invalid_argument(
+          "model: its extended velocity space (nvExtended " + std::to_string(model.nvExtended)
+          + ") differs from its velocity space (nv " + std::to_string(model.nv)
+          + "): a joint mimics another, which pinsettle does not support yet");
+
+      int iq = 0, iv = 0;
+      for (std::size_t j = 1; j < n; ++j)
+      {
+        const pinocchio::JointModel & jmodel = model.joints[j];
+        if (model.parents[j] >= j)
+          refuse(
+            model, j,
+            "has parent index " + std::to_string(model.parents[j])
+              + ", not before it: the joints are not a tree in order");
+        if (
+          jmodel.idx_q() != iq || jmodel.nq() != model.nqs[j] || model.idx_qs[j] != iq
+          || jmodel.idx_v() != iv || jmodel.nv() != model.nvs[j] || model.idx_vs[j] != iv)
+          refuse(
+            model, j,
+            "has configuration or velocity indices that do not follow the joint before it (the "
+            "model was changed by hand after it was built)");
+        iq += jmodel.nq();
+        iv += jmodel.nv();
+      }
+      if (iq != model.nq || iv != model.nv)
+        throw std::invalid_argument(
+          "model: its joints span " + std::to_string(iq) + " configuration and "
+          + std::to_string(iv) + " velocity entries, but nq = " + std::to_string(model.nq)
+          + " and nv = " + std::to_string(model.nv));
+    }
+
+  } // namespace
+
+  void checkSupportedModel(const pinocchio::Model & model)
+  {
+    // Mimic joints first: the most common case, with the most useful message.
+    for (std::size_t j = 1; j < model.joints.size(); ++j)
+      checkJoint(model, j, model.joints[j]);
+    checkTables(model);
+  }
+
+} // namespace pinsettle

@@ -1,0 +1,133 @@
+//
+// Boost.Test cases of pinsettle::checkSupportedModel: a model the algorithms pinsettle runs do
+// not support is refused with a message naming the joint, never run into a crash.
+//
+
+#define BOOST_TEST_MODULE pinsettle_models
+#include <boost/test/unit_test.hpp>
+
+#include <pinsettle/pinsettle.hpp>
+
+#include <pinocchio/algorithm/model.hpp>
+#include <pinocchio/multibody/sample-models.hpp>
+
+#include <stdexcept>
+#include <string>
+
+namespace
+{
+
+  // Two links hanging from hinges about y, 0.5 m each, 1 kg at their middles.
+  pinocchio::Model twoLinks()
+  {
+    pinocchio::Model model;
+    const pinocchio::Inertia link(
+      1., Eigen::Vector3d(0., 0., -0.25), Eigen::Matrix3d::Identity() * 1e-2);
+    const pinocchio::JointIndex j1 =
+      model.addJoint(0, pinocchio::JointModelRY(), pinocchio::SE3::Identity(), "joint1");
+    model.appendBodyToJoint(j1, link);
+    const pinocchio::JointIndex j2 = model.addJoint(
+      j1, pinocchio::JointModelRY(),
+      pinocchio::SE3(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0., 0., -0.5)), "joint2");
+    model.appendBodyToJoint(j2, link);
+    return model;
+  }
+
+  // The same, joint2 following joint1 as pinocchio.buildModelFromUrdf(path, mimic=True) makes of
+  // <mimic joint="joint1" multiplier="-1.5" offset="0.25"/>: q[joint2] = -1.5 q[joint1] + 0.25.
+  pinocchio::Model twoLinksWithMimic()
+  {
+    pinocchio::Model model;
+    pinocchio::transformJointIntoMimic(twoLinks(), 1, 2, -1.5, 0.25, model);
+    return model;
+  }
+
+  std::string refusal(const pinocchio::Model & model)
+  {
+    try
+    {
+      pinsettle::checkSupportedModel(model);
+    }
+    catch (const std::invalid_argument & e)
+    {
+      return e.what();
+    }
+    return "";
+  }
+
+  bool contains(const std::string & text, const std::string & part)
+  {
+    return text.find(part) != std::string::npos;
+  }
+
+} // namespace
+
+BOOST_AUTO_TEST_CASE(mimic_joint_is_refused_with_its_name_and_why)
+{
+  const pinocchio::Model model = twoLinksWithMimic();
+  // The model really holds a mimic joint, as Pinocchio's URDF parser makes it.
+  BOOST_REQUIRE_EQUAL(model.mimicking_joints.size(), 1u);
+  BOOST_REQUIRE_EQUAL(model.joints[2].shortname(), "JointModelMimic");
+  BOOST_REQUIRE_EQUAL(model.nv, 1);
+
+  const std::string message = refusal(model);
+  BOOST_TEST_MESSAGE(message);
+  BOOST_CHECK(contains(message, "'joint2'"));
+  BOOST_CHECK(contains(message, "mimic joint of 'joint1'"));
+  BOOST_CHECK(contains(message, "q_follower = multiplier * q_leader + offset"));
+  BOOST_CHECK(contains(message, "q[joint2] = -1.5 * q[joint1] + 0.25"));
+  BOOST_CHECK(contains(message, "does not support mimic joints yet"));
+  BOOST_CHECK(contains(message, "mimic=False"));
+
+  // Pinocchio's own sample manipulator with its mimic joint.
+  pinocchio::Model manipulator;
+  pinocchio::buildModels::manipulator(manipulator, true);
+  BOOST_REQUIRE(!manipulator.mimicking_joints.empty());
+  const std::string name = manipulator.names[manipulator.mimicking_joints.front()];
+  BOOST_CHECK(contains(refusal(manipulator), "'" + name + "'"));
+}
+
+BOOST_AUTO_TEST_CASE(supported_models_pass)
+{
+  BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(twoLinks()));
+
+  pinocchio::Model manipulator;
+  pinocchio::buildModels::manipulator(manipulator);
+  BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(manipulator));
+
+  pinocchio::Model humanoid;
+  pinocchio::buildModels::humanoidRandom(humanoid, true);
+  BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(humanoid));
+
+  // A composite joint of supported parts, and the joint types beside it.
+  pinocchio::Model model;
+  pinocchio::JointModelComposite composite;
+  composite.addJoint(pinocchio::JointModelRX());
+  composite.addJoint(pinocchio::JointModelRY());
+  const pinocchio::JointIndex j =
+    model.addJoint(0, composite, pinocchio::SE3::Identity(), "composite");
+  model.appendBodyToJoint(j, pinocchio::Inertia::Random());
+  model.addJoint(j, pinocchio::JointModelPlanar(), pinocchio::SE3::Random(), "planar");
+  model.addJoint(2, pinocchio::JointModelUniversal(), pinocchio::SE3::Random(), "universal");
+  model.addJoint(3, pinocchio::JointModelHelicalUnaligned(), pinocchio::SE3::Random(), "helical");
+  model.addJoint(4, pinocchio::JointModelEllipsoid(), pinocchio::SE3::Random(), "ellipsoid");
+  BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(model));
+}
+
+BOOST_AUTO_TEST_CASE(tables_changed_by_hand_are_refused)
+{
+  // Pinocchio's algorithms index these tables without checking them.
+  pinocchio::Model parents = twoLinks();
+  parents.parents[2] = 2;
+  const std::string message = refusal(parents);
+  BOOST_CHECK(contains(message, "'joint2'"));
+  BOOST_CHECK(contains(message, "parent"));
+
+  pinocchio::Model inertias = twoLinks();
+  inertias.inertias.pop_back();
+  BOOST_CHECK(contains(refusal(inertias), "inertias"));
+
+  pinocchio::Model names = twoLinks();
+  names.names.push_back("extra");
+  BOOST_CHECK(contains(refusal(names), "names"));
+}

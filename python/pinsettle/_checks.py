@@ -36,3 +36,10 @@ def as_vector(value: Any, name: str, size: int, size_name: str) -> np.ndarray:
     if bad.size:
         raise ValueError(f"{name}[{bad[0]}] is {arr[bad[0]]}; every entry must be finite")
     return arr
+
+
+def as_flag(value: Any, name: str) -> bool:
+    """A True/False argument (numpy booleans too); anything else is a TypeError naming it."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {type(value).__name__} {value!r}")
+    return bool(value)

@@ -12,6 +12,8 @@ import pinocchio
 # 'point_loads').
 _Elements = dict[str, list[tuple[Any, ...]]]
 _Loops = list[tuple[Any, ...]]
+# Joint stops: (take the model's position limits, [(joint index, lower, upper), ...]).
+_Stops = tuple[bool, list[tuple[int, float, float]]]
 
 class Settings:
     dt: float | str
@@ -46,6 +48,17 @@ class _Stiffness(TypedDict):
     basis: npt.NDArray[np.float64]
 
 @type_check_only
+class _StopStiffness(_Stiffness, total=False):
+    # Present when stops are given.
+    stop_contacts: list[tuple[str, str, float]]
+    stop_residual: float
+
+@type_check_only
+class _JointStops(TypedDict):
+    stops: list[tuple[str, int, int, float, float]]
+    equal_limits: list[str]
+
+@type_check_only
 class _TimeScale(TypedDict):
     omega_max: float
     omega_unscaled: float
@@ -68,7 +81,9 @@ def solve(
     callback: Callable[[], bool] | None = ...,
     elements: _Elements | None = ...,
     loops: _Loops | None = ...,
+    stops: _Stops | None = ...,
 ) -> dict[str, Any]: ...
+def joint_stops(model: pinocchio.Model, stops: _Stops | None) -> _JointStops: ...
 def kinetic_energies(
     model: pinocchio.Model, q: npt.ArrayLike, v: npt.ArrayLike
 ) -> tuple[float, float]: ...
@@ -83,7 +98,8 @@ def stiffness(
     q: npt.ArrayLike,
     elements: _Elements | None = ...,
     loops: _Loops | None = ...,
-) -> _Stiffness: ...
+    stops: _Stops | None = ...,
+) -> _StopStiffness: ...
 def time_scale(
     model: pinocchio.Model,
     q: npt.ArrayLike,

@@ -1,8 +1,8 @@
 """Scenes: a mechanism with its force elements, locked joints, gravity and start pose.
 
 A scene is built in code (``Scene(model)``, ``add_joint_spring``, ``add_spring``, ``add_load``,
-``lock``) or read from a TOML file (``load_scene``). Names are resolved and every value is
-checked when it is added, so that a mistake is reported where it is made.
+``lock``, ``set_limit``) or read from a TOML file (``load_scene``). Names are resolved and every
+value is checked when it is added, so that a mistake is reported where it is made.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio
 
 from . import _core
-from ._checks import as_vector, unknown_key_message
+from ._checks import as_flag, as_vector, unknown_key_message
 from ._settings import SETTING_TYPES, Settings, make_settings, set_setting
 from .robots import load_robot, load_urdf, robot_urdf
 
@@ -93,6 +93,20 @@ class Loop:
 LOOP_KINDS = ("point", "frame")
 
 
+@dataclass(frozen=True)
+class JointLimit:
+    """Stops of a 1-DoF joint set by ``Scene.set_limit`` (``[[limit]]``), rad or m. A side left
+    None is the model's own limit on that side while the scene's ``limits`` is on (none when it
+    is off, or when the model has no usable limit there); -inf / +inf: no stop on that side."""
+
+    joint: str
+    lower: float | None = None
+    upper: float | None = None
+
+
+_INF = math.inf
+
+
 # --- value checks with messages that name the parameter --------------------------------------
 
 
@@ -135,16 +149,71 @@ def _is_angle_pair(model: pinocchio.Model, j: int) -> bool:
     return bool(model.nvs[j] == 1 and model.nqs[j] == 2)
 
 
+def _bound(value: Any, name: str, none: float) -> float:
+    """A stop position (rad or m): a number, or ``none`` (-inf for a lower stop, +inf for an
+    upper one) for no stop on that side."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
+        raise SceneError(
+            f"{name} must be a number (rad or m), got {type(value).__name__} {value!r}"
+        )
+    try:
+        x = float(value)
+    except OverflowError:
+        raise SceneError(f"{name} is too large for a float: {value}") from None
+    if math.isnan(x):
+        raise SceneError(f"{name} must be a number (rad or m), got nan")
+    if math.isinf(x) and x != none:
+        raise SceneError(f"{name} must be finite, or {none} for no stop on that side, got {x}")
+    return x
+
+
+def model_stops(model: pinocchio.Model) -> dict[str, tuple[float, float]]:
+    """The stops a model's own position limits make, by joint name: (lower, upper), rad or m,
+    -inf / +inf where a side has none (the rules of ``pinsettle::JointStops``: 1-DoF joints with
+    one coordinate; equal limits, non-finite or huge ones are no stop)."""
+    return {
+        name: (lower, upper)
+        for name, _, _, lower, upper in _core.joint_stops(model, (True, []))["stops"]
+    }
+
+
+def _effective_stop(
+    limit: JointLimit, own: Mapping[str, tuple[float, float]]
+) -> tuple[float, float]:
+    """The (lower, upper) stops of a ``set_limit`` entry: a side left None takes the model's
+    own stop from ``own`` (empty when the scene's limits are off), else none (-inf / +inf).
+
+    Raises:
+        SceneError: lower > upper, saying which side is the model's.
+    """
+    model_lower, model_upper = own.get(limit.joint, (-_INF, _INF))
+    lower = model_lower if limit.lower is None else limit.lower
+    upper = model_upper if limit.upper is None else limit.upper
+    if lower > upper:
+
+        def origin(side: str, given: float | None) -> str:
+            return "" if given is not None else f" (the model's own {side} limit)"
+
+        raise SceneError(
+            f"joint '{limit.joint}': lower {lower:g}{origin('lower', limit.lower)} > upper "
+            f"{upper:g}{origin('upper', limit.upper)}"
+        )
+    return lower, upper
+
+
 # --- the scene --------------------------------------------------------------------------------
 
 
 class Scene:
     """A mechanism to settle: a ``pinocchio.Model`` plus gravity, start pose, locked joints,
-    springs and loads.
+    springs, loads, loops and joint stops.
 
     The scene owns a copy of the model (gravity is set on it). Joint names are the model's
     joint names; frame names are its frame names (URDF link names); ``"universe"`` is the
     world. ``pinsettle.solve(scene)`` settles it; results are in the full configuration.
+    ``limits`` (default True): the model's position limits are joint stops (a URDF's
+    ``<limit lower upper>`` of revolute and prismatic joints); ``set_limit`` adds or overrides
+    the stops of a joint either way.
     """
 
     def __init__(
@@ -155,9 +224,11 @@ class Scene:
         settings: Settings | Mapping[str, Any] | None = None,
         name: str = "scene",
         description: str = "",
+        limits: bool = True,
     ) -> None:
         if not isinstance(model, pinocchio.Model):
             raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
+        self._limits = True
         self.model = pinocchio.Model(model)
         self.name = name
         self.description = description
@@ -172,10 +243,13 @@ class Scene:
         #: Loop closures of the tree (``add_loop``, ``[[loop]]``).
         self.loops: list[Loop] = []
         self.locked: list[str] = []
+        #: Stops added or overridden by ``set_limit`` (``[[limit]]``), one per joint.
+        self.joint_limits: list[JointLimit] = []
         self._start: dict[str, Any] = {}
         if gravity is not None:
             self.gravity = gravity
         self._compiled: _Compiled | None = None
+        self.limits = limits
 
     # -- construction -------------------------------------------------------------------------
 
@@ -202,6 +276,18 @@ class Scene:
     def gravity(self, value: Any) -> None:
         g = np.array(_vector(value, "gravity", 3))
         self.model.gravity = pinocchio.Motion(g, np.zeros(3))
+        self._compiled = None
+
+    @property
+    def limits(self) -> bool:
+        """Whether the model's own position limits are joint stops (``[model] limits``)."""
+        return self._limits
+
+    @limits.setter
+    def limits(self, value: Any) -> None:
+        if not isinstance(value, (bool, np.bool_)):
+            raise SceneError(f"limits must be True or False, got {value!r}")
+        self._limits = bool(value)
         self._compiled = None
 
     def _joint_id(self, joint: Any, name: str) -> int:
@@ -260,6 +346,46 @@ class Scene:
             self._joint_id(joint, "locked joint")
             if joint not in self.locked:
                 self.locked.append(joint)
+        self._changed()
+        return self
+
+    def set_limit(self, joint: str, lower: Any = None, upper: Any = None) -> Scene:
+        """Add or override the stops of a 1-DoF joint (revolute, prismatic, helical): ``lower``
+        and ``upper`` in rad or m. A side left None keeps the model's own limit on that side
+        while ``limits`` is on (none when it is off); ``-math.inf`` / ``math.inf`` is no stop on
+        that side. A second call for the same joint replaces the first.
+
+        Raises:
+            SceneError: an unknown joint (with a close match), a joint that cannot have a stop
+                (continuous, multi-DoF, mimic), neither side given, a bound that is not a
+                number or NaN, lower > upper (also against the model's limit kept on a side).
+        """
+        j = self._joint_id(joint, "joint")
+        model = self.model
+        kind = _joint_kind(model, j)
+        if _is_angle_pair(model, j):
+            raise SceneError(
+                f"joint '{joint}' is a continuous joint ({kind}): a continuous joint has no stops"
+            )
+        if model.nvs[j] != 1 or model.nqs[j] != 1:
+            raise SceneError(
+                f"joint '{joint}' is a {kind} with {model.nvs[j]} degrees of freedom; a stop "
+                "needs a 1-DoF joint with one coordinate (revolute, prismatic, helical)"
+            )
+        if "Mimic" in kind:
+            raise SceneError(
+                f"joint '{joint}' ({kind}) mimics another joint: it has no motion of its own to "
+                "stop"
+            )
+        if lower is None and upper is None:
+            raise SceneError(f"joint '{joint}': give 'lower', 'upper' or both (rad or m)")
+        limit = JointLimit(
+            joint,
+            None if lower is None else _bound(lower, "lower", -_INF),
+            None if upper is None else _bound(upper, "upper", _INF),
+        )
+        _effective_stop(limit, model_stops(model) if self.limits else {})  # an empty range
+        self.joint_limits = [lim for lim in self.joint_limits if lim.joint != joint] + [limit]
         self._changed()
         return self
 
@@ -474,10 +600,27 @@ class Scene:
             return np.zeros(0)
         return _core.loops(compiled.model, q[compiled.q_index], compiled.loops)["error"]
 
-    def residual(self, q: Any) -> float:
-        """max |static_force(q)| (N m or N)."""
+    def residual(self, q: Any, *, limits: bool | None = None) -> float:
+        """The residual the solver reports at the full configuration q (N m or N): max
+        |static_force(q)|, or with joint stops the largest violation of the conditions of a rest
+        against them (|force| on a joint off its stops; on a joint at its lower stop
+        max(0, -force), at its upper stop max(0, force): a stop only pushes). ``limits``: as
+        for ``pinsettle.solve`` (None: the scene's own setting)."""
+        q = as_vector(q, "q", self.model.nq, "model.nq")
+        compiled = self.compile(q)
         force = self.static_force(q)
-        return float(np.max(np.abs(force))) if force.size else 0.0
+        stops = compiled.stops_for(self.limits if limits is None else as_flag(limits, "limits"))
+        if stops is None or not force.size:
+            return float(np.max(np.abs(force))) if force.size else 0.0
+        compiled.check_loops(stops)
+        violation = np.abs(force)
+        qr = q[compiled.q_index]
+        for _, iq, iv, lower, upper in _core.joint_stops(compiled.model, stops)["stops"]:
+            if qr[iq] <= lower:
+                violation[iv] = max(0.0, -force[iv])
+            elif qr[iq] >= upper:
+                violation[iv] = max(0.0, force[iv])
+        return float(np.max(violation))
 
     def __repr__(self) -> str:
         parts = [f"'{self.name}'", f"nq={self.model.nq}"]
@@ -487,9 +630,12 @@ class Scene:
             ("springs", self.springs),
             ("loads", self.loads),
             ("loops", self.loops),
+            ("stops set", self.joint_limits),
         ):
             if items:
                 parts.append(f"{len(items)} {label}")
+        if not self.limits:
+            parts.append("model limits off")
         return f"Scene({', '.join(parts)})"
 
 
@@ -499,13 +645,18 @@ class _Compiled:
     def __init__(self, scene: Scene, q_ref: np.ndarray) -> None:
         full = scene.model
         locked_ids = [full.getJointId(name) for name in scene.locked]
-        for kind, items in (("joint_spring", scene.joint_springs), ("load", scene.loads)):
+        for kind, items in (
+            ("joint_spring", scene.joint_springs),
+            ("load", scene.loads),
+            ("limit", scene.joint_limits),
+        ):
             for k, item in enumerate(items, start=1):
                 joint = getattr(item, "joint", None)
                 if joint in scene.locked:
                     raise SceneError(
-                        f"[[{kind}]] #{k} on joint '{joint}': the joint is locked, so it would "
-                        "do nothing"
+                        f"[[{kind}]] #{k} on joint '{joint}': the joint is locked, so "
+                        + ("its stops would" if kind == "limit" else "it would")
+                        + " do nothing"
                     )
         if locked_ids:
             model = pinocchio.buildReducedModel(full, sorted(locked_ids), q_ref)
@@ -602,10 +753,64 @@ class _Compiled:
             )
             for k, loop in enumerate(scene.loops, start=1)
         ] or None
+        # Joint stops: the model's own (the reduced model keeps the position limits of the
+        # joints it keeps) and those set by name, resolved when the limits setting is known.
+        self._own_stops = model_stops(model)
+        self._set_stops = [(int(model.getJointId(lim.joint)), lim) for lim in scene.joint_limits]
+        #: The stops as the C++ core takes them with the scene's own setting (None: no stop).
+        self.stops = self.stops_for(scene.limits)
         try:
             _core.static_force(model, pinocchio.neutral(model), self.elements)
         except ValueError as error:  # anything the C++ checks catch that the above did not
             raise SceneError(str(error)) from None
+
+    def stops_for(self, limits: bool) -> tuple[bool, list[tuple[int, float, float]]] | None:
+        """The joint stops for ``_core``: (take the model's limits, [(joint index in the reduced
+        model, lower, upper), ...]), or None when there is none to apply (limits off and no
+        stop set).
+
+        Raises:
+            SceneError: a stop set whose range is empty once its sides are resolved.
+        """
+        if not limits and not self._set_stops:
+            return None
+        own = self._own_stops if limits else {}
+        return (limits, [(j, *_effective_stop(lim, own)) for j, lim in self._set_stops])
+
+    def equal_limits(self, stops: tuple[bool, list[tuple[int, float, float]]] | None) -> list[str]:
+        """Joints whose equal model limits were taken as no stop (and that no stop set
+        overrides)."""
+        if stops is None:
+            return []
+        set_by_name = {lim.joint for _, lim in self._set_stops}
+        equal: list[str] = _core.joint_stops(self.model, stops)["equal_limits"]
+        return [name for name in equal if name not in set_by_name]
+
+    def check_loops(self, stops: tuple[bool, list[tuple[int, float, float]]] | None) -> None:
+        """Stops and loops together are not supported yet: an error naming the joints.
+
+        Raises:
+            SceneError: the scene has loops and at least one joint stop.
+        """
+        if not self.loops or stops is None:
+            return
+        joints = [name for name, *_ in _core.joint_stops(self.model, stops)["stops"]]
+        if not joints:
+            return
+        from_model = [name for name in joints if name in self._own_stops and stops[0]]
+        set_by_name = sorted(set(joints) - set(from_model))
+        what = []
+        if from_model:
+            what.append(
+                f"the model's limits of {', '.join(from_model)} (turn them off: limits=False, "
+                "or [model] limits = false in a scene file)"
+            )
+        if set_by_name:
+            what.append(f"the stops set on {', '.join(set_by_name)} (set_limit, [[limit]])")
+        raise SceneError(
+            "joint stops on a mechanism with loops are not supported yet: remove "
+            + " and ".join(what)
+        )
 
     def full_q(self, q: np.ndarray) -> np.ndarray:
         out: np.ndarray = self.q_ref.copy()
@@ -636,12 +841,13 @@ def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | lis
 
 # --- the scene file ----------------------------------------------------------------------------
 
-_TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "solver"]
-_MODEL_KEYS = ["urdf", "robot", "floating", "locked", "gravity"]
+_TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "limit", "solver"]
+_MODEL_KEYS = ["urdf", "robot", "floating", "locked", "gravity", "limits"]
 _JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
 _SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
 _LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
 _LOOP_KEYS = ["a", "b", "kind"]
+_LIMIT_KEYS = ["joint", "lower", "upper"]
 
 
 def _check_keys(table: Mapping[str, Any], known: list[str], where: str) -> None:
@@ -716,6 +922,9 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
     floating = m.get("floating", False)
     if not isinstance(floating, bool):
         raise SceneError(f"[model] floating must be true or false, got {floating!r}")
+    limits = m.get("limits", True)
+    if not isinstance(limits, bool):
+        raise SceneError(f"[model] limits must be true or false, got {limits!r}")
     if ("urdf" in m) == ("robot" in m):
         raise SceneError(
             "[model] needs exactly one of 'urdf' (a file) or 'robot' (an example-robot-data "
@@ -741,7 +950,7 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
             message = error.args[0] if error.args else str(error)
             raise SceneError(f"[model] robot: {message}") from None
 
-    scene = Scene(model, name=path.stem, description=_description(path))
+    scene = Scene(model, name=path.stem, description=_description(path), limits=limits)
     scene.path = path
     scene.urdf = urdf_path
 
@@ -826,6 +1035,21 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
                 )
         at(where, scene.add_loop, s["a"], s["b"], s.get("kind", "point"))
 
+    first: dict[str, int] = {}
+    for k, s in enumerate(_tables(data, "limit"), start=1):
+        where = f"[[limit]] #{k}"
+        _check_keys(s, _LIMIT_KEYS, where)
+        joint = _required(s, "joint", where)
+        if "lower" not in s and "upper" not in s:
+            raise SceneError(f"{where}: give 'lower', 'upper' or both (rad or m), got neither")
+        if isinstance(joint, str) and joint in first:
+            raise SceneError(
+                f"{where}: joint '{joint}' has its stops in [[limit]] #{first[joint]} already "
+                "(one [[limit]] per joint)"
+            )
+        at(where, scene.set_limit, joint, s.get("lower"), s.get("upper"))
+        first[joint] = k
+
     solver = _table(data, "solver", "[solver]")
     for key, value in solver.items():
         if key not in SETTING_TYPES:
@@ -849,4 +1073,6 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
                 "[[loop]]: the loops leave the mechanism no degree of freedom (every joint "
                 "motion would open a loop): it is a structure, with nothing to settle"
             )
+        compiled = scene.compile()
+        compiled.check_loops(compiled.stops)
     return scene

@@ -11,7 +11,7 @@ import numpy as np
 import pinocchio
 
 from . import _core
-from ._checks import as_vector
+from ._checks import as_flag, as_vector
 from ._scene import Scene, joint_values
 from ._settings import Settings, make_settings
 
@@ -62,6 +62,16 @@ class Result:
     ``residual``,
     ``stability`` and the stiffness eigenvalues are those of the closed mechanism (the static
     force along the motions the loops allow, K restricted to them).
+
+    Joint stops (``limits``: whether any were in force, the model's position limits or stops
+    set on a scene): ``at_limit`` maps each joint resting on a stop at the end to 'lower' or
+    'upper', ``limit_reactions`` to the stop's reaction (>= 0, N m or N: the force it pushes
+    with), ``start_clamped`` each joint whose start was outside its stops to how far it was
+    moved onto the nearest one (rad or m). ``equal_limits`` names the joints whose lower and
+    upper model limits are equal, taken as no stop. With stops ``residual`` is the largest
+    violation of the conditions of a rest against them (|force| off the stops, a stop that
+    would have to pull) and the stability verdict is that of K restricted to the joints not
+    pressed on a stop.
     """
 
     q: np.ndarray
@@ -93,6 +103,13 @@ class Result:
     trace: Trace | None = None
     settings: Settings = field(default_factory=Settings, repr=False)
     joints: dict[str, float | list[float]] = field(default_factory=dict, repr=False)
+    limits: bool = False
+    at_limit: dict[str, str] = field(default_factory=dict)
+    limit_reactions: dict[str, float] = field(default_factory=dict)
+    start_clamped: dict[str, float] = field(default_factory=dict)
+    equal_limits: tuple[str, ...] = ()
+    #: 'rad' or 'm' for each joint named in at_limit or start_clamped (for the summary).
+    units: dict[str, str] = field(default_factory=dict, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -112,7 +129,13 @@ class Result:
             + f"{self.sim_time:.4g} s simulated)",
             f"wall time        {self.wall_time * 1e3:.3f} ms",
             f"residual         {self.residual:.3e} (max |net static generalized force|"
-            + (", along the motions the loops allow)" if self.loops else ")")
+            + (
+                ", along the motions the loops allow)"
+                if self.loops
+                else " off the stops, max pull asked of a stop)"
+                if self.limits
+                else ")"
+            )
             + (
                 f", {self.residual_before_polish:.3e} before the Newton polish"
                 if self.polished
@@ -137,15 +160,39 @@ class Result:
                 else []
             ),
             f"stability        {self.stability} (smallest stiffness eigenvalue "
-            f"{self.min_stiffness_eigenvalue:.4g}{neutral})",
+            f"{self.min_stiffness_eigenvalue:.4g}{neutral}"
+            + (", on the joints off their stops)" if self.at_limit else ")"),
         ]
+        if self.start_clamped:
+            lines.append(
+                "start clamped    "
+                + ", ".join(
+                    f"{name} moved {distance:.4g} {self.units.get(name, 'rad')}"
+                    for name, distance in self.start_clamped.items()
+                )
+                + " onto the nearest stop (the start was outside its limits)"
+            )
+        if self.equal_limits:
+            lines.append(
+                "note             "
+                + ", ".join(self.equal_limits)
+                + ": lower and upper limits equal in the model (a URDF's default when they "
+                "are left out), taken as no stop"
+            )
         if self.reason:
             lines.append(f"reason           {self.reason}")
         if self.joints:
             lines.append("joints")
             for name, value in self.joints.items():
                 values = value if isinstance(value, list) else [value]
-                lines.append(f"  {name:<28} " + " ".join(f"{x: .9f}" for x in values))
+                line = f"  {name:<28} " + " ".join(f"{x: .9f}" for x in values)
+                if name in self.at_limit:
+                    unit = "N" if self.units.get(name) == "m" else "N m"
+                    line += (
+                        f"  at {self.at_limit[name]} stop, reaction "
+                        f"{self.limit_reactions.get(name, 0.0):.3g} {unit}"
+                    )
+                lines.append(line)
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -178,6 +225,11 @@ class Result:
             "stability": self.stability,
             "min_stiffness_eigenvalue": self.min_stiffness_eigenvalue,
             "neutral_directions": self.neutral_directions,
+            "limits": self.limits,
+            "at_limit": self.at_limit,
+            "limit_reactions": self.limit_reactions,
+            "start_clamped": self.start_clamped,
+            "equal_limits": list(self.equal_limits),
         }
 
 
@@ -220,7 +272,11 @@ class StabilityReport:
     unit eigenvector of the smallest (a joint-velocity direction, dim nv). ``basis`` (nv x dim
     K) gives the joint velocities K's coordinates stand for: the identity for a tree; for a
     scene with loops, an orthonormal basis of the motions the loops allow, K being restricted
-    to them (including the curvature of the loops under their reactions).
+    to them (including the curvature of the loops under their reactions); with joint stops, the
+    joints not pressed on a stop (a selection of columns of the identity), K restricted to them.
+    With stops, ``stop_contacts`` lists the joints resting on a stop at q as (joint, 'lower' or
+    'upper', reaction >= 0 in N m or N) and ``stop_residual`` is the residual of a rest against
+    them (as ``Result.residual``); without stops, empty and None.
     """
 
     verdict: str
@@ -231,21 +287,32 @@ class StabilityReport:
     softest_direction: np.ndarray
     stiffness_matrix: np.ndarray
     basis: np.ndarray
+    stop_contacts: list[tuple[str, str, float]] = field(default_factory=list)
+    stop_residual: float | None = None
 
 
-def assess_stability(model: Any, q: Any) -> StabilityReport:
+def _limits_flag(limits: Any, default: bool) -> bool:
+    return default if limits is None else as_flag(limits, "limits")
+
+
+def assess_stability(model: Any, q: Any, *, limits: bool | None = None) -> StabilityReport:
     """Stability of a rest at ``q`` of a ``pinocchio.Model`` under gravity or of a ``Scene``
     (all its elements; K on the free joints). Gravity's part of K comes from Pinocchio's
-    analytic derivatives, the elements' part from central finite differences."""
+    analytic derivatives, the elements' part from central finite differences. With joint stops
+    (``limits`` as for ``solve``: None honours a bare model's position limits and a scene's own
+    setting) K is restricted to the joints not pressed on a stop at q."""
     if isinstance(model, Scene):
         q = as_vector(q, "q", model.model.nq, "model.nq")
         compiled = model.compile(q)
+        stops = compiled.stops_for(_limits_flag(limits, model.limits))
+        compiled.check_loops(stops)
         raw = _core.stiffness(
-            compiled.model, q[compiled.q_index], compiled.elements, compiled.loops
+            compiled.model, q[compiled.q_index], compiled.elements, compiled.loops, stops
         )
     else:
         _check_model(model)
-        raw = _core.stiffness(model, as_vector(q, "q", model.nq, "model.nq"))
+        stops = (True, []) if _limits_flag(limits, True) else None
+        raw = _core.stiffness(model, as_vector(q, "q", model.nq, "model.nq"), None, None, stops)
     return StabilityReport(**raw)
 
 
@@ -256,6 +323,7 @@ def solve(
     *,
     v0: Any = None,
     callback: Callable[[], bool] | None = None,
+    limits: bool | None = None,
     **overrides: Any,
 ) -> Result:
     """Settle a mechanism by kinetic damping and return where it comes to rest.
@@ -269,16 +337,23 @@ def solve(
         v0: start joint velocity (dim model.nv); zero when None.
         callback: called every ``check_every`` steps without arguments; returning True stops the
             run with status 'aborted'. Ctrl-C does the same.
+        limits: whether the model's position limits are joint stops. None: yes for a
+            ``pinocchio.Model``, the scene's own setting (``Scene.limits``, ``[model] limits``)
+            for a scene; True or False overrides it. Stops set on a scene (``set_limit``,
+            ``[[limit]]``) apply either way.
         **overrides: any ``Settings`` field, e.g. ``kt=0.3``.
 
     Raises:
         TypeError: ``model`` is neither a ``pinocchio.Model`` nor a ``Scene``; an unknown
             setting or a value of the wrong type.
         ValueError: a setting out of range, or a ``q0``/``v0`` of the wrong size, with a
-            non-finite entry or a non-normalised quaternion; the message names it.
+            non-finite entry or a non-normalised quaternion; the message names it. A
+            ``SceneError`` (a ValueError) for joint stops on a scene with loops (not supported
+            yet).
     """
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
+    stops: tuple[bool, list[tuple[int, float, float]]] | None
     if isinstance(model, Scene):
         scene = model
         full = scene.model
@@ -290,6 +365,10 @@ def solve(
         locked_v = np.delete(v_full, compiled.v_index)
         if np.any(locked_v != 0.0):
             raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
+        stops = compiled.stops_for(_limits_flag(limits, scene.limits))
+        compiled.check_loops(stops)
+        equal = compiled.equal_limits(stops)
+        solved = compiled.model
         raw = _core.solve(
             compiled.model,
             q_full[compiled.q_index],
@@ -298,6 +377,7 @@ def solve(
             callback,
             compiled.elements,
             compiled.loops,
+            stops,
         )
         raw["q"] = compiled.full_q(raw["q"])
         raw["loops"] = len(scene.loops)
@@ -313,15 +393,34 @@ def solve(
         s.check()
         q = pinocchio.neutral(model) if q0 is None else as_vector(q0, "q0", model.nq, "model.nq")
         v = np.zeros(model.nv) if v0 is None else as_vector(v0, "v0", model.nv, "model.nv")
-        raw = _core.solve(model, q, v, s, callback)
+        stops = (True, []) if _limits_flag(limits, True) else None
+        equal = [] if stops is None else list(_core.joint_stops(model, stops)["equal_limits"])
+        solved = model
+        raw = _core.solve(model, q, v, s, callback, None, None, stops)
         raw["loops"] = 0
         naming = model
     trace = raw.pop("trace")
     if trace is not None:
         trace["event_kind"] = tuple(trace["event_kind"])
+    contacts = raw.pop("stop_contacts")
+    clamped = {str(name): float(distance) for name, distance in raw.pop("start_clamped")}
+    named = {str(name) for name, _, _ in contacts} | set(clamped)
     return Result(
         **raw,
         trace=None if trace is None else Trace(**trace),
         settings=s,
         joints=joint_values(naming, raw["q"]),
+        limits=stops is not None,
+        at_limit={str(name): str(side) for name, side, _ in contacts},
+        limit_reactions={str(name): float(reaction) for name, _, reaction in contacts},
+        start_clamped=clamped,
+        equal_limits=tuple(equal),
+        units={name: _unit(solved, name) for name in named},
     )
+
+
+def _unit(model: pinocchio.Model, name: str) -> str:
+    """'m' for a prismatic joint, 'rad' for a revolute or helical one."""
+    kind = str(model.joints[model.getJointId(name)].shortname())
+    prismatic = kind in ("JointModelPX", "JointModelPY", "JointModelPZ") or "Prismatic" in kind
+    return "m" if prismatic else "rad"

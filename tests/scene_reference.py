@@ -41,7 +41,10 @@ class Reference:
     ``(frame_a, point_a, frame_b, point_b, stiffness, rest_length)``; joint springs
     ``(joint, stiffness, rest)``; joint loads ``(joint, effort)``; point loads
     ``(frame, point, force, torque)``; loop closures ``(frame_a, point_a, frame_b, point_b,
-    kind)``.
+    kind)``. Joint stops: the model's position limits when ``limits`` (a revolute or prismatic
+    joint of one coordinate; equal limits, non-finite or huge ones are none), and
+    ``limit_entries`` ``(joint, lower or None, upper or None)`` on top (None: the model's own on
+    that side while ``limits``, else none).
     """
 
     full: pinocchio.Model
@@ -52,6 +55,8 @@ class Reference:
     point_loads: list[tuple] = field(default_factory=list)
     loops: list[tuple] = field(default_factory=list)
     start: dict = field(default_factory=dict)
+    limits: bool = True
+    limit_entries: list[tuple] = field(default_factory=list)
     _reduced: dict = field(default_factory=dict, repr=False)
 
     # -- construction --
@@ -74,7 +79,14 @@ class Reference:
         def end(e):
             return e["frame"], np.array(e.get("point", [0.0, 0.0, 0.0]), float)
 
-        ref = cls(full, locked=list(m.get("locked", [])), start=dict(data.get("start", {})))
+        ref = cls(
+            full,
+            locked=list(m.get("locked", [])),
+            start=dict(data.get("start", {})),
+            limits=m.get("limits", True),
+        )
+        for s in data.get("limit", []):
+            ref.limit_entries.append((s["joint"], s.get("lower"), s.get("upper")))
         for s in data.get("joint_spring", []):
             ref.joint_springs.append((s["joint"], s["stiffness"], s.get("rest", 0.0)))
         for s in data.get("spring", []):
@@ -255,6 +267,71 @@ class Reference:
             minus = self.force_reduced(model, pinocchio.integrate(model, q, -step))
             k[:, i] = (plus - minus) / (2 * h)
         return k
+
+    # -- joint stops --
+
+    def stops(self, model: pinocchio.Model) -> dict[str, tuple[float, float]]:
+        """The stops of the joints of ``model`` (the full or a reduced model) by name:
+        (lower, upper) with -inf / +inf where a side has none."""
+        out = {}
+        own = {}
+        for j in range(1, model.njoints):
+            if model.nqs[j] != 1 or model.nvs[j] != 1:
+                continue  # continuous, spherical, planar, free-flyer: no stop of their own
+            iq = model.idx_qs[j]
+            low, high = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
+            if low == high:  # a URDF's default when the limits are left out: none
+                continue
+            low = low if math.isfinite(low) and abs(low) < 1e10 else -math.inf
+            high = high if math.isfinite(high) and abs(high) < 1e10 else math.inf
+            own[model.names[j]] = (low, high)
+            if self.limits and (math.isfinite(low) or math.isfinite(high)):
+                out[model.names[j]] = (low, high)
+        for name, low, high in self.limit_entries:
+            if name not in model.names:
+                continue  # a locked joint
+            kept = own if self.limits else {}
+            model_low, model_high = kept.get(name, (-math.inf, math.inf))
+            out[name] = (
+                model_low if low is None else float(low),
+                model_high if high is None else float(high),
+            )
+        return {k: v for k, v in out.items() if math.isfinite(v[0]) or math.isfinite(v[1])}
+
+    def rest_conditions(
+        self, model: pinocchio.Model, q: np.ndarray, force: np.ndarray
+    ) -> tuple[np.ndarray, dict[str, tuple[str, float]], bool]:
+        """The conditions of a rest against stops at the reduced configuration q given the net
+        static force there: the violation per velocity index (|force| off the stops; at a lower
+        stop max(0, -force), at an upper max(0, force): a stop only pushes), the joints on a stop
+        with (side, reaction >= 0), and whether every stopped joint is within its range."""
+        violation = np.abs(force)
+        contacts = {}
+        inside = True
+        for name, (low, high) in self.stops(model).items():
+            j = model.getJointId(name)
+            x, iv = q[model.idx_qs[j]], model.idx_vs[j]
+            inside = inside and low <= x <= high
+            if x <= low:
+                violation[iv] = max(0.0, -force[iv])
+                contacts[name] = ("lower", max(0.0, force[iv]))
+            elif x >= high:
+                violation[iv] = max(0.0, force[iv])
+                contacts[name] = ("upper", max(0.0, -force[iv]))
+        return violation, contacts, inside
+
+    def rest_residual(self, q_full: np.ndarray) -> float:
+        """The residual of a rest against the stops (the plain residual without any)."""
+        model = self.reduced(q_full)
+        q = self.to_reduced(model, q_full)
+        violation = self.rest_conditions(model, q, self.force_reduced(model, q))[0]
+        return float(np.max(violation)) if violation.size else 0.0
+
+    def contacts(self, q_full: np.ndarray) -> dict[str, tuple[str, float]]:
+        """The joints resting on a stop at q_full: (side, reaction)."""
+        model = self.reduced(q_full)
+        q = self.to_reduced(model, q_full)
+        return self.rest_conditions(model, q, self.force_reduced(model, q))[1]
 
     # -- the same on full configurations --
 

@@ -174,20 +174,25 @@ def test_double_pendulum_settles_strictly_stable(double_pendulum):
     assert eigenvalues.min() > 1e-3  # no neutral direction: a strict minimum
 
 
+# The Panda's arm passes through its joint stops on its way to hanging down: these two tests
+# are about the equilibria of the unlimited model (g(q) = 0, the full stiffness), so they turn
+# the limits off (tests/test_limits.py settles the real Panda on its stops).
+
+
 @pytest.mark.parametrize("energy", ["exact", "simplified"])
 def test_panda_arm_settles_to_a_stable_pose(panda_arm, energy):
-    result = pinsettle.solve(panda_arm, max_e=1e-16, energy=energy)
+    result = pinsettle.solve(panda_arm, max_e=1e-16, energy=energy, limits=False)
     assert_stable_equilibrium(panda_arm, result, max_residual=1e-6)
 
 
 def test_panda_with_free_fingers_has_no_equilibrium(panda, panda_arm):
-    """The full Panda's fingers are prismatic joints without spring or enforced limit: where
-    the arm hangs, gravity has a component along them and they slide away for ever. The
-    solver must not claim convergence (this is physics, not a solver failure)."""
-    arm = pinsettle.solve(panda_arm, max_e=1e-16)
+    """Without its stops the full Panda's fingers are prismatic joints without spring or
+    limit: where the arm hangs, gravity has a component along them and they slide away for
+    ever. The solver must not claim convergence (this is physics, not a solver failure)."""
+    arm = pinsettle.solve(panda_arm, max_e=1e-16, limits=False)
     q_full = np.concatenate([arm.q, [0.0, 0.0]])
     assert np.max(np.abs(gravity(panda, q_full)[-2:])) > 1e-2
-    result = pinsettle.solve(panda, max_steps=20_000)
+    result = pinsettle.solve(panda, max_steps=20_000, limits=False)
     assert result.status == "max_steps"
     assert not result.converged
     assert np.max(np.abs(result.q[-2:])) > panda.upperPositionLimit[-1]  # past the 4 cm stop
@@ -287,9 +292,10 @@ def test_diverged_on_a_huge_time_step(pendulum):
 def test_a_step_past_the_stability_limit_is_halved_until_it_settles(dt):
     # Mass 2 kg on a 500 N/m spring: omega = 15.8 rad/s, explicit Euler is stable only for
     # dt < 2 / omega = 0.126 s. A fixed step beyond that explodes; the guard rolls back to the
-    # last good state, halves the step and goes on, to the exact answer -m g / k.
+    # last good state, halves the step and goes on, to the exact answer -m g / k. (Without the
+    # slider's stops at +-0.5 m, which bound the motion and keep the energy from exploding.)
     scene = pinsettle.load_scene(pinsettle.scene_path("slider_spring"))
-    result = pinsettle.solve(scene, dt=dt, max_e=1e-16)
+    result = pinsettle.solve(scene, dt=dt, max_e=1e-16, limits=False)
     assert result.status == "converged"
     assert result.dt_reductions >= 1
     assert result.dt == dt * 0.5**result.dt_reductions < 2.0 / np.sqrt(500.0 / 2.0)
@@ -476,8 +482,13 @@ def test_trace_records_configurations_and_events_for_playback():
     t = r.trace
     assert t.q.shape == (len(t.step), scene.model.nq)  # full model: locked fingers included
     assert np.allclose(t.q[:, -2:], 0.02)
-    # Each recorded q is the state at its step: the first one is the start.
-    assert np.allclose(t.q[0], scene.q0())
+    # Each recorded q is the state at its step: the first one is the start, moved into the
+    # joints' limits (panda_joint4 starts at 0, above its upper limit -0.0698).
+    full = scene.model
+    assert np.allclose(
+        t.q[0], np.clip(scene.q0(), full.lowerPositionLimit, full.upperPositionLimit)
+    )
+    assert r.start_clamped == {"panda_joint4": pytest.approx(0.0698)}
     # Every damping event is listed, in order, inside the run.
     assert t.event_kind.count("damping") == r.peaks
     assert np.all(np.diff(t.event_step) > 0) and t.event_step[-1] < r.steps
@@ -548,13 +559,17 @@ def test_released_at_a_stable_equilibrium_converges_at_once(pendulum):
 def test_released_upright_is_pushed_off_and_hangs_down(pendulum):
     # q = pi is an equilibrium too (up to the round-off of sin(pi)), but a maximum: it must not
     # be reported converged there. With a fixed small step the round-off creeps too slowly and
-    # the solver pushes it off; with the automatic step it falls away by itself.
-    result = pinsettle.solve(pendulum, [np.pi], max_e=1e-20, max_steps=200000, dt=1e-3)
+    # the solver pushes it off; with the automatic step it falls away by itself. (The URDF's
+    # stop at 3.1416 rad, 7.3e-6 rad away, would catch a push that way: limits off, this is
+    # about the push.)
+    result = pinsettle.solve(
+        pendulum, [np.pi], max_e=1e-20, max_steps=200000, dt=1e-3, limits=False
+    )
     assert result.status == "converged"
     assert result.pushes >= 1
     assert result.stability == "stable"
     assert abs(np.sin(result.q[0])) < 1e-8 and np.cos(result.q[0]) > 0
-    result = pinsettle.solve(pendulum, [np.pi], max_e=1e-20)
+    result = pinsettle.solve(pendulum, [np.pi], max_e=1e-20, limits=False)
     assert result.status == "converged"
     assert result.stability == "stable"
     assert abs(np.sin(result.q[0])) < 1e-8 and np.cos(result.q[0]) > 0

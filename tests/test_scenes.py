@@ -82,7 +82,8 @@ class Expected:
 
     ``neutral`` joints can take any value at an equilibrium; their numbers are those of the
     run the comment describes. ``eigen_range`` is (smallest, largest) where the comment gives
-    only those.
+    only those. ``at_limit``: the joints resting on a stop and which ('lower' or 'upper'); the
+    eigenvalues are then those of the stiffness restricted to the other joints.
     """
 
     joints: dict[str, str] = field(default_factory=dict)
@@ -90,6 +91,7 @@ class Expected:
     eigen_range: tuple[str, str] | None = None
     neutral: tuple[str, ...] = ()
     stable: bool = True  # False: stable-or-neutral (zero eigenvalues along ``neutral``)
+    at_limit: dict[str, str] = field(default_factory=dict)
 
 
 EXPECTED = {
@@ -101,19 +103,56 @@ EXPECTED = {
     ),
     "panda_fingers_locked": Expected(
         {
-            "panda_joint1": "5.47885",
-            "panda_joint2": "3.36194",
-            "panda_joint3": "9.40103",
-            "panda_joint4": "5.78567",
-            "panda_joint5": "0.72484",
-            "panda_joint6": "-3.86920",
-            "panda_joint7": "-0.89934",
+            "panda_joint1": "-0.187814",
+            "panda_joint2": "1.7628",
+            "panda_joint3": "-0.010341",
+            "panda_joint4": "-1.656010",
+            "panda_joint5": "0.706446",
+            "panda_joint6": "2.414132",
+            "panda_joint7": "-0.899372",
             "panda_finger_joint1": "0.02",
             "panda_finger_joint2": "0.02",
         },
-        ("0", "0.0258", "0.156", "2.27", "3.16", "11.5", "69.2"),
+        ("0", "0.0258", "0.1511", "2.554", "23.68", "29.94"),
         neutral=("panda_joint1",),
         stable=False,
+        at_limit={"panda_joint2": "upper"},
+    ),
+    "panda": Expected(
+        {
+            "panda_joint1": "-0.175350",
+            "panda_joint2": "1.7628",
+            "panda_joint3": "-0.010341",
+            "panda_joint4": "-1.656015",
+            "panda_joint5": "0.706973",
+            "panda_joint6": "2.412858",
+            "panda_joint7": "-0.917299",
+            "panda_finger_joint1": "0.04",
+            "panda_finger_joint2": "0",
+        },
+        ("0", "0.0305", "0.1513", "2.558", "23.68", "29.94"),
+        neutral=("panda_joint1",),
+        stable=False,
+        at_limit={
+            "panda_joint2": "upper",
+            "panda_finger_joint1": "upper",
+            "panda_finger_joint2": "lower",
+        },
+    ),
+    "xarm7": Expected(
+        {
+            "joint1": "1.261963",
+            "joint2": "2.0944",
+            "joint3": "3.055161",
+            "joint4": "3.894605",
+            "joint5": "-3.097803",
+            "joint6": "1.339274",
+            "joint7": "-4.784254",
+        },
+        ("0", "0.00964", "0.08486", "1.0247", "6.846", "12.82"),
+        neutral=("joint1",),
+        stable=False,
+        at_limit={"joint2": "upper"},
     ),
     "planar_3link_spring": Expected(
         {"joint1": "-0.138592", "joint2": "-0.144181", "joint3": "-1.566479"},
@@ -174,7 +213,9 @@ POSITIONS = [
     ("bistable_pendulum", "arm", (0.0, 0.0, -1.0), ("-0.5951", None, "-0.8037")),
     ("planar_3link_spring", "link3", (0.0, 0.0, -0.5), ("0.6893", "0", "-0.8379")),
     ("ur5", "tool0", (0.0, 0.0, 0.0), (None, None, "-0.823")),
-    ("panda_fingers_locked", "panda_hand_tcp", (0.0, 0.0, 0.0), (None, None, "-0.578")),
+    ("panda_fingers_locked", "panda_hand_tcp", (0.0, 0.0, 0.0), (None, None, "-0.393")),
+    ("panda", "panda_hand_tcp", (0.0, 0.0, 0.0), (None, None, "-0.392")),
+    ("xarm7", "link_eef", (0.0, 0.0, 0.0), (None, None, "-0.298")),
     ("ur5_tool_spring", "tool0", (0.0, 0.0, 0.0), ("0.3365", "0.1682", "0.2104")),
 ]
 
@@ -208,9 +249,36 @@ def solved():
     return get
 
 
+def pressed_joints(ref: Reference, q_full: np.ndarray) -> list[str]:
+    """The joints resting on a stop at q_full whose stop pushes (a reaction beyond 1e-9 of the
+    largest static force: the one the stability verdict counts as held), by the reference."""
+    model = ref.reduced(q_full)
+    q = ref.to_reduced(model, q_full)
+    force = ref.force_reduced(model, q)
+    contacts = ref.rest_conditions(model, q, force)[1]
+    tol = 1e-9 * np.max(np.abs(force), initial=0.0)
+    return [name for name, (_, reaction) in contacts.items() if reaction > tol]
+
+
+def restricted_stiffness(ref: Reference, q_full: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """The reference stiffness (finite differences) restricted to the velocity indices of the
+    joints not pressed on a stop, and those indices."""
+    model = ref.reduced(q_full)
+    q = ref.to_reduced(model, q_full)
+    k = ref.stiffness_reduced(model, q)
+    held = set()
+    for name in pressed_joints(ref, q_full):
+        j = model.getJointId(name)
+        held.update(range(model.idx_vs[j], model.idx_vs[j] + model.nvs[j]))
+    free = [i for i in range(model.nv) if i not in held]
+    return k[np.ix_(free, free)], free
+
+
 def independent_root(ref: Reference, q_full: np.ndarray, neutral=()) -> np.ndarray:
     """An equilibrium found by scipy's fsolve on the Reference force, started at q_full, with
-    the neutral joints held at their value there (their stiffness is zero)."""
+    the neutral joints held at their value there (their stiffness is zero), and the joints
+    pressed on a stop held on it (their force is taken by the stop)."""
+    neutral = (*neutral, *pressed_joints(ref, q_full))
     model = ref.reduced(q_full)
     q0 = ref.to_reduced(model, q_full)
     fixed = {model.idx_vs[model.getJointId(name)] for name in neutral}
@@ -261,7 +329,8 @@ def test_reference_agrees_with_scene_static_force(name, solved):
         assert got.shape == expected.shape
         scale = max(1.0, np.max(np.abs(expected)))
         assert np.allclose(got, expected, rtol=1e-9, atol=1e-9 * scale), (q, got, expected)
-        assert scene.residual(q) == pytest.approx(np.max(np.abs(expected)), rel=1e-9, abs=1e-12)
+        # With stops, the residual of a rest against them (q may be outside their range).
+        assert scene.residual(q) == pytest.approx(ref.rest_residual(q), rel=1e-9, abs=1e-12)
 
 
 def mixed_scenes():
@@ -370,8 +439,11 @@ def test_scene_converges_to_an_equilibrium(name, solved):
     scene, result, ref = solved(name)
     assert result.status == "converged" and result.converged
     assert result.q.shape == (scene.model.nq,)
-    residual = ref.residual(result.q)
+    residual = ref.rest_residual(result.q)  # the plain residual when nothing rests on a stop
     assert residual < MAX_RESIDUAL
+    contacts = ref.contacts(result.q)
+    assert {name: side for name, (side, _) in contacts.items()} == EXPECTED[name].at_limit
+    assert result.at_limit == EXPECTED[name].at_limit
     # The residual reported is the one recomputed independently, up to the round-off of two
     # different sums over forces of ~10 N m (1e-14 N m).
     assert result.residual == pytest.approx(residual, rel=1e-9, abs=1e-13)
@@ -385,8 +457,9 @@ def test_scene_joint_values_are_the_stated_ones(name, solved):
     scene, result, ref = solved(name)
     expected = EXPECTED[name]
     root = independent_root(ref, result.q, expected.neutral)
-    assert ref.residual(root) < 1e-10
-    eigenvalues = ref.eigenvalues(result.q)
+    assert ref.rest_residual(root) < 1e-10
+    k, _ = restricted_stiffness(ref, result.q)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (k + k.T))
     smallest = min(e for e in eigenvalues if e > 1e-6)
     # How far the solver may be from the exact equilibrium, given its residual.
     solver_tol = 1e-6 + 3.0 * result.residual * math.sqrt(len(eigenvalues)) / smallest
@@ -406,8 +479,9 @@ def test_scene_stiffness_eigenvalues_are_the_stated_ones(name, solved):
     scene, result, ref = solved(name)
     expected = EXPECTED[name]
     model = ref.reduced(result.q)
-    q = ref.to_reduced(model, result.q)
-    k = ref.stiffness_reduced(model, q)
+    # On the joints not pressed on a stop (all of them when none is).
+    k, free = restricted_stiffness(ref, result.q)
+    assert len(free) == model.nv - len(expected.at_limit)
     eigenvalues = np.linalg.eigvalsh(0.5 * (k + k.T))
     top = max(1.0, np.max(np.abs(eigenvalues)))
     # Stable or neutral: no direction of negative stiffness beyond round-off.
@@ -420,9 +494,11 @@ def test_scene_stiffness_eigenvalues_are_the_stated_ones(name, solved):
         # The zero stiffness is along the neutral joints: moving one of them alone costs
         # nothing (its column of K vanishes); every other direction is stiff.
         for joint in expected.neutral:
-            column = k[:, model.idx_vs[model.getJointId(joint)]]
+            column = k[:, free.index(model.idx_vs[model.getJointId(joint)])]
             assert np.max(np.abs(column)) <= 1e-6 * top, (joint, column)
-        assert eigenvalues[~neutral].min() > 1e-2
+        # Far from the neutral cut (1e-6 of the largest): xarm7's softest direction is
+        # 0.00964 N m/rad for a largest eigenvalue of 12.8.
+        assert eigenvalues[~neutral].min() > 1e-4 * top
     if expected.eigenvalues:
         assert len(eigenvalues) == len(expected.eigenvalues)
         for got, text in zip(eigenvalues, expected.eigenvalues, strict=True):

@@ -3,10 +3,12 @@
 Every case is a scene (a model, its springs and loads, a start) solved with each energy measure
 and kt in {0, 0.5, 0.9}. A case passes when it ends
 
-- ``converged`` and ``stable`` or ``neutral``, within 1e-6 (rad or m) in every joint of the
-  equilibrium that Newton's method finds from the answer on this module's own reimplementation
-  of the static force (gravity from Pinocchio's RNEA, springs and loads written out here with
-  frame Jacobians, a finite-difference Jacobian: nothing of pinsettle's force or stiffness code);
+- ``converged``, within 1e-6 (rad or m) in every joint of the equilibrium that Newton's method
+  finds from the answer on this module's own reimplementation of the static force (gravity from
+  Pinocchio's RNEA, springs and loads written out here with frame Jacobians, a finite-difference
+  Jacobian: nothing of pinsettle's force or stiffness code), and that equilibrium stable or
+  neutral by the eigenvalues of the symmetric part of that same finite-difference Jacobian (a
+  rest on a saddle fails, whatever the solver's own verdict says);
 - or with the status the case expects (``no_equilibrium``),
 
 and never with a non-finite value, a crash or a hang (each run has a wall-clock budget).
@@ -100,6 +102,20 @@ def static_force(physics: Physics, q: np.ndarray) -> np.ndarray:
     return force
 
 
+def jacobian(physics: Physics, q: np.ndarray) -> np.ndarray:
+    """d static_force / dq by central differences along each joint-velocity direction (step
+    1e-7 through pinocchio.integrate): the stiffness matrix, nothing of pinsettle's."""
+    model = physics.model
+    J = np.empty((model.nv, model.nv))
+    for i in range(model.nv):
+        e = np.zeros(model.nv)
+        e[i] = 1e-7
+        plus = static_force(physics, pinocchio.integrate(model, q, e))
+        minus = static_force(physics, pinocchio.integrate(model, q, -e))
+        J[:, i] = (plus - minus) / 2e-7
+    return J
+
+
 def newton(physics: Physics, q: np.ndarray, iterations: int = 30) -> tuple[np.ndarray, float]:
     """Newton's method on the static force from q with a central-difference Jacobian (least
     squares: neutral directions are left alone), until the step is below 1e-13 or stops
@@ -112,13 +128,7 @@ def newton(physics: Physics, q: np.ndarray, iterations: int = 30) -> tuple[np.nd
         r = static_force(physics, q)
         if not np.any(r):
             return q, 0.0
-        J = np.empty((model.nv, model.nv))
-        for i in range(model.nv):
-            e = np.zeros(model.nv)
-            e[i] = 1e-7
-            plus = static_force(physics, pinocchio.integrate(model, q, e))
-            minus = static_force(physics, pinocchio.integrate(model, q, -e))
-            J[:, i] = (plus - minus) / 2e-7
+        J = jacobian(physics, q)
         step = np.linalg.lstsq(J, -r, rcond=1e-8)[0]  # FD noise: ~1e-8 of the largest
         size = float(np.max(np.abs(step)))
         trial = pinocchio.integrate(model, q, step)
@@ -129,6 +139,36 @@ def newton(physics: Physics, q: np.ndarray, iterations: int = 30) -> tuple[np.nd
         if size < 1e-13:
             break
     return q, last
+
+
+# Zero eigenvalues (neutral directions) are told from negative ones within this fraction of the
+# largest, or within the finite-difference noise of the Jacobian if that is larger: its
+# asymmetry (the stiffness of springs, loads and gravity is symmetric) times its size.
+NEUTRAL_TOLERANCE = 1e-7
+
+
+@dataclass
+class Stability:
+    verdict: str  # "stable", "neutral" or "unstable"
+    min_eigenvalue: float  # N m/rad or N/m
+    tolerance: float
+
+
+def stability(physics: Physics, q: np.ndarray) -> Stability:
+    """The kind of rest at q from the eigenvalues of the symmetric part of this module's own
+    finite-difference stiffness (the Jacobian Newton uses), not from pinsettle's verdict."""
+    J = jacobian(physics, q)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (J + J.T))
+    noise = len(J) * float(np.max(np.abs(J - J.T)))
+    tolerance = max(NEUTRAL_TOLERANCE * float(np.max(np.abs(eigenvalues))), noise, 1e-300)
+    smallest = float(eigenvalues[0])
+    if smallest < -tolerance:
+        verdict = "unstable"
+    elif smallest <= tolerance:
+        verdict = "neutral"
+    else:
+        verdict = "stable"
+    return Stability(verdict, smallest, tolerance)
 
 
 # --- the cases ----------------------------------------------------------------------------------
@@ -317,6 +357,8 @@ class Outcome:
     steps: int
     seconds: float
     error: float  # max |q - q_newton| (rad or m); nan when there is no equilibrium to match
+    reference_stability: str  # from the reference's own stiffness at the Newton root; "-" if none
+    reference_min_eigenvalue: float  # N m/rad or N/m; nan when not assessed
     residual: float
     dt_reductions: int
     scaled_modes: int
@@ -332,14 +374,13 @@ def run(case: Case, energy: str, kt: float) -> Outcome:
     seconds = time.perf_counter() - start
     finite = bool(np.all(np.isfinite(result.q)) and np.all(np.isfinite(result.v)))
     error = math.nan
+    reference = None
     why = ""
     if not finite:
         why = "non-finite q or v"
     elif case.expect == "equilibrium":
         if not result.converged:
             why = f"ended {result.status}"
-        elif result.stability not in ("stable", "neutral"):
-            why = f"converged {result.stability}"
         else:
             root, uncertainty = newton(physics, result.q)
             if not uncertainty <= 1e-3 * JOINT_TOLERANCE:
@@ -347,8 +388,15 @@ def run(case: Case, energy: str, kt: float) -> Outcome:
             else:
                 diff = pinocchio.difference(physics.model, root, result.q)
                 error = float(np.max(np.abs(diff)))
+                reference = stability(physics, root)
                 if not error <= JOINT_TOLERANCE:
                     why = f"{error:.1e} from the Newton root"
+                elif reference.verdict == "unstable":
+                    why = (
+                        f"rest on a saddle: the reference stiffness has eigenvalue "
+                        f"{reference.min_eigenvalue:.3g} (tolerance {reference.tolerance:.1e}); "
+                        f"the solver said {result.stability}"
+                    )
     elif result.status != case.expect:
         why = f"ended {result.status}, expected {case.expect}"
     return Outcome(
@@ -362,6 +410,8 @@ def run(case: Case, energy: str, kt: float) -> Outcome:
         result.steps,
         seconds,
         error,
+        "-" if reference is None else reference.verdict,
+        math.nan if reference is None else reference.min_eigenvalue,
         result.residual,
         result.dt_reductions,
         result.scaled_modes,
@@ -380,17 +430,24 @@ def runs() -> list[tuple[Case, str, float]]:
 def table(outcomes: list[Outcome]) -> str:
     lines = [
         "| group | case | settings | energy | kt | outcome | steps | time (ms) | error vs Newton "
-        "| residual | halvings | stiff modes | pass |",
-        "| --- | --- | --- | --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |",
+        "| reference stiffness | residual | halvings | stiff modes | pass |",
+        "| --- | --- | --- | --- | --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: "
+        "| --- |",
     ]
     for o in outcomes:
         outcome = o.status + (f", {o.stability}" if o.status == "converged" else "")
         error = "-" if math.isnan(o.error) else f"{o.error:.1e}"
+        reference = (
+            "-"
+            if math.isnan(o.reference_min_eigenvalue)
+            else f"{o.reference_stability}, min {o.reference_min_eigenvalue:.2g}"
+        )
         verdict = "yes" if o.passed else f"**no**: {o.why}"
         lines.append(
             f"| {o.group} | {o.case} | {o.settings or 'defaults'} | {o.energy} | {o.kt:g} "
             f"| {outcome} | {o.steps:,} "
-            f"| {1e3 * o.seconds:.1f} | {error} | {o.residual:.1e} | {o.dt_reductions} "
+            f"| {1e3 * o.seconds:.1f} | {error} | {reference} | {o.residual:.1e} "
+            f"| {o.dt_reductions} "
             f"| {o.scaled_modes} | {verdict} |"
         )
     return "\n".join(lines)
@@ -534,13 +591,17 @@ K; the polished pose is kept only if it stays of the same stability and within t
 ## The stress suite
 
 {passed}/{runs} runs passed, {seconds:.1f} s of solving in all. A run passes when it ends
-converged and stable or neutral within {tolerance:g} (rad or m) in every joint of the
-equilibrium that an independent Newton solve (this suite's own static force: Pinocchio's RNEA
-for gravity, springs and loads written out with frame Jacobians, central-difference Jacobian)
-finds from its answer, or with the status the case expects. `error vs Newton` is that distance;
-`residual` the largest net static generalized force left (N m or N); `halvings` the divergence
-guard's step halvings; `stiff modes` the most modes slowed at once. Default settings otherwise.
-Failures stay in the table until they are fixed.
+converged within {tolerance:g} (rad or m) in every joint of the equilibrium that an independent
+Newton solve (this suite's own static force: Pinocchio's RNEA for gravity, springs and loads
+written out with frame Jacobians, central-difference Jacobian) finds from its answer, and that
+equilibrium is stable or neutral by the eigenvalues of the symmetric part of the same
+central-difference Jacobian (not by the solver's verdict: a rest on a saddle fails), or when it
+ends with the status the case expects. `error vs Newton` is that distance; `reference
+stiffness` the reference's verdict and smallest eigenvalue (N m/rad or N/m; neutral within
+1e-7 of the largest or the differences' noise); `residual` the largest net static generalized
+force left (N m or N); `halvings` the divergence guard's step halvings; `stiff modes` the most
+modes slowed at once. Default settings otherwise. Failures stay in the table until they are
+fixed.
 
 """
 

@@ -1,7 +1,7 @@
 """The stress suite (benchmarks/stress.py) as tests: every extreme case, each energy measure and
-kt in {0, 0.5, 0.9}, must end converged and stable or neutral at the independent Newton root
-(1e-6 in every joint), or with the status the case expects; never non-finite, never past its
-wall-clock budget."""
+kt in {0, 0.5, 0.9}, must end converged at the independent Newton root (1e-6 in every joint), a
+rest that the reference's own finite-difference stiffness finds stable or neutral, or with the
+status the case expects; never non-finite, never past its wall-clock budget."""
 
 from __future__ import annotations
 
@@ -58,3 +58,50 @@ def test_the_reference_is_independent_and_right():
     scene = physics.scene()
     q = np.array([0.3])
     assert stress.static_force(physics, q) == pytest.approx(scene.static_force(q), abs=1e-12)
+
+
+def test_the_reference_verdict_is_its_own():
+    # The suite's stability verdict comes from its own finite-difference stiffness.
+    pendulum = stress.Physics(stress.chain([1.0], [1.0]))
+    hanging = stress.stability(pendulum, np.array([0.0]))
+    upright = stress.stability(pendulum, np.array([math.pi]))
+    assert hanging.verdict == "stable"
+    assert hanging.min_eigenvalue == pytest.approx(9.81 * 0.5, rel=1e-6)  # m g l
+    assert upright.verdict == "unstable"
+    assert upright.min_eigenvalue == pytest.approx(-9.81 * 0.5, rel=1e-6)
+    # The UR5 hanging down turns freely about the vertical: zero eigenvalues, neutral; with its
+    # upper arm standing up it is an equilibrium again, a maximum (-m g l of the arm).
+    ur5 = stress.Physics(stress.pinsettle.load_robot("ur5"))
+    down = np.array([0.0, math.pi / 2, 0.0, -math.pi / 2, 0.0, 0.0])
+    up = np.array([0.0, -math.pi / 2, 0.0, -math.pi / 2, 0.0, 0.0])
+    assert np.max(np.abs(stress.static_force(ur5, down))) < 1e-9
+    assert np.max(np.abs(stress.static_force(ur5, up))) < 1e-9
+    assert stress.stability(ur5, down).verdict == "neutral"
+    assert stress.stability(ur5, up).verdict == "unstable"
+    assert stress.stability(ur5, up).min_eigenvalue < -10.0
+
+
+def test_a_rest_on_a_saddle_fails_whatever_the_solver_says(monkeypatch):
+    # A solver that stops a pendulum exactly upright and calls it stable: the case must fail
+    # on the reference's own eigenvalues (Newton agrees the pose is an equilibrium).
+    physics = stress.Physics(stress.chain([1.0], [1.0]))
+    case = stress.Case(
+        "upright pendulum, wrongly stable", "test", stress._physics_case(physics, [math.pi])
+    )
+
+    class Upright:
+        q = np.array([math.pi])
+        v = np.zeros(1)
+        status = "converged"
+        converged = True
+        stability = "stable"
+        steps = 0
+        residual = 0.0
+        dt_reductions = 0
+        scaled_modes = 0
+
+    monkeypatch.setattr(stress.pinsettle, "solve", lambda *args, **kwargs: Upright())
+    outcome = stress.run(case, "exact", 0.5)
+    assert not outcome.passed
+    assert "saddle" in outcome.why and outcome.reference_stability == "unstable"
+    assert outcome.error <= stress.JOINT_TOLERANCE  # it is an equilibrium: only its kind fails

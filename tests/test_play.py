@@ -1,11 +1,13 @@
 """Playback (pinsettle play): static HTML for every scene, the energy plot, the live server on
 127.0.0.1, what the animation ends on, and screenshots of both pages in headless Chromium.
 
-The screenshots need Chromium: without it these tests skip with the reason, except where
-PINSETTLE_REQUIRE_CHROMIUM=1 (set by .ci/run), where its absence is a failure."""
+The screenshots need Chromium, and most tests the viz extra (meshcat, matplotlib): without them
+these tests skip with the reason, except where PINSETTLE_REQUIRE_CHROMIUM=1 (set by .ci/run),
+where their absence is a failure. The missing-extra message is tested in every case."""
 
 from __future__ import annotations
 
+import importlib
 import os
 import shutil
 import subprocess
@@ -21,14 +23,32 @@ import pytest
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 SCENES = sorted(p.stem for p in ROBOTS.glob("*.toml"))
 
-meshcat = pytest.importorskip("meshcat", reason="the viz extra (meshcat) is not installed")
-matplotlib = pytest.importorskip("matplotlib", reason="the viz extra (matplotlib) is not installed")
-from matplotlib import image  # noqa: E402
+# The tests that need neither meshcat nor matplotlib: they run whatever is installed.
+WITHOUT_VIZ = {
+    "test_solving_never_imports_meshcat_or_matplotlib",
+    "test_missing_extra_is_a_clear_message",
+}
+
+
+@pytest.fixture(autouse=True)
+def viz_extra(request):
+    """Every other test needs the viz extra: it skips without it, except where
+    PINSETTLE_REQUIRE_CHROMIUM=1 (CI), where a missing or broken viz dependency fails."""
+    if request.function.__name__ in WITHOUT_VIZ:
+        return
+    for module in ("meshcat", "matplotlib"):
+        try:
+            importlib.import_module(module)
+        except ImportError as error:
+            if os.environ.get("PINSETTLE_REQUIRE_CHROMIUM") == "1":
+                pytest.fail(
+                    f"the viz extra is required here (PINSETTLE_REQUIRE_CHROMIUM=1) but "
+                    f"{module} does not import: {error}"
+                )
+            pytest.skip(f"the viz extra ({module}) is not installed: {error}")
 
 
 def _play():
-    import importlib
-
     return importlib.import_module("pinsettle.play")
 
 
@@ -248,6 +268,8 @@ def screenshot(browser: str, url: str, path: Path, budget_ms: int = 4000) -> np.
             timeout=120,
         )
         if path.exists():
+            from matplotlib import image
+
             return image.imread(path)[:, :, :3]
     pytest.fail(f"Chromium wrote no screenshot of {url}")
 

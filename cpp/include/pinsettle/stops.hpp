@@ -1,0 +1,226 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_stops_hpp__
+#define __pinsettle_stops_hpp__
+
+#include "pinsettle/stability.hpp"
+
+#include <Eigen/Cholesky>
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace pinsettle
+{
+
+  /// \brief Which side of its range a joint rests against.
+  enum class StopSide
+  {
+    Lower,
+    Upper
+  };
+
+  /// \brief "lower" or "upper".
+  const char * toString(StopSide side);
+
+  /// \brief A joint resting on one of its stops, and the stop's reaction.
+  struct StopContact
+  {
+    pinocchio::JointIndex joint;
+    StopSide side;
+    /// Force the stop exerts, >= 0, pushing the joint away from it (N m or N).
+    double reaction;
+  };
+
+  ///
+  /// \brief Position stops of a model's 1-DoF joints (revolute, prismatic, helical): unilateral
+  /// and inelastic, a joint pushed into a stop stays on it.
+  ///
+  /// By default they are the model's position limits (model.lowerPositionLimit,
+  /// model.upperPositionLimit; a URDF's <limit lower upper>), with three exceptions that are no
+  /// stop: a joint whose lower and upper limits are equal (the URDF default when they are left
+  /// out; equalLimitJoints lists them), a bound that is not finite or beyond kNoLimit (a model
+  /// built in code), and joints with more than one configuration entry (continuous, spherical,
+  /// free-flyer, planar). setLimit adds or overrides a stop.
+  ///
+  class JointStops
+  {
+  public:
+    /// Bounds this large (rad or m) or larger are no stop.
+    static constexpr double kNoLimit = 1e10;
+
+    /// \brief A stop of one joint; either bound may be infinite (no stop on that side).
+    struct Stop
+    {
+      pinocchio::JointIndex joint;
+      int iq; ///< index in q
+      int iv; ///< index in v
+      double lower, upper;
+    };
+
+    ///
+    /// \param[in] model The mechanism (it must outlive the stops).
+    /// \param[in] from_model Take the model's position limits; false: start with none.
+    ///
+    explicit JointStops(const pinocchio::Model & model, bool from_model = true);
+
+    ///
+    /// \brief Add or override the stops of a joint.
+    ///
+    /// \param[in] lower Lower stop (rad or m), -infinity for none.
+    /// \param[in] upper Upper stop (rad or m), +infinity for none.
+    /// \throws std::invalid_argument for a joint that is not 1-DoF with one configuration entry
+    ///         (named), a NaN, or lower > upper.
+    ///
+    void setLimit(pinocchio::JointIndex joint, double lower, double upper);
+
+    /// \brief Remove the stops of a joint (nothing happens when it has none).
+    void removeLimit(pinocchio::JointIndex joint);
+
+    /// \brief Whether there is no stop at all; the solver then runs nothing of them.
+    bool empty() const
+    {
+      return stops_.empty();
+    }
+
+    const std::vector<Stop> & stops() const
+    {
+      return stops_;
+    }
+
+    /// \brief Joints whose model limits were equal and were taken as no stop.
+    const std::vector<pinocchio::JointIndex> & equalLimitJoints() const
+    {
+      return equal_limits_;
+    }
+
+    const pinocchio::Model & model() const
+    {
+      return model_;
+    }
+
+  private:
+    const pinocchio::Model & model_;
+    std::vector<Stop> stops_;
+    std::vector<pinocchio::JointIndex> equal_limits_;
+  };
+
+  ///
+  /// \brief Move q into the stops' ranges.
+  ///
+  /// \param[in,out] q The configuration (dim model.nq).
+  /// \param[out] moved Each joint moved and by how much (rad or m), or nullptr.
+  /// \return The largest move (rad or m); 0 when q was inside.
+  ///
+  double clampToStops(
+    const JointStops & stops,
+    Eigen::VectorXd & q,
+    std::vector<std::pair<pinocchio::JointIndex, double>> * moved = nullptr);
+
+  ///
+  /// \brief The inelastic impact: a joint past a stop is put on it and its velocity into the
+  /// stop removed (also the velocity into a stop it rests on).
+  ///
+  /// \param[in,out] q The configuration (dim model.nq).
+  /// \param[in,out] v The joint velocity (dim model.nv).
+  /// \return Whether a joint was past a stop.
+  ///
+  bool enforceStops(const JointStops & stops, Eigen::VectorXd & q, Eigen::VectorXd & v);
+
+  ///
+  /// \brief The joints resting on a stop at q and the stops' reactions, from the static force.
+  ///
+  /// A joint exactly on a stop is listed with reaction max(0, tau) at a lower stop and
+  /// max(0, -tau) at an upper one (0 when the static force pulls it off the stop).
+  ///
+  /// \param[in] q The configuration (dim model.nq).
+  /// \param[in] tau The net static generalized force at q (dim model.nv, computeStaticForce).
+  ///
+  std::vector<StopContact> computeStopContacts(
+    const JointStops & stops, const Eigen::VectorXd & q, const Eigen::VectorXd & tau);
+
+  ///
+  /// \brief The residual of a rest against stops: the largest violation of its conditions.
+  ///
+  /// Off the stops the static force must vanish (|tau|); on a lower stop it must press into the
+  /// stop (tau >= 0, violation max(0, -tau)); on an upper stop likewise (max(0, tau)).
+  ///
+  /// \return The residual (N m or N).
+  ///
+  double computeStopResidual(
+    const JointStops & stops, const Eigen::VectorXd & q, const Eigen::VectorXd & tau);
+
+  ///
+  /// \brief The tangent directions free at q: every joint velocity but those of joints resting
+  /// on a stop with a reaction above tolerance.
+  ///
+  /// \return The selection matrix B (dim model.nv x number of free directions): K restricted to
+  ///         them is B^T K B.
+  ///
+  Eigen::MatrixXd computeFreeDirections(
+    const JointStops & stops,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau,
+    double tolerance);
+
+  ///
+  /// \brief Stability of a rest against stops: the stiffness restricted to the free directions
+  /// (computeFreeDirections, a stop whose reaction is within 1e-9 of the largest static force
+  /// counted as free). The report's basis is that selection; stiffness is B^T K B.
+  ///
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const JointStops & stops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces = nullptr);
+
+  ///
+  /// \brief Holding joints on their stops during a step: the part of the solver's loop that
+  /// turns the free acceleration into the one with the resting joints held.
+  ///
+  /// A joint resting on a stop (exactly on it, not moving off it) is held when its
+  /// acceleration points into the stop. The held acceleration solves M a = f with a = 0 on the
+  /// held joints, f = M a_free the generalized force of the free motion; a held joint whose
+  /// stop would have to pull is released and a resting joint that the others now accelerate
+  /// into its stop is held, until neither happens (an active set). Nothing is computed when no
+  /// resting joint is accelerated into its stop.
+  ///
+  class StopHold
+  {
+  public:
+    explicit StopHold(const JointStops & stops);
+
+    ///
+    /// \brief Replace the free acceleration data.ddq by the held one.
+    ///
+    /// \param[in] q, v The state (on the stops' ranges, as enforceStops leaves it).
+    /// \param[in] added Extra inertia W^T diag(d) W of scaled stiff modes (TimeScale), or
+    ///            nullptr; the held motion is that of the same scaled system.
+    /// \return Whether a joint is held.
+    ///
+    bool hold(
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q,
+      const Eigen::VectorXd & v,
+      const TimeScale * added);
+
+  private:
+    // The acceleration with the held joints' at zero: M_ff a_f = f_f.
+    void solveHeld(const std::vector<bool> & held, Eigen::VectorXd & a);
+
+    const JointStops & stops_;
+    // Joints resting on a stop: (index in v, +1 lower stop / -1 upper stop).
+    std::vector<std::pair<int, double>> resting_;
+    std::vector<int> free_;
+    Eigen::MatrixXd mass_, mass_ff_;
+    Eigen::VectorXd force_, force_f_;
+    Eigen::LLT<Eigen::MatrixXd> llt_;
+  };
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_stops_hpp__

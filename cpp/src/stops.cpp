@@ -1,0 +1,324 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#include "pinsettle/stops.hpp"
+#include "pinsettle/solver.hpp"
+
+#include <pinocchio/algorithm/crba.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace pinsettle
+{
+
+  const char * toString(StopSide side)
+  {
+    return side == StopSide::Lower ? "lower" : "upper";
+  }
+
+  namespace
+  {
+    // Joints a stop can act on: one configuration entry, one velocity (revolute, prismatic,
+    // helical), never a mimic joint (it has no motion of its own).
+    bool isStoppable(const pinocchio::Model & model, pinocchio::JointIndex joint)
+    {
+      return model.nqs[joint] == 1 && model.nvs[joint] == 1
+             && model.joints[joint].shortname().find("Mimic") == std::string::npos;
+    }
+
+    double asBound(double limit, double none)
+    {
+      return std::isfinite(limit) && std::abs(limit) < JointStops::kNoLimit ? limit : none;
+    }
+
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+  } // namespace
+
+  JointStops::JointStops(const pinocchio::Model & model, bool from_model)
+  : model_(model)
+  {
+    if (!from_model)
+      return;
+    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    {
+      if (!isStoppable(model, j))
+        continue;
+      const int iq = model.idx_qs[j];
+      const double lower = model.lowerPositionLimit[iq], upper = model.upperPositionLimit[iq];
+      if (lower == upper)
+      {
+        equal_limits_.push_back(j);
+        continue;
+      }
+      const Stop stop{j, iq, model.idx_vs[j], asBound(lower, -kInf), asBound(upper, kInf)};
+      if (std::isfinite(stop.lower) || std::isfinite(stop.upper))
+        stops_.push_back(stop);
+    }
+  }
+
+  void JointStops::setLimit(pinocchio::JointIndex joint, double lower, double upper)
+  {
+    std::ostringstream msg;
+    if (joint == 0 || joint >= static_cast<pinocchio::JointIndex>(model_.njoints))
+      msg << "joint index " << joint << " is not a joint of the model (1 to "
+          << model_.njoints - 1 << ")";
+    else if (!isStoppable(model_, joint))
+      msg << "joint '" << model_.names[joint] << "' (" << model_.joints[joint].shortname()
+          << ") cannot have a stop: only revolute, prismatic and helical joints (one "
+             "configuration entry) can";
+    else if (std::isnan(lower) || std::isnan(upper))
+      msg << "the stops of joint '" << model_.names[joint] << "' are NaN";
+    else if (lower > upper)
+      msg << "the stops of joint '" << model_.names[joint] << "' have lower " << lower
+          << " > upper " << upper;
+    if (msg.tellp() > 0)
+      throw std::invalid_argument(msg.str());
+    removeLimit(joint);
+    const Stop stop{joint, model_.idx_qs[joint], model_.idx_vs[joint], lower, upper};
+    if (std::isfinite(lower) || std::isfinite(upper))
+    {
+      std::vector<Stop>::iterator at = stops_.begin();
+      while (at != stops_.end() && at->joint < joint)
+        ++at;
+      stops_.insert(at, stop);
+    }
+  }
+
+  void JointStops::removeLimit(pinocchio::JointIndex joint)
+  {
+    for (std::vector<Stop>::iterator it = stops_.begin(); it != stops_.end(); ++it)
+      if (it->joint == joint)
+      {
+        stops_.erase(it);
+        return;
+      }
+  }
+
+  double clampToStops(
+    const JointStops & stops,
+    Eigen::VectorXd & q,
+    std::vector<std::pair<pinocchio::JointIndex, double>> * moved)
+  {
+    double largest = 0.;
+    for (const JointStops::Stop & s : stops.stops())
+    {
+      const double before = q[s.iq];
+      q[s.iq] = std::min(std::max(before, s.lower), s.upper);
+      const double distance = std::abs(q[s.iq] - before);
+      if (distance > 0.)
+      {
+        largest = std::max(largest, distance);
+        if (moved != nullptr)
+          moved->emplace_back(s.joint, distance);
+      }
+    }
+    return largest;
+  }
+
+  bool enforceStops(const JointStops & stops, Eigen::VectorXd & q, Eigen::VectorXd & v)
+  {
+    bool hit = false;
+    for (const JointStops::Stop & s : stops.stops())
+    {
+      double & x = q[s.iq];
+      double & rate = v[s.iv];
+      if (x <= s.lower)
+      {
+        hit = hit || x < s.lower;
+        x = s.lower;
+        rate = std::max(rate, 0.);
+      }
+      else if (x >= s.upper)
+      {
+        hit = hit || x > s.upper;
+        x = s.upper;
+        rate = std::min(rate, 0.);
+      }
+    }
+    return hit;
+  }
+
+  std::vector<StopContact> computeStopContacts(
+    const JointStops & stops, const Eigen::VectorXd & q, const Eigen::VectorXd & tau)
+  {
+    std::vector<StopContact> contacts;
+    for (const JointStops::Stop & s : stops.stops())
+    {
+      if (q[s.iq] <= s.lower)
+        contacts.push_back(StopContact{s.joint, StopSide::Lower, std::max(0., tau[s.iv])});
+      else if (q[s.iq] >= s.upper)
+        contacts.push_back(StopContact{s.joint, StopSide::Upper, std::max(0., -tau[s.iv])});
+    }
+    return contacts;
+  }
+
+  double computeStopResidual(
+    const JointStops & stops, const Eigen::VectorXd & q, const Eigen::VectorXd & tau)
+  {
+    Eigen::VectorXd violation = tau.cwiseAbs();
+    for (const JointStops::Stop & s : stops.stops())
+    {
+      if (q[s.iq] <= s.lower)
+        violation[s.iv] = std::max(0., -tau[s.iv]);
+      else if (q[s.iq] >= s.upper)
+        violation[s.iv] = std::max(0., tau[s.iv]);
+    }
+    return violation.size() > 0 ? violation.maxCoeff() : 0.;
+  }
+
+  Eigen::MatrixXd computeFreeDirections(
+    const JointStops & stops,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau,
+    double tolerance)
+  {
+    std::vector<bool> held(static_cast<std::size_t>(tau.size()), false);
+    for (const StopContact & c : computeStopContacts(stops, q, tau))
+      if (c.reaction > tolerance)
+        held[static_cast<std::size_t>(stops.model().idx_vs[c.joint])] = true;
+    Eigen::Index free = 0;
+    for (const bool h : held)
+      free += h ? 0 : 1;
+    Eigen::MatrixXd B = Eigen::MatrixXd::Zero(tau.size(), free);
+    Eigen::Index column = 0;
+    for (Eigen::Index k = 0; k < tau.size(); ++k)
+      if (!held[static_cast<std::size_t>(k)])
+        B(k, column++) = 1.;
+    return B;
+  }
+
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const JointStops & stops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    if (stops.empty())
+      return assessStability(model, data, q, forces);
+    const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+    const double tolerance = 1e-9 * tau.lpNorm<Eigen::Infinity>();
+    const Eigen::MatrixXd B = computeFreeDirections(stops, q, tau, tolerance);
+    const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
+    const bool finite_differences = forces != nullptr && !forces->empty();
+    StabilityReport report =
+      assessStiffness(B.transpose() * K * B, finite_differences ? 1e-7 : 1e-9);
+    if (B.cols() == 0) // every joint pressed onto a stop: nothing can move
+    {
+      report.verdict = Stability::Stable;
+      report.softest_direction = Eigen::VectorXd::Zero(model.nv);
+    }
+    else
+      report.softest_direction = B * report.softest_direction;
+    report.basis = B;
+    return report;
+  }
+
+  StopHold::StopHold(const JointStops & stops)
+  : stops_(stops)
+  {
+  }
+
+  bool StopHold::hold(
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & v,
+    const TimeScale * added)
+  {
+    // Joints resting on a stop (on it, not moving off it): +1 on a lower stop, -1 on an upper
+    // one, the direction in which its stop pushes.
+    resting_.clear();
+    bool into = false;
+    for (const JointStops::Stop & s : stops_.stops())
+    {
+      const double a = data.ddq[s.iv];
+      if (q[s.iq] <= s.lower && v[s.iv] <= 0.)
+      {
+        resting_.emplace_back(s.iv, 1.);
+        into = into || a < 0.;
+      }
+      else if (q[s.iq] >= s.upper && v[s.iv] >= 0.)
+      {
+        resting_.emplace_back(s.iv, -1.);
+        into = into || a > 0.;
+      }
+    }
+    if (!into)
+      return false;
+
+    const pinocchio::Model & model = stops_.model();
+    const Eigen::VectorXd free_acceleration = data.ddq;
+    pinocchio::crba(model, data, q);
+    mass_ = data.M.selfadjointView<Eigen::Upper>();
+    if (added != nullptr && added->stiff_masses.size() > 0)
+      mass_.noalias() += added->stiff_momenta.transpose() * added->stiff_masses.asDiagonal()
+                         * added->stiff_momenta;
+    force_.noalias() = mass_ * free_acceleration;
+
+    // Active set: hold the resting joints accelerated into their stop; then release a held
+    // joint whose stop would have to pull, and hold a resting one now accelerated into its
+    // stop, until neither happens (a bounded number of passes: the last one keeps its answer).
+    std::vector<bool> held(resting_.size(), false);
+    for (std::size_t k = 0; k < resting_.size(); ++k)
+      held[k] = resting_[k].second * free_acceleration[resting_[k].first] < 0.;
+    Eigen::VectorXd a = free_acceleration;
+    const std::size_t passes = 2 * resting_.size() + 2;
+    for (std::size_t pass = 0; pass < passes; ++pass)
+    {
+      solveHeld(held, a);
+      bool changed = false;
+      for (std::size_t k = 0; k < resting_.size(); ++k)
+      {
+        const int i = resting_[k].first;
+        const double side = resting_[k].second;
+        // The stop's force on the joint is M a - f; it may only push (side * force >= 0).
+        const bool release = held[k] && side * (mass_.row(i).dot(a) - force_[i]) < 0.;
+        const bool hold = !held[k] && side * a[i] < 0.;
+        if (release || hold)
+        {
+          held[k] = hold;
+          changed = true;
+        }
+      }
+      if (!changed)
+        break;
+    }
+    data.ddq = a;
+    return std::find(held.begin(), held.end(), true) != held.end();
+  }
+
+  void StopHold::solveHeld(const std::vector<bool> & held, Eigen::VectorXd & a)
+  {
+    const Eigen::Index nv = force_.size();
+    std::vector<bool> fixed(static_cast<std::size_t>(nv), false);
+    for (std::size_t k = 0; k < resting_.size(); ++k)
+      if (held[k])
+        fixed[static_cast<std::size_t>(resting_[k].first)] = true;
+    free_.clear();
+    for (Eigen::Index i = 0; i < nv; ++i)
+      if (!fixed[static_cast<std::size_t>(i)])
+        free_.push_back(static_cast<int>(i));
+    const Eigen::Index n = static_cast<Eigen::Index>(free_.size());
+    mass_ff_.resize(n, n);
+    force_f_.resize(n);
+    for (Eigen::Index r = 0; r < n; ++r)
+    {
+      force_f_[r] = force_[free_[r]];
+      for (Eigen::Index c = 0; c < n; ++c)
+        mass_ff_(r, c) = mass_(free_[r], free_[c]);
+    }
+    a.setZero();
+    if (n == 0)
+      return;
+    llt_.compute(mass_ff_);
+    llt_.solveInPlace(force_f_);
+    for (Eigen::Index r = 0; r < n; ++r)
+      a[free_[r]] = force_f_[r];
+  }
+
+} // namespace pinsettle

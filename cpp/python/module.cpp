@@ -16,6 +16,7 @@
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/loops.hpp"
+#include "pinsettle/stops.hpp"
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"
 
@@ -105,6 +106,32 @@ namespace
     return loops;
   }
 
+  // Joint stops: None for none, else (from_model, [(joint index, lower, upper), ...]) with the
+  // model's position limits taken when from_model, then each entry adding or overriding a
+  // joint's stops (an infinite bound: none on that side).
+  std::unique_ptr<JointStops> stopsFrom(const pinocchio::Model & model, const py::object & spec)
+  {
+    if (spec.is_none())
+      return nullptr;
+    const auto t = spec.cast<std::tuple<bool, py::list>>();
+    auto stops = std::make_unique<JointStops>(model, std::get<0>(t));
+    for (const py::handle & e : std::get<1>(t))
+    {
+      const auto limit = e.cast<std::tuple<std::size_t, double, double>>();
+      stops->setLimit(std::get<0>(limit), std::get<1>(limit), std::get<2>(limit));
+    }
+    return stops;
+  }
+
+  py::list stopContactsToList(const pinocchio::Model & model, const std::vector<StopContact> & c)
+  {
+    py::list out;
+    for (const StopContact & contact : c)
+      out.append(
+        py::make_tuple(model.names[contact.joint], toString(contact.side), contact.reaction));
+    return out;
+  }
+
   // A model read from Python, its force elements, loops and scratch data, for one evaluation
   // at q.
   struct Evaluation
@@ -113,23 +140,31 @@ namespace
     std::unique_ptr<ForceElements> elements;
     std::unique_ptr<LoopConstraints> loops;
     pinocchio::Data data;
+    std::unique_ptr<JointStops> stops;
   };
 
   Evaluation evaluationAt(
     const py::object & model_obj,
     const Eigen::VectorXd & q,
     const py::object & spec,
-    const py::object & loops = py::none())
+    const py::object & loops = py::none(),
+    const py::object & stops = py::none())
   {
     const pinocchio::Model & model = modelFrom(model_obj);
     checkConfiguration(model, q, "q");
     return Evaluation{
-      model, elementsFrom(model, spec), loopsFrom(model, loops), pinocchio::Data(model)};
+      model, elementsFrom(model, spec), loopsFrom(model, loops), pinocchio::Data(model),
+      stopsFrom(model, stops)};
   }
 
-  py::dict toDict(const Result & r)
+  py::dict toDict(const pinocchio::Model & model, const Result & r)
   {
     py::dict out;
+    out["stop_contacts"] = stopContactsToList(model, r.stop_contacts);
+    py::list clamped;
+    for (const std::pair<pinocchio::JointIndex, double> & c : r.start_clamped)
+      clamped.append(py::make_tuple(model.names[c.first], c.second));
+    out["start_clamped"] = clamped;
     out["q"] = r.q;
     out["v"] = r.v;
     out["status"] = toString(r.status);
@@ -209,12 +244,14 @@ namespace
     const Settings & settings,
     const py::object & callback,
     const py::object & elements_spec,
-    const py::object & loops_spec)
+    const py::object & loops_spec,
+    const py::object & stops_spec)
   {
     const pinocchio::Model & model = modelFrom(model_obj);
     const std::unique_ptr<ForceElements> elements = elementsFrom(model, elements_spec);
     const std::unique_ptr<LoopConstraints> loops = loopsFrom(model, loops_spec);
-    Solver solver(model, loops.get());
+    const std::unique_ptr<JointStops> stops = stopsFrom(model, stops_spec);
+    Solver solver(model, loops.get(), stops.get());
 
     // Polled with the GIL released in between: Ctrl-C (SIGINT) ends the run as "aborted" and
     // keeps the state; an exception from the user's callback ends it and is re-raised.
@@ -251,7 +288,7 @@ namespace
     }
     if (error)
       throw std::move(*error);
-    return toDict(result);
+    return toDict(model, result);
   }
 
 } // namespace
@@ -321,7 +358,29 @@ PYBIND11_MODULE(_core, m)
   m.def(
     "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
     py::arg("callback") = py::none(), py::arg("elements") = py::none(),
-    py::arg("loops") = py::none());
+    py::arg("loops") = py::none(), py::arg("stops") = py::none());
+
+  m.def(
+    "joint_stops",
+    [](const py::object & model_obj, const py::object & spec) {
+      const pinocchio::Model & model = modelFrom(model_obj);
+      const std::unique_ptr<JointStops> stops = stopsFrom(model, spec);
+      py::dict out;
+      py::list list, equal;
+      if (stops)
+      {
+        for (const JointStops::Stop & s : stops->stops())
+          list.append(py::make_tuple(model.names[s.joint], s.iq, s.iv, s.lower, s.upper));
+        for (const pinocchio::JointIndex j : stops->equalLimitJoints())
+          equal.append(model.names[j]);
+      }
+      out["stops"] = list;
+      out["equal_limits"] = equal;
+      return out;
+    },
+    py::arg("model"), py::arg("stops"),
+    "The stops the solver applies: (joint, index in q, index in v, lower, upper) for each "
+    "joint with one, and the joints whose equal model limits were taken as no stop.");
 
   m.def(
     "kinetic_energies",
@@ -338,11 +397,15 @@ PYBIND11_MODULE(_core, m)
     "stiffness",
     [](
       const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
-      const py::object & loops) {
-      Evaluation at = evaluationAt(model_obj, q, spec, loops);
+      const py::object & loops, const py::object & stops) {
+      Evaluation at = evaluationAt(model_obj, q, spec, loops, stops);
+      if (at.loops && at.stops && !at.stops->empty())
+        throw std::invalid_argument(
+          "joint stops on a mechanism with loops are not supported yet: assess it without stops");
       const StabilityReport report =
-        at.loops ? assessStability(at.model, at.data, *at.loops, q, at.elements.get())
-                 : assessStability(at.model, at.data, q, at.elements.get());
+        at.loops   ? assessStability(at.model, at.data, *at.loops, q, at.elements.get())
+        : at.stops ? assessStability(at.model, at.data, *at.stops, q, at.elements.get())
+                   : assessStability(at.model, at.data, q, at.elements.get());
       py::dict out;
       out["stiffness_matrix"] = report.stiffness;
       out["verdict"] = toString(report.verdict);
@@ -352,10 +415,16 @@ PYBIND11_MODULE(_core, m)
       out["eigenvalues"] = report.eigenvalues;
       out["softest_direction"] = report.softest_direction;
       out["basis"] = report.basis;
+      if (at.stops)
+      {
+        const Eigen::VectorXd tau = computeStaticForce(at.model, at.data, q, at.elements.get());
+        out["stop_contacts"] = stopContactsToList(at.model, computeStopContacts(*at.stops, q, tau));
+        out["stop_residual"] = computeStopResidual(*at.stops, q, tau);
+      }
       return out;
     },
-    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
-    py::arg("loops") = py::none());
+    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(), py::arg("loops") = py::none(),
+    py::arg("stops") = py::none());
 
   m.def(
     "static_force",

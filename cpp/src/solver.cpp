@@ -134,10 +134,12 @@ namespace pinsettle
     return computeStaticForce(model, data, q, forces).lpNorm<Eigen::Infinity>();
   }
 
-  Solver::Solver(const pinocchio::Model & model, const LoopConstraints * loops)
+  Solver::Solver(
+    const pinocchio::Model & model, const LoopConstraints * loops, const JointStops * stops)
   : data(model)
   , model_(model)
   , loops_(loops != nullptr && !loops->empty() ? loops : nullptr)
+  , stops_(stops != nullptr && !stops->empty() ? stops : nullptr)
   , q_(model.nq)
   , v_(model.nv)
   , dq_(model.nv)
@@ -152,6 +154,16 @@ namespace pinsettle
       if (&loops_->model() != &model)
         throw std::invalid_argument("loops: they were made for another model than the solver's");
       stepper_.reset(new LoopStepper(model, *loops_));
+    }
+    if (stops_ != nullptr)
+    {
+      if (&stops_->model() != &model)
+        throw std::invalid_argument("stops: they were made for another model than the solver's");
+      if (loops_ != nullptr)
+        throw std::invalid_argument(
+          "joint stops on a mechanism with loops are not supported yet: solve it without stops "
+          "(a scene's [model] limits = false)");
+      hold_.reset(new StopHold(*stops_));
     }
   }
 
@@ -168,6 +180,8 @@ namespace pinsettle
   {
     if (loops_ != nullptr)
       return assessStability(model_, data, *loops_, q, forces);
+    if (stops_ != nullptr)
+      return assessStability(model_, data, *stops_, q, forces);
     return assessStability(model_, data, q, forces);
   }
 
@@ -281,6 +295,11 @@ namespace pinsettle
     result.mobility = model_.nv;
     if (loops_ != nullptr)
       assemble(result);
+    if (stops_ != nullptr)
+    {
+      clampToStops(*stops_, q_, &result.start_clamped);
+      enforceStops(*stops_, q_, v_);
+    }
 
     peaks_ = PeakDetector(settings.err);
     window_ = StoppingWindow(settings.ds, settings.max_e);
@@ -437,6 +456,8 @@ namespace pinsettle
   {
     // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
     step_control_.correctAcceleration(data, q_);
+    if (stops_ != nullptr)
+      hold_->hold(data, q_, v_, &step_control_.timeScale());
     const double h = step_control_.nextStep(v_);
     integrateSemiImplicitEuler(model_, q_, v_, data.ddq, h, dq_, q_next_);
     if (!q_next_.allFinite() || !v_.allFinite())
@@ -444,6 +465,8 @@ namespace pinsettle
     q_.swap(q_next_);
     if (loops_ != nullptr) // back onto the loops, and a velocity they allow
       stepper_->project(data, q_, v_);
+    if (stops_ != nullptr)
+      enforceStops(*stops_, q_, v_);
     runaway_.addMotion(dq_);
     time_ += h;
     return true;
@@ -461,7 +484,7 @@ namespace pinsettle
     trace_.finish(result);
     result.q = q_;
     result.v = v_;
-    result.residual = staticForce(q_, forces_).lpNorm<Eigen::Infinity>();
+    result.residual = residualAt(q_, forces_);
     result.residual_before_polish = result.residual;
     StabilityReport report = rest_.isAssessed(q_) ? rest_.report() : assess(q_, forces_);
     if (settings_->polish && status == Status::Converged)
@@ -475,8 +498,22 @@ namespace pinsettle
     if (loops_ != nullptr)
       result.constraint_error =
         computeLoopError(model_, data, *loops_, result.q).lpNorm<Eigen::Infinity>();
+    if (stops_ != nullptr)
+      result.stop_contacts = computeStopContacts(*stops_, result.q, staticForce(result.q, forces_));
     settings_ = nullptr;
     forces_ = nullptr;
+  }
+
+  double Solver::residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau) const
+  {
+    if (stops_ != nullptr)
+      return computeStopResidual(*stops_, q, tau);
+    return tau.lpNorm<Eigen::Infinity>();
+  }
+
+  double Solver::residualAt(const Eigen::VectorXd & q, const ForceModel * forces)
+  {
+    return residualOf(q, staticForce(q, forces));
   }
 
   void Solver::polish(StabilityReport & report, const ForceModel * forces, Result & result)
@@ -497,26 +534,31 @@ namespace pinsettle
 
     Eigen::VectorXd q = result.q, q_next(model.nq);
     Eigen::VectorXd tau = staticForce(q, forces);
-    double residual = tau.lpNorm<Eigen::Infinity>();
+    double residual = residualOf(q, tau);
+    // Loops and stops restrict the motions Newton may take (the report's basis).
+    const bool restricted = loops_ != nullptr || stops_ != nullptr;
     int iterations = 0;
     for (; iterations < 10 && residual > 0.; ++iterations)
     {
-      // Newton on the allowed motions (all of them without loops): K ds = -B^T tau, dq = B ds.
-      const StabilityReport at = loops_ != nullptr ? assess(q, forces) : StabilityReport();
+      // Newton on the allowed motions (all of them without loops or stops): K ds = -B^T tau,
+      // dq = B ds.
+      const StabilityReport at = restricted ? assess(q, forces) : StabilityReport();
       const Eigen::MatrixXd K =
-        loops_ != nullptr ? at.stiffness : computeStiffnessMatrix(model, data, q, forces);
+        restricted ? at.stiffness : computeStiffnessMatrix(model, data, q, forces);
       // Least squares with a rank cut: neutral directions (K singular there) are left alone.
       Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(K);
       cod.setThreshold(
         std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12));
       const Eigen::VectorXd dq =
-        loops_ != nullptr ? Eigen::VectorXd(-at.basis * cod.solve(at.basis.transpose() * tau))
-                          : Eigen::VectorXd(-cod.solve(tau));
+        restricted ? Eigen::VectorXd(-at.basis * cod.solve(at.basis.transpose() * tau))
+                   : Eigen::VectorXd(-cod.solve(tau));
       pinocchio::integrate(model, q, dq, q_next);
       if (loops_ != nullptr)
         projectOntoLoops(model, data, *loops_, q_next);
+      if (stops_ != nullptr)
+        clampToStops(*stops_, q_next);
       const Eigen::VectorXd tau_next = staticForce(q_next, forces);
-      const double residual_next = tau_next.lpNorm<Eigen::Infinity>();
+      const double residual_next = residualOf(q_next, tau_next);
       if (!(residual_next < residual))
         break;
       q.swap(q_next);

@@ -65,8 +65,8 @@ namespace pinsettle
   {
     std::ostringstream msg;
     if (joint == 0 || joint >= static_cast<pinocchio::JointIndex>(model_.njoints))
-      msg << "joint index " << joint << " is not a joint of the model (1 to "
-          << model_.njoints - 1 << ")";
+      msg << "joint index " << joint << " is not a joint of the model (1 to " << model_.njoints - 1
+          << ")";
     else if (!isStoppable(model_, joint))
       msg << "joint '" << model_.names[joint] << "' (" << model_.joints[joint].shortname()
           << ") cannot have a stop: only revolute, prismatic and helical joints (one "
@@ -256,8 +256,8 @@ namespace pinsettle
     pinocchio::crba(model, data, q);
     mass_ = data.M.selfadjointView<Eigen::Upper>();
     if (added != nullptr && added->stiff_masses.size() > 0)
-      mass_.noalias() += added->stiff_momenta.transpose() * added->stiff_masses.asDiagonal()
-                         * added->stiff_momenta;
+      mass_.noalias() +=
+        added->stiff_momenta.transpose() * added->stiff_masses.asDiagonal() * added->stiff_momenta;
     force_.noalias() = mass_ * free_acceleration;
 
     // Active set: hold the resting joints accelerated into their stop; then release a held

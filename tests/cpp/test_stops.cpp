@@ -31,12 +31,12 @@ namespace
     {
       const pinocchio::SE3 placement(
         Eigen::Matrix3d::Identity(), Eigen::Vector3d(0., 0., k == 0 ? 0. : -l));
-      parent = model.addJoint(
-        parent, pinocchio::JointModelRY(), placement, "j" + std::to_string(k + 1));
+      parent =
+        model.addJoint(parent, pinocchio::JointModelRY(), placement, "j" + std::to_string(k + 1));
       model.addJointFrame(parent);
       model.appendBodyToJoint(
-        parent,
-        pinocchio::Inertia(m, Eigen::Vector3d(0., 0., -0.5 * l), Eigen::Matrix3d::Identity() * 1e-2));
+        parent, pinocchio::Inertia(
+                  m, Eigen::Vector3d(0., 0., -0.5 * l), Eigen::Matrix3d::Identity() * 1e-2));
     }
     return model;
   }

@@ -17,6 +17,7 @@
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"
 #include "pinsettle/step-control.hpp"
+#include "pinsettle/stops.hpp"
 #include "pinsettle/urdf.hpp"
 
 #endif // ifndef __pinsettle_pinsettle_hpp__

@@ -5,7 +5,7 @@
 #ifndef __pinsettle_result_hpp__
 #define __pinsettle_result_hpp__
 
-#include "pinsettle/stability.hpp"
+#include "pinsettle/stops.hpp"
 
 #include <Eigen/Core>
 
@@ -108,6 +108,11 @@ namespace pinsettle
     double assembly_distance = 0.;
     /// Largest loop constraint error of the final configuration (m or rad); 0 without loops.
     double constraint_error = 0.;
+    /// Joints resting on a stop at the end, with the stops' reactions; empty without stops.
+    std::vector<StopContact> stop_contacts;
+    /// Joints whose start was outside their stops, and how far each was moved onto the nearest
+    /// stop (rad or m).
+    std::vector<std::pair<pinocchio::JointIndex, double>> start_clamped;
     /// Residual before the Newton polish (N m or N); equal to residual when not polished.
     double residual_before_polish = 0.;
     /// Newton iterations of the polish; whether its result was kept.
@@ -124,7 +129,9 @@ namespace pinsettle
     /// Simplified energy sum |v|^2 + |w|^2 of the final state.
     double simplified_kinetic_energy = 0.;
     /// max |rnea(q, 0, 0) - applied generalized forces| of the final configuration (N m or N);
-    /// with loops, of its component along the motions they allow (computeStaticForce).
+    /// with loops, of its component along the motions they allow (computeStaticForce); with
+    /// stops, the largest violation of the conditions of a rest against them
+    /// (computeStopResidual).
     double residual = 0.;
     /// Stability of the final configuration (assessStability).
     Stability stability = Stability::Unknown;

@@ -13,6 +13,7 @@
 #include "pinsettle/settings.hpp"
 #include "pinsettle/stability.hpp"
 #include "pinsettle/step-control.hpp"
+#include "pinsettle/stops.hpp"
 
 #include <memory>
 
@@ -95,6 +96,11 @@ namespace pinsettle
   /// (DivergenceGuard), the no-equilibrium test (RunawayMonitor), the stability check at rest
   /// (RestCheck), the trace (TraceRecorder) and the clock (RunClock).
   ///
+  /// With joint stops (JointStops) the start is moved into their ranges, a joint resting on a
+  /// stop is held there while its stop pushes (StopHold), a joint that crosses a stop is put on
+  /// it with its velocity into the stop removed (an inelastic impact), and the residual and the
+  /// stability verdict are those of a rest against stops. Without stops none of this runs.
+  ///
   /// With loop closures (LoopConstraints) each step runs Pinocchio's constrained forward dynamics
   /// (pinocchio::constraintDynamics) instead of aba, then projects q onto the loops (Gauss-Newton
   /// to 1e-13) and the velocity onto the motions they allow; the residual, the stability verdict,
@@ -107,8 +113,14 @@ namespace pinsettle
     ///
     /// \param[in] model The mechanism's tree.
     /// \param[in] loops Loop closures of the tree (they must outlive the solver), or nullptr.
+    /// \param[in] stops Joint stops (they must outlive the solver), or nullptr.
+    /// \throws std::invalid_argument when loops or stops were made for another model, or when
+    ///         both are given (not supported yet).
     ///
-    explicit Solver(const pinocchio::Model & model, const LoopConstraints * loops = nullptr);
+    explicit Solver(
+      const pinocchio::Model & model,
+      const LoopConstraints * loops = nullptr,
+      const JointStops * stops = nullptr);
     ~Solver();
 
     ///
@@ -174,6 +186,8 @@ namespace pinsettle
     void pushOff(Result & result);
     void damp(const StepEnergies & e, Result & result);
     bool integrate();
+    double residualAt(const Eigen::VectorXd & q, const ForceModel * forces);
+    double residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau) const;
     void finish(Status status, Result & result);
 
     // Newton steps from the converged result.q; keeps them only if the rest stays of the same
@@ -187,6 +201,8 @@ namespace pinsettle
     const pinocchio::Model & model_;
     const LoopConstraints * loops_;
     std::unique_ptr<LoopStepper> stepper_;
+    const JointStops * stops_;
+    std::unique_ptr<StopHold> hold_;
 
     // The run in progress: its inputs and where it is.
     const Settings * settings_ = nullptr;

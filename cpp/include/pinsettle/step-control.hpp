@@ -106,6 +106,12 @@ namespace pinsettle
     double halve(
       pinocchio::Data & data, const Eigen::VectorXd & q, Eigen::VectorXd & v, std::int64_t step);
 
+    /// \brief The current estimate (its stiff modes' added inertia).
+    const TimeScale & timeScale() const
+    {
+      return time_scale_;
+    }
+
     /// \brief Number of scaled stiff modes of the current estimate.
     Eigen::Index stiffModes() const
     {

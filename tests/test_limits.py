@@ -632,8 +632,8 @@ def test_cli_demo_no_limits_and_clamped_start():
     assert out["limits"] is False and out["at_limit"] == {} and out["start_clamped"] == {}
     model = pinsettle.load_robot(ROBOT_PASSING_THROUGH)
     assert out["q"] == pinsettle.solve(model, limits=False, max_steps=3000).q.tolist()
-    proc = run("demo", "kinova", "--max-steps", "10")
-    assert proc.returncode == 1
+    proc = run("demo", "kinova")
+    assert proc.returncode == 0, proc.stderr
     assert "start clamped    j2s6s200_joint_2 moved" in proc.stdout
     assert "pull asked of a stop, recomputed with pinocchio" in proc.stdout
 

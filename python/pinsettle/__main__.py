@@ -109,14 +109,13 @@ def _demo(args: argparse.Namespace) -> int:
     else:
         print(f"{args.robot}: {model.nq} configuration variables, released at rest from neutral")
         print(result.summary())
-        if result.limits:
-            independent = _rest_check(model, result.q, True)
+        independent = _rest_check(model, result.q, result.limits)
+        if result.at_limit:
             print(
                 f"check            {independent:.3e}: |g(q)| off the stops, pull asked of a "
                 "stop, recomputed with pinocchio"
             )
         else:
-            independent = _rest_check(model, result.q, False)
             print(f"check            |g(q)| = {independent:.3e} recomputed with pinocchio")
     return 0 if result.converged else 1
 

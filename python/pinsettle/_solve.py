@@ -255,7 +255,8 @@ def static_force(model: pinocchio.Model, q: Any) -> np.ndarray:
 
 
 def static_residual(model: Any, q: Any) -> float:
-    """max |net static generalized force| (N m or N) of a model under gravity or of a scene."""
+    """max |net static generalized force| (N m or N) of a model under gravity, or a scene's
+    ``residual(q)`` (with joint stops, the residual of a rest against them)."""
     if isinstance(model, Scene):
         return model.residual(q)
     force = static_force(model, q)

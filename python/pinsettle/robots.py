@@ -114,13 +114,18 @@ def load_urdf(path: str | Path, floating: bool = False) -> pinocchio.Model:
             os.close(saved)
         captured.seek(0)
         parser_says = captured.read().decode(errors="replace").strip()
-    if error is not None:
-        reasons = [
-            line.strip()
-            for line in parser_says.splitlines()
-            if line.strip() and not line.strip().startswith("at line")
-        ]
-        detail = "; ".join(reasons) if reasons else str(error)
+    reasons = [
+        line.strip()
+        for line in parser_says.splitlines()
+        if line.strip() and not line.strip().startswith("at line")
+    ]
+    # urdfdom reports an element it cannot read (a mass of "nan", an inertia of "abc", an
+    # origin with two numbers) as an error and drops it, and Pinocchio builds the model
+    # anyway: without that link's inertia, say. Such a file is refused as one that does not
+    # parse, not solved as a different mechanism.
+    dropped = any(reason.startswith("Error:") for reason in reasons)
+    if error is not None or dropped:
+        detail = "; ".join(" ".join(reason.split()) for reason in reasons) or str(error)
         raise ValueError(f"{path}: the URDF does not parse: {detail}")
     if parser_says:
         print(parser_says, file=sys.stderr)

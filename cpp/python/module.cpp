@@ -16,6 +16,7 @@
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/loops.hpp"
+#include "pinsettle/model-checks.hpp"
 #include "pinsettle/stops.hpp"
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"
@@ -41,6 +42,9 @@ namespace
           << py::str(py::type::handle_of(obj).attr("__qualname__")).cast<std::string>();
       throw py::type_error(msg.str());
     }
+    // Every entry point reads its model here: one the algorithms do not support is refused
+    // with a message (ValueError), never run.
+    checkSupportedModel(model());
     return model();
   }
 

@@ -4,6 +4,7 @@
 
 #include "pinsettle/solver.hpp"
 #include "pinsettle/energy.hpp"
+#include "pinsettle/model-checks.hpp"
 #include "pinsettle/stability.hpp"
 #include "loop-stepper.hpp"
 
@@ -274,6 +275,7 @@ namespace pinsettle
     Result & result)
   {
     checkSettings(settings);
+    checkSupportedModel(model_);
     if (model_.nv == 0)
       throw std::invalid_argument("model has no degree of freedom: nothing to settle");
     checkConfiguration(model_, q0, "q0");
@@ -295,6 +297,7 @@ namespace pinsettle
     result.mobility = model_.nv;
     if (loops_ != nullptr)
       assemble(result);
+    impacts_ = 0;
     if (stops_ != nullptr)
     {
       clampToStops(*stops_, q_, &result.start_clamped);
@@ -466,7 +469,17 @@ namespace pinsettle
     if (loops_ != nullptr) // back onto the loops, and a velocity they allow
       stepper_->project(data, q_, v_);
     if (stops_ != nullptr)
-      enforceStops(*stops_, q_, v_);
+    {
+      // A joint past a stop at every step is not motion but chatter (each step crosses the
+      // range, and the impacts keep the energy at zero): roll back with the step halved, as
+      // for a blow-up.
+      impacts_ = enforceStops(*stops_, q_, v_) ? impacts_ + 1 : 0;
+      if (impacts_ >= DivergenceGuard::kBlowUpSteps)
+      {
+        impacts_ = 0;
+        return false;
+      }
+    }
     runaway_.addMotion(dq_);
     time_ += h;
     return true;

@@ -211,6 +211,7 @@ namespace pinsettle
     double kt_ = 0.; // lowered to 0 when partial damping cannot hold a runaway
     std::int64_t step_ = 0;
     double time_ = 0.;
+    int impacts_ = 0; // steps in a row with a joint past a stop
 
     // Workspace, sized once for the model.
     Eigen::VectorXd q_, v_, dq_, q_next_, tau_;

@@ -49,7 +49,20 @@ namespace pinsettle
       const Eigen::VectorXd gravity = pinocchio::computeGeneralizedGravity(model, data, q);
       return gravity - computeStaticForce(model, data, q, &forces);
     }
+
+    bool hasCompositeJoint(const pinocchio::Model & model)
+    {
+      for (std::size_t j = 1; j < model.joints.size(); ++j)
+        if (model.joints[j].shortname() == "JointModelComposite")
+          return true;
+      return false;
+    }
   } // namespace
+
+  bool stiffnessByFiniteDifferences(const pinocchio::Model & model, const ForceModel * forces)
+  {
+    return (forces != nullptr && !forces->empty()) || hasCompositeJoint(model);
+  }
 
   Eigen::MatrixXd computeStiffnessMatrix(
     const pinocchio::Model & model,
@@ -58,8 +71,13 @@ namespace pinsettle
     const ForceModel * forces)
   {
     Eigen::MatrixXd K = Eigen::MatrixXd::Zero(model.nv, model.nv);
-    pinocchio::computeGeneralizedGravityDerivatives(model, data, q, K);
-    if (forces == nullptr || forces->empty())
+    // Pinocchio 4.1's gravity derivatives drop the coupling between the parts of a composite
+    // joint (a composite of RX and RY gets a triangular block): difference gravity there.
+    const bool composite = hasCompositeJoint(model);
+    const bool applied = forces != nullptr && !forces->empty();
+    if (!composite)
+      pinocchio::computeGeneralizedGravityDerivatives(model, data, q, K);
+    if (!composite && !applied)
       return K;
     // tau_static = g - applied: K = dg/dq - d applied/dq.
     const double h = 1e-6;
@@ -70,9 +88,14 @@ namespace pinsettle
       pinocchio::integrate(model, q, dq, q_plus);
       pinocchio::integrate(model, q, -dq, q_minus);
       dq[k] = 0.;
-      K.col(k) -=
-        (appliedForce(model, data, q_plus, *forces) - appliedForce(model, data, q_minus, *forces))
-        / (2. * h);
+      if (composite)
+        K.col(k) = (computeStaticForce(model, data, q_plus, forces)
+                    - computeStaticForce(model, data, q_minus, forces))
+                   / (2. * h);
+      else
+        K.col(k) -=
+          (appliedForce(model, data, q_plus, *forces) - appliedForce(model, data, q_minus, *forces))
+          / (2. * h);
     }
     return K;
   }
@@ -114,9 +137,9 @@ namespace pinsettle
     const Eigen::VectorXd & q,
     const ForceModel * forces)
   {
-    const bool finite_differences = forces != nullptr && !forces->empty();
     return assessStiffness(
-      computeStiffnessMatrix(model, data, q, forces), finite_differences ? 1e-7 : 1e-9);
+      computeStiffnessMatrix(model, data, q, forces),
+      stiffnessByFiniteDifferences(model, forces) ? 1e-7 : 1e-9);
   }
 
   namespace

@@ -64,9 +64,11 @@ namespace pinsettle
   /// force (computeStaticForce) along the tangent directions of the configuration space.
   ///
   /// Gravity comes from Pinocchio's analytic derivatives
-  /// (pinocchio::computeGeneralizedGravityDerivatives); the applied efforts, when there are any,
+  /// (pinocchio::computeGeneralizedGravityDerivatives), except on a model with a composite joint,
+  /// where Pinocchio 4.1's derivatives are wrong (the coupling between the parts of a composite
+  /// is dropped) and gravity's part is differenced too; the applied efforts, when there are any,
   /// by central finite differences of their generalized force (step 1e-6 along each tangent
-  /// direction, through pinocchio::integrate).
+  /// direction, through pinocchio::integrate). stiffnessByFiniteDifferences says which.
   ///
   /// \param[in] q The joint configuration (dim model.nq).
   /// \param[in] forces Applied efforts, or nullptr for gravity alone.
@@ -77,6 +79,13 @@ namespace pinsettle
     pinocchio::Data & data,
     const Eigen::VectorXd & q,
     const ForceModel * forces = nullptr);
+
+  ///
+  /// \brief Whether computeStiffnessMatrix differences (part of) K numerically: with applied
+  /// efforts, or on a model with a composite joint. A verdict then takes a tolerance of 1e-7 of
+  /// the largest eigenvalue instead of 1e-9.
+  ///
+  bool stiffnessByFiniteDifferences(const pinocchio::Model & model, const ForceModel * forces);
 
   ///
   /// \brief Stability of a rest at q from the eigenvalues of the symmetric part of K.

@@ -162,6 +162,30 @@ namespace pinsettle
           + " and nv = " + std::to_string(model.nv));
     }
 
+    // Pinocchio's algorithms that work on subtrees (crba, computeMinverse, the gravity
+    // derivatives) take a joint's descendants to be the joints right after it: depth-first
+    // order, as the URDF parser adds them. A model built by hand in another order gets a wrong
+    // mass matrix from crba (aba and rnea, which only follow the parents, stay right).
+    // Depth-first: the parent of joint j is joint j - 1 or one of its ancestors.
+    void checkDepthFirstOrder(const pinocchio::Model & model)
+    {
+      for (std::size_t j = 2; j < model.joints.size(); ++j)
+      {
+        const std::size_t parent = model.parents[j];
+        std::size_t a = j - 1;
+        while (a != 0 && a != parent)
+          a = model.parents[a];
+        if (a != parent)
+          refuse(
+            model, j,
+            "hangs from " + jointName(model, parent) + " but comes after " + jointName(model, j - 1)
+              + ", which is not in that joint's subtree: the joints are not in depth-first order, "
+                "which Pinocchio's crba and derivatives need (they take a joint's subtree to be "
+                "the joints right after it; their mass matrix would be wrong). Add each joint's "
+                "descendants before the next branch, as Pinocchio's URDF parser does");
+      }
+    }
+
   } // namespace
 
   void checkSupportedModel(const pinocchio::Model & model)
@@ -170,6 +194,7 @@ namespace pinsettle
     for (std::size_t j = 1; j < model.joints.size(); ++j)
       checkJoint(model, j, model.joints[j]);
     checkTables(model);
+    checkDepthFirstOrder(model);
   }
 
 } // namespace pinsettle

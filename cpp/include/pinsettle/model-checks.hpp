@@ -23,7 +23,10 @@ namespace pinsettle
   /// - a joint type this check does not know (one a later Pinocchio adds);
   /// - a model whose tables disagree with each other (joint, parent, name, placement and inertia
   ///   lists of different lengths, a parent listed after its child, joints' configuration or
-  ///   velocity indices that do not tile q and v).
+  ///   velocity indices that do not tile q and v);
+  /// - joints not in depth-first order (a joint's descendants not right after it, as a model
+  ///   built by hand branch by branch can have them): pinocchio::crba and the derivatives assume
+  ///   that order and would give a wrong mass matrix and stiffness.
   ///
   /// \throws std::invalid_argument naming the joint and why.
   ///

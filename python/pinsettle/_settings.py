@@ -88,13 +88,24 @@ def set_setting(settings: _core.Settings, key: str, value: Any) -> None:
         raise TypeError(f"setting '{key}' expects {kind}, got {type(value).__name__} {value!r}")
     if kind == "int" and isinstance(value, (int, np.integer)) and not -(2**63) <= value < 2**63:
         raise ValueError(f"setting '{key}' must fit in a 64-bit integer, got {value}")
+    # The type by hand before the C++ property sees it: pybind11 raises RuntimeError, not
+    # TypeError, for some values it cannot convert (None for dt).
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not is_bool
+    expected = {
+        "float": number,
+        "float or 'auto'": number or isinstance(value, str),  # 'fast': the C++ range message
+        "int": isinstance(value, (int, np.integer)) and not is_bool,
+        "bool": is_bool,
+    }.get(kind, isinstance(value, str))
+    if not expected:
+        raise TypeError(f"setting '{key}' expects {kind}, got {type(value).__name__} {value!r}")
     if kind.startswith("float") and isinstance(value, (int, np.integer)):
         value = float(value)
     if is_bool:
         value = bool(value)
     try:
         setattr(settings, key, value)
-    except TypeError:
+    except (TypeError, RuntimeError):
         raise TypeError(
             f"setting '{key}' expects {SETTING_TYPES[key]}, got {type(value).__name__} {value!r}"
         ) from None

@@ -46,9 +46,7 @@ namespace pinsettle
 
   void DivergenceGuard::start(const Eigen::VectorXd & q, const Eigen::VectorXd & v, double time)
   {
-    q_good_ = q;
-    v_good_ = v;
-    time_good_ = time;
+    keep(q, v, time);
     e_exact_prev_ = 0.;
     blow_up_ = 0;
     reductions_ = 0;

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -313,6 +314,95 @@ def test_played_to_the_end_the_animation_holds_the_final_pose(name, exported, br
 def test_live_page_shows_the_robot(live, browser, tmp_path):
     pixels = screenshot(browser, live.url, tmp_path / "live.png", 8000)
     assert drawn_fraction(pixels) > 0.01
+
+
+# --- users' meshes: STL files without normals or colour -------------------------------------
+
+
+def _ur5_with_stl_visuals(folder: Path, material: str = "") -> Path:
+    """A scene of the UR5 of example-robot-data whose visuals are its collision STL files (with
+    zero normals in the file, as many exporters write them); ``material`` (a URDF <material>
+    element) is put on the upper arm's visual."""
+    urdf = Path(pinsettle.robot_urdf("ur5")).read_text(encoding="utf-8")
+    urdf = re.sub(r"meshes/ur5/visual/(\w+)\.dae", r"meshes/ur5/collision/\1.stl", urdf)
+    assert urdf.count("collision/upperarm.stl") == 2  # the visual and the collision
+    if material:
+        at = urdf.index("collision/upperarm.stl")
+        at = urdf.index("</visual>", urdf.rfind("<visual>", 0, at))
+        urdf = urdf[:at] + material + urdf[at:]
+    (folder / "ur5_stl.urdf").write_text(urdf, encoding="utf-8")
+    (folder / "ur5_stl.toml").write_text('[model]\nurdf = "ur5_stl.urdf"\n', encoding="utf-8")
+    return folder / "ur5_stl.toml"
+
+
+def _cube_triangles() -> np.ndarray:
+    """The 12 triangles of the cube [0, 1]^3, counter-clockwise seen from outside."""
+    corners = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=float)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    triangles = []
+    for a, b, c, d in quads:
+        triangles += [corners[[a, b, c]], corners[[a, c, d]]]
+    return np.array(triangles)
+
+
+def test_read_stl_binary_and_ascii_with_outward_normals(tmp_path):
+    play = _play()
+    triangles = _cube_triangles()
+    binary = tmp_path / "cube_binary.stl"
+    records = b"".join(
+        np.zeros(3, "<f4").tobytes() + t.astype("<f4").tobytes() + b"\0\0" for t in triangles
+    )
+    binary.write_bytes(
+        b"solid but binary".ljust(80, b" ") + len(triangles).to_bytes(4, "little") + records
+    )
+    ascii_stl = tmp_path / "cube_ascii.stl"
+    facets = "".join(
+        "facet normal 0 0 0\n outer loop\n"
+        + "".join(f"  vertex {x:g} {y:g} {z:g}\n" for x, y, z in t)
+        + " endloop\nendfacet\n"
+        for t in triangles
+    )
+    ascii_stl.write_text(f"solid cube\n{facets}endsolid cube\n", encoding="ascii")
+    for path in (binary, ascii_stl):
+        vertices, faces, normals = play.read_stl(path)
+        assert np.array_equal(vertices, triangles.reshape(-1, 3))
+        assert np.array_equal(vertices[faces], triangles)
+        # Unit normals pointing away from the cube's centre, the same for a face's 3 vertices.
+        assert np.allclose(np.linalg.norm(normals, axis=1), 1.0)
+        outward = triangles.mean(axis=1) - 0.5
+        per_face = normals.reshape(-1, 3, 3)
+        assert np.allclose(per_face, per_face[:, :1])
+        assert np.all(np.einsum("ij,ij->i", per_face[:, 0], outward) > 0.4)
+    broken = tmp_path / "broken.stl"
+    broken.write_text("solid x\nfacet normal 0 0 1\n outer loop\n  vertex 0 0\n", encoding="ascii")
+    with pytest.raises(ValueError, match="broken.stl: not a readable STL file"):
+        play.read_stl(broken)
+
+
+def test_stl_meshes_are_lit_in_their_urdf_colour_or_grey(browser, tmp_path):
+    play = _play()
+    red = '<material name="red"><color rgba="0.85 0.1 0.1 1"/></material>'
+    scene = pinsettle.load_scene(_ur5_with_stl_visuals(tmp_path, red))
+    viz = play.play(scene, html=tmp_path / "ur5_stl.html", live=False)
+    colors = {obj.name: tuple(obj.meshColor) for obj in viz.visual_model.geometryObjects}
+    assert colors["upper_arm_link_0"] == pytest.approx((0.85, 0.1, 0.1, 1.0))
+    assert all(c[:3] != pytest.approx((0.9, 0.9, 0.9)) for c in colors.values())
+    pixels = screenshot(browser, (tmp_path / "ur5_stl.html").as_uri() + "#end", tmp_path / "s.png")
+    h, w, _ = pixels.shape
+    middle = pixels[h // 5 :, w // 4 : 3 * w // 4]  # below the overlay
+    background = pixels[h // 5 :, w - 3 : w - 2]
+    robot = middle[np.abs(middle - background).max(axis=2) > 0.08]
+    assert robot.shape[0] > 0.01 * middle.shape[0] * middle.shape[1], "no robot drawn"
+    # Lit, not a silhouette: few dark pixels, and the shading varies over the surface.
+    brightness = robot.max(axis=1)
+    assert np.mean(brightness < 0.15) < 0.02, f"{np.mean(brightness < 0.15):.1%} near black"
+    assert np.median(brightness) > 0.35
+    assert np.ptp(np.percentile(brightness, [10, 90])) > 0.05
+    # The upper arm red, the rest a neutral grey.
+    r, g, b = robot.T
+    red_share = np.mean((r > 0.45) & (g < 0.3) & (b < 0.3))
+    grey_share = np.mean((np.abs(r - g) < 0.06) & (np.abs(g - b) < 0.08) & (brightness > 0.3))
+    assert red_share > 0.1 and grey_share > 0.3, (red_share, grey_share)
 
 
 def test_notebook_api_returns_pinocchios_visualizer():

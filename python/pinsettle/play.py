@@ -62,6 +62,8 @@ SERVER_TIMEOUT = 20.0
 _DEFAULT_MESH_COLOR = (0.9, 0.9, 0.9, 1.0)  # what pinocchio gives a URDF shape without material
 _LINK_COLORS = ((0.16, 0.42, 0.74, 1.0), (0.33, 0.60, 0.86, 1.0))
 _BASE_COLOR = (0.35, 0.36, 0.38, 1.0)
+#: An STL mesh without a URDF material (pinocchio's 0.9 grey would vanish on the background).
+_MESH_GREY = (0.62, 0.64, 0.67, 1.0)
 _SPRING_COLOR = 0xE8590C
 _END_COLOR = 0x343A40
 _EVENT_COLORS = {"damping": 0xFFB000, "push": 0x1C7ED6, "rollback": 0xE03131}
@@ -229,14 +231,54 @@ def _visual_model(scene: Scene) -> pinocchio.GeometryModel | None:
     if geometry.ngeoms == 0:
         return None
     for k, obj in enumerate(geometry.geometryObjects):
-        # URDF shapes without a material: the base dark, the links in alternating blues.
-        if not obj.meshPath.lower().endswith((".dae", ".obj", ".stl")) and np.allclose(
-            obj.meshColor, _DEFAULT_MESH_COLOR
-        ):
+        if not np.allclose(obj.meshColor, _DEFAULT_MESH_COLOR):
+            continue  # the URDF's <material> colour
+        path = obj.meshPath.lower()
+        if path.endswith(".stl"):
+            # STL carries no colour (a DAE or OBJ brings its own materials): a lit grey.
+            obj.meshColor = np.array(_MESH_GREY)
+        elif not path.endswith((".dae", ".obj")):
+            # URDF shapes without a material: the base dark, the links in alternating blues.
             color = _BASE_COLOR if obj.parentJoint == 0 else _LINK_COLORS[obj.parentJoint % 2]
             obj.meshColor = np.array(color)
-            geometry.geometryObjects[k] = obj
+        geometry.geometryObjects[k] = obj
     return geometry
+
+
+def read_stl(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The triangles of an STL file (binary or ASCII) as (vertices, faces, normals): three
+    vertices per triangle, each with its triangle's unit normal computed from the vertices
+    (counter-clockwise seen from outside, as STL orders them). The file's own normals are not
+    used: many exporters write zeros there, which drew such meshes black."""
+    data = Path(path).read_bytes()
+    count = int.from_bytes(data[80:84], "little") if len(data) >= 84 else -1
+    if count >= 0 and len(data) == 84 + 50 * count:
+        record = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("extra", "<u2")])
+        triangles = np.frombuffer(data, dtype=record, count=count, offset=84)["vertices"]
+    else:
+        words = data.decode("ascii", errors="replace").split()
+        try:
+            values = [
+                [float(x) for x in words[i + 1 : i + 4]]
+                for i, word in enumerate(words)
+                if word.lower() == "vertex"
+            ]
+        except ValueError as error:
+            raise ValueError(f"{path}: not a readable STL file ({error})") from None
+        if not values or len(values) % 3:
+            raise ValueError(
+                f"{path}: not a readable STL file (neither binary with {count} triangles in "
+                f"{len(data)} bytes nor ASCII with whole facets)"
+            )
+        triangles = np.array(values).reshape(-1, 3, 3)
+    triangles = np.asarray(triangles, dtype=float)
+    normal = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    length = np.linalg.norm(normal, axis=1, keepdims=True)
+    # A degenerate triangle draws nothing; any unit normal keeps the shader finite.
+    normal = np.where(length > 0, normal / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
+    vertices = triangles.reshape(-1, 3)
+    faces = np.arange(vertices.shape[0]).reshape(-1, 3)
+    return vertices, faces, np.repeat(normal, 3, axis=0)
 
 
 def _stick_figure(model: pinocchio.Model) -> pinocchio.GeometryModel:
@@ -694,6 +736,13 @@ def _visualizer_class() -> type:
         result: Result
         timeline: Timeline
         window: _Window
+
+        def loadMeshFromFile(self, geometry_object: Any) -> Any:  # noqa: N802  (pinocchio's)
+            # STL: our own triangles with normals (meshcat's loader keeps the file's, often
+            # zeros: a black mesh); DAE and OBJ as pinocchio loads them.
+            if geometry_object.meshPath.lower().endswith(".stl"):
+                return _normal_mesh_class()(*read_stl(geometry_object.meshPath))
+            return super().loadMeshFromFile(geometry_object)
 
         @property
         def url(self) -> str | None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pinsettle
@@ -38,3 +39,94 @@ def test_installed_files():
     ]:
         assert (PACKAGE / relative).is_file(), relative
     assert Path(pinsettle.get_cmake_dir()) == PACKAGE / "lib" / "cmake" / "pinsettle"
+
+
+CONSUMER_CMAKE = """\
+cmake_minimum_required(VERSION 3.22)
+project(consumer CXX)
+find_package(pinsettle 0.1 REQUIRED)
+get_target_property(library pinsettle::pinsettle IMPORTED_LOCATION_RELEASE)
+get_target_property(include pinsettle::pinsettle INTERFACE_INCLUDE_DIRECTORIES)
+file(WRITE "${CMAKE_BINARY_DIR}/found.txt" "${library}\\n${include}\\n")
+add_executable(consumer main.cpp)
+target_link_libraries(consumer PRIVATE pinsettle::pinsettle)
+"""
+
+# Links the library's settings check (no Pinocchio header: it compiles in seconds).
+CONSUMER_MAIN = """\
+#include <pinsettle/settings.hpp>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+int main() {
+  pinsettle::Settings settings;
+  settings.kt = 2.;
+  try { pinsettle::checkSettings(settings); }
+  catch (const std::invalid_argument & e) {
+    std::printf("%s\\n", e.what());
+    return std::string(e.what()).find("kt") == std::string::npos;
+  }
+  return 1;
+}
+"""
+
+
+def test_cmake_install_to_a_plain_prefix_gives_a_working_package(tmp_path):
+    """`cmake --install . --prefix P` outside a wheel, then a project with find_package(pinsettle)
+    and CMAKE_PREFIX_PATH=P;<Pinocchio's prefix> configures, builds and runs against it. (The
+    installed config once pointed one folder above P: its destinations began with "./".)
+
+    The library is not compiled again: the wheel's libpinsettle.a, built from the same sources,
+    is put where the build would leave it, and the install rules copy it as they would."""
+    cmake = shutil.which("cmake")
+    if cmake is None:
+        pytest.fail("cmake is not installed: pip install '.[test]' brings it")
+    root = Path(__file__).resolve().parents[1]
+    cmeel_prefix = subprocess.run(
+        [sys.executable, "-m", "cmeel", "cmake"], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    generator = ["-G", "Ninja"] if shutil.which("ninja") else []
+
+    def run(*cmd: str) -> str:
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        assert proc.returncode == 0, f"{' '.join(cmd)}:\n{proc.stdout}\n{proc.stderr}"
+        return proc.stdout
+
+    build, prefix, consumer = tmp_path / "build", tmp_path / "prefix", tmp_path / "consumer"
+    run(
+        cmake,
+        "-S",
+        str(root),
+        "-B",
+        str(build),
+        *generator,
+        "-DCMAKE_BUILD_TYPE=Release",
+        "-DPINSETTLE_BUILD_PYTHON=OFF",
+        f"-DPython_EXECUTABLE={sys.executable}",
+    )
+    shutil.copy(PACKAGE / "lib" / "libpinsettle.a", build / "libpinsettle.a")
+    run(cmake, "--install", str(build), "--prefix", str(prefix))
+    configs = list(prefix.glob("lib*/cmake/pinsettle/pinsettleConfig.cmake"))
+    assert len(configs) == 1, sorted(p.relative_to(prefix) for p in prefix.rglob("*"))
+    assert not (tmp_path / "lib").exists() and not (tmp_path / "include").exists()
+
+    consumer.mkdir()
+    (consumer / "CMakeLists.txt").write_text(CONSUMER_CMAKE)
+    (consumer / "main.cpp").write_text(CONSUMER_MAIN)
+    run(
+        cmake,
+        "-S",
+        str(consumer),
+        "-B",
+        str(consumer / "build"),
+        *generator,
+        "-DCMAKE_BUILD_TYPE=Release",
+        f"-DCMAKE_PREFIX_PATH={prefix};{cmeel_prefix}",
+    )
+    library, include = (consumer / "build" / "found.txt").read_text().split()
+    assert Path(library).resolve() == (configs[0].parents[2] / "libpinsettle.a").resolve()
+    assert (Path(include) / "pinsettle" / "solver.hpp").is_file()
+    assert Path(include).resolve().parent == prefix.resolve()
+    run(cmake, "--build", str(consumer / "build"))
+    out = run(str(consumer / "build" / "consumer"))
+    assert "kt" in out

@@ -8,6 +8,7 @@ import signal
 import sys
 import time
 import webbrowser
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,7 @@ import numpy as np
 import pinocchio
 
 import pinsettle
+from pinsettle._progress import StatusLine, status_line
 
 
 def _step(text: str) -> float | str:
@@ -68,6 +70,21 @@ def _add_limits_flag(parser: argparse.ArgumentParser, what: str) -> None:
     )
 
 
+def _add_quiet_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no live progress line (shown on stderr, when it is a terminal, once a solve has "
+        "run 0.5 s)",
+    )
+
+
+def _progress_line(args: argparse.Namespace) -> AbstractContextManager[StatusLine | None]:
+    """The live progress line while solving (None off a terminal, with --json or --quiet)."""
+    return status_line(sys.stderr, not (args.quiet or getattr(args, "json", False)))
+
+
 def _limits(args: argparse.Namespace) -> bool | None:
     """False with --no-limits, else None (the model's or the scene's own setting)."""
     return False if args.no_limits else None
@@ -103,7 +120,10 @@ def _setting_overrides(args: argparse.Namespace) -> dict[str, Any]:
 def _demo(args: argparse.Namespace) -> int:
     model = pinsettle.load_robot(args.robot)
     q0 = pinocchio.neutral(model)
-    result = pinsettle.solve(model, q0, limits=_limits(args), **_setting_overrides(args))
+    with _progress_line(args) as progress:
+        result = pinsettle.solve(
+            model, q0, limits=_limits(args), progress=progress, **_setting_overrides(args)
+        )
     if args.json:
         print(json.dumps(result.to_dict()))
     else:
@@ -150,7 +170,10 @@ def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray |
 
 def _solve(args: argparse.Namespace) -> int:
     scene, q0 = _load_scene(args)
-    result = pinsettle.solve(scene, q0, limits=_limits(args), **_setting_overrides(args))
+    with _progress_line(args) as progress:
+        result = pinsettle.solve(
+            scene, q0, limits=_limits(args), progress=progress, **_setting_overrides(args)
+        )
     if args.json:
         out = {"scene": str(scene.path), **result.to_dict()}
         print(json.dumps(out))
@@ -205,7 +228,8 @@ def _play(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"{flag} {path}: no such folder: {path.parent}")
     scene, q0 = _load_scene(args)
     overrides = {**_setting_overrides(args), **TRACE_SETTINGS}
-    result = pinsettle.solve(scene, q0, limits=_limits(args), **overrides)
+    with _progress_line(args) as progress:
+        result = pinsettle.solve(scene, q0, limits=_limits(args), progress=progress, **overrides)
     title = f"{scene.name}: {scene.description}" if scene.description else scene.name
     print(title)
     print(
@@ -262,6 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("robot", nargs="?", default="ur5", help="robot name (see `pinsettle robots`)")
     demo.add_argument("--json", action="store_true", help="print one JSON object")
     _add_limits_flag(demo, "robot")
+    _add_quiet_flag(demo)
     _add_setting_flags(demo)
     demo.set_defaults(func=_demo)
     solve = sub.add_parser(
@@ -270,6 +295,7 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("scene", help="scene file (.toml) or scene name")
     solve.add_argument("--json", action="store_true", help="print one JSON object")
     _add_limits_flag(solve, "scene model")
+    _add_quiet_flag(solve)
     _add_start_flag(solve)
     _add_setting_flags(solve)
     solve.set_defaults(func=_solve)
@@ -293,6 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     play.add_argument("--no-open", action="store_true", help="do not open a browser")
     _add_limits_flag(play, "scene model")
+    _add_quiet_flag(play)
     _add_start_flag(play)
     _add_setting_flags(play)
     play.set_defaults(func=_play)

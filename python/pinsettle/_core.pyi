@@ -73,6 +73,16 @@ class _LoopState(TypedDict):
     rank: int
     basis: npt.NDArray[np.float64]
 
+# What solve's progress callable is given every settings.check_every steps.
+@type_check_only
+class _Progress(TypedDict):
+    steps: int
+    sim_time: float
+    kinetic_energy: float
+    peaks: int
+    residual: float  # nan before the first assessment
+    wall_time: float
+
 def solve(
     model: pinocchio.Model,
     q0: npt.ArrayLike,
@@ -82,6 +92,7 @@ def solve(
     elements: _Elements | None = ...,
     loops: _Loops | None = ...,
     stops: _Stops | None = ...,
+    progress: Callable[[_Progress], object] | None = ...,
 ) -> dict[str, Any]: ...
 def joint_stops(model: pinocchio.Model, stops: _Stops | None) -> _JointStops: ...
 def kinetic_energies(

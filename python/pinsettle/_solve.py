@@ -23,7 +23,9 @@ class Trace:
     ``q`` (samples x model.nq) is recorded with ``Settings.trace_configurations``, else None.
     ``event_step``/``event_time``/``event_kind`` list every velocity change: 'damping' at an
     energy peak, 'push' off an unstable rest, 'rollback' to the last good state with the step
-    halved (never decimated).
+    halved, 'impact' of a joint on its stop (never decimated); ``event_joint`` gives the joint
+    of each impact (its index in the model solved, the full model for a scene), -1 for the
+    other kinds.
     """
 
     step: np.ndarray
@@ -35,6 +37,49 @@ class Trace:
     event_step: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     event_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
     event_kind: tuple[str, ...] = ()
+    event_joint: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+
+@dataclass(frozen=True)
+class Progress:
+    """A running solve's state, given to ``solve(..., progress=f)`` every ``check_every`` steps.
+
+    ``steps`` taken so far, ``sim_time`` simulated (s), ``kinetic_energy`` now (J, the exact
+    measure), ``peaks`` the damping events so far, ``residual`` the last assessed residual (N m
+    or N, as ``Result.residual``; nan before the first assessment), ``wall_time`` since the
+    solve started (s).
+    """
+
+    steps: int
+    sim_time: float
+    kinetic_energy: float
+    peaks: int
+    residual: float
+    wall_time: float
+
+
+def _progress_reporter(
+    progress: Callable[[Progress], object] | None,
+) -> Callable[[Mapping[str, Any]], None] | None:
+    """What the C++ loop calls with its plain dict: ``progress`` given a ``Progress``."""
+    if progress is None:
+        return None
+    if not callable(progress):
+        raise TypeError(f"progress must be callable or None, got {type(progress).__name__}")
+
+    def report(record: Mapping[str, Any]) -> None:
+        progress(
+            Progress(
+                steps=int(record["steps"]),
+                sim_time=float(record["sim_time"]),
+                kinetic_energy=float(record["kinetic_energy"]),
+                peaks=int(record["peaks"]),
+                residual=float(record["residual"]),
+                wall_time=float(record["wall_time"]),
+            )
+        )
+
+    return report
 
 
 @dataclass(frozen=True)
@@ -325,6 +370,7 @@ def solve(
     v0: Any = None,
     callback: Callable[[], bool] | None = None,
     limits: bool | None = None,
+    progress: Callable[[Progress], object] | None = None,
     **overrides: Any,
 ) -> Result:
     """Settle a mechanism by kinetic damping and return where it comes to rest.
@@ -342,6 +388,10 @@ def solve(
             ``pinocchio.Model``, the scene's own setting (``Scene.limits``, ``[model] limits``)
             for a scene; True or False overrides it. Stops set on a scene (``set_limit``,
             ``[[limit]]``) apply either way.
+        progress: called every ``check_every`` steps with a ``Progress`` (steps, simulated
+            time, kinetic energy, damping events, residual, wall time); its return value is
+            ignored, an exception from it ends the run and is raised here. None (the default)
+            costs nothing.
         **overrides: any ``Settings`` field, e.g. ``kt=0.3``.
 
     Raises:
@@ -354,6 +404,7 @@ def solve(
     """
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
+    report = _progress_reporter(progress)
     stops: tuple[bool, list[tuple[int, float, float]]] | None
     if isinstance(model, Scene):
         scene = model
@@ -379,12 +430,17 @@ def solve(
             compiled.elements,
             compiled.loops,
             stops,
+            **_progress_argument(report),
         )
         raw["q"] = compiled.full_q(raw["q"])
         raw["loops"] = len(scene.loops)
         raw["v"] = compiled.full_v(raw["v"], full.nv)
-        if raw["trace"] is not None and raw["trace"]["q"] is not None:
-            raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
+        if raw["trace"] is not None:
+            if raw["trace"]["q"] is not None:
+                raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
+            raw["trace"]["event_joint"] = _full_joints(
+                compiled.model, full, raw["trace"].get("event_joint", [])
+            )
         naming = full
     else:
         _check_model(model)
@@ -397,7 +453,7 @@ def solve(
         stops = (True, []) if _limits_flag(limits, True) else None
         equal = [] if stops is None else list(_core.joint_stops(model, stops)["equal_limits"])
         solved = model
-        raw = _core.solve(model, q, v, s, callback, None, None, stops)
+        raw = _core.solve(model, q, v, s, callback, None, None, stops, **_progress_argument(report))
         raw["loops"] = 0
         naming = model
     trace = raw.pop("trace")
@@ -418,6 +474,20 @@ def solve(
         equal_limits=tuple(equal),
         units={name: _unit(solved, name) for name in named},
     )
+
+
+def _progress_argument(report: Any) -> dict[str, Any]:  # TEMPORARY until the build has it
+    return {} if report is None else {"progress": report}
+
+
+def _full_joints(reduced: pinocchio.Model, full: pinocchio.Model, joints: Any) -> np.ndarray:
+    """Joint indices of the reduced model (locked joints removed) as indices of the full
+    model, by name; -1 stays -1."""
+    indices: np.ndarray = np.asarray(joints, dtype=np.int64)
+    if reduced is full:
+        return indices
+    ids = [full.getJointId(name) for name in reduced.names]
+    return np.array([ids[j] if j >= 0 else -1 for j in indices], dtype=np.int64)
 
 
 def _unit(model: pinocchio.Model, name: str) -> str:

@@ -51,6 +51,15 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--backtrack", action="store_true", default=None, help="back up to the peak")
 
 
+def _add_floating_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--floating",
+        action="store_true",
+        help="with a model file (URDF, MJCF): a free-flyer joint on the root body "
+        "(default: root fixed)",
+    )
+
+
 def _add_start_flag(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--start",
@@ -157,8 +166,9 @@ def _parse_start(items: list[str]) -> dict[str, float | list[float]]:
 
 
 def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray | None]:
-    """The scene of args.scene and the start of its --start flags (None: the scene's own)."""
-    scene = pinsettle.load_scene(pinsettle.scene_path(args.scene))
+    """The scene of args.scene (a scene file or name, a URDF or an MJCF file) and the start of
+    its --start flags (None: the scene's own)."""
+    scene = pinsettle.load_scene(args.scene, floating=True if args.floating else None)
     if not args.start:
         return scene, None
     try:
@@ -175,11 +185,13 @@ def _solve(args: argparse.Namespace) -> int:
             scene, q0, limits=_limits(args), progress=progress, **_setting_overrides(args)
         )
     if args.json:
-        out = {"scene": str(scene.path), **result.to_dict()}
+        out = {"scene": str(scene.path), "notes": scene.notes, **result.to_dict()}
         print(json.dumps(out))
     else:
         title = f"{scene.name}: {scene.description}" if scene.description else scene.name
         print(title)
+        for note in scene.notes:  # what the model file says that the scene leaves out
+            print(f"{'note':<17}{note}")
         print(result.summary())
     return 0 if result.converged else 1
 
@@ -232,6 +244,8 @@ def _play(args: argparse.Namespace) -> int:
         result = pinsettle.solve(scene, q0, limits=_limits(args), progress=progress, **overrides)
     title = f"{scene.name}: {scene.description}" if scene.description else scene.name
     print(title)
+    for note in scene.notes:
+        print(f"{'note':<17}{note}")
     print(
         f"{result.status}: {result.steps} steps, {result.peaks} damping events, "
         f"{result.sim_time:.4g} s simulated"
@@ -292,10 +306,13 @@ def build_parser() -> argparse.ArgumentParser:
     solve = sub.add_parser(
         "solve", help="settle a scene file (a path, or a scene name of `pinsettle scenes`)"
     )
-    solve.add_argument("scene", help="scene file (.toml) or scene name")
+    solve.add_argument(
+        "scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"
+    )
     solve.add_argument("--json", action="store_true", help="print one JSON object")
     _add_limits_flag(solve, "scene model")
     _add_quiet_flag(solve)
+    _add_floating_flag(solve)
     _add_start_flag(solve)
     _add_setting_flags(solve)
     solve.set_defaults(func=_solve)
@@ -306,7 +323,9 @@ def build_parser() -> argparse.ArgumentParser:
         "browser (a server on 127.0.0.1 until Ctrl-C), or with --html as a self-contained "
         "page plus the energy plot (PNG) next to it.",
     )
-    play.add_argument("scene", help="scene file (.toml) or scene name")
+    play.add_argument(
+        "scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"
+    )
     play.add_argument(
         "--speed",
         metavar="X",
@@ -320,6 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument("--no-open", action="store_true", help="do not open a browser")
     _add_limits_flag(play, "scene model")
     _add_quiet_flag(play)
+    _add_floating_flag(play)
     _add_start_flag(play)
     _add_setting_flags(play)
     play.set_defaults(func=_play)

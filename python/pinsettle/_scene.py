@@ -20,8 +20,11 @@ import pinocchio
 
 from . import _core
 from ._checks import as_flag, as_vector, unknown_key_message
+from ._mjcf import MjcfError, load_mjcf
+from ._model_files import file_kind, load_srdf_poses, robot_srdf
 from ._settings import SETTING_TYPES, Settings, make_settings, set_setting
 from .robots import load_robot, load_urdf, robot_urdf
+from .scenes import scene_path
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -236,6 +239,14 @@ class Scene:
         #: The URDF the model was built from, if any (its visual shapes are drawn by
         #: ``pinsettle.play``; solving never loads them).
         self.urdf: Path | None = None
+        #: The MJCF file the model was built from, if any.
+        self.mjcf: Path | None = None
+        #: The SRDF files whose poses were read (``load_srdf``).
+        self.srdf: list[Path] = []
+        #: What the model file said that the scene leaves out (an MJCF file's damping,
+        #: actuators, ...), one line each; ``pinsettle solve`` prints them.
+        self.notes: list[str] = []
+        self._pose_notes: dict[str, str] = {}
         self.settings = make_settings(settings, {})
         self.joint_springs: list[JointSpring] = []
         self.springs: list[Spring] = []
@@ -266,6 +277,93 @@ class Scene:
         scene = cls(load_robot(name, floating=floating), **kwargs)
         scene.urdf = robot_urdf(name)
         return scene
+
+    @classmethod
+    def from_mjcf(cls, path: str | Path, *, floating: bool = False, **kwargs: Any) -> Scene:
+        """A scene of a MuJoCo MJCF file: its bodies and joints, gravity (``<option
+        gravity>``), joint ranges as stops, joint springs (``stiffness``, ``springref``),
+        ``connect`` and ``weld`` equalities as loops, its reference pose ``qpos0`` as the
+        start and its keyframes as poses (``set_pose``). What it says that has no force at rest
+        (damping, actuators, ...) is listed in ``notes``; what would change the rest and cannot
+        be honoured is an error naming the element. ``floating``: a free-flyer on the root body.
+
+        Raises:
+            FileNotFoundError: no such file, or an included file or asset missing.
+            SceneError: the file cannot be read or honoured (the message names the element).
+        """
+        try:
+            mjcf = load_mjcf(path, floating=floating)
+        except MjcfError as error:
+            raise SceneError(str(error)) from None
+        scene = cls(mjcf.model, **kwargs)
+        scene.mjcf = Path(path)
+        scene.notes = list(mjcf.notes)
+        for joint, stiffness, rest in mjcf.joint_springs:
+            scene.add_joint_spring(joint, stiffness, rest)
+        for frame_a, point_a, frame_b, point_b, kind in mjcf.loops:
+            scene.add_loop((frame_a, point_a), (frame_b, point_b), kind)
+        scene.set_start(mjcf.start)
+        return scene
+
+    @property
+    def poses(self) -> list[str]:
+        """Names of the model's named poses: an SRDF's (``load_srdf``), an MJCF file's
+        keyframes and its ``qpos0``."""
+        return sorted(entry.key() for entry in self.model.referenceConfigurations)
+
+    def load_srdf(self, path: str | Path) -> Scene:
+        """Read the named poses (``group_state``) of an SRDF file for ``set_pose``, with
+        Pinocchio's ``loadReferenceConfigurations``; the rest of the SRDF
+        (``disable_collisions``, groups) plays no part.
+
+        Raises:
+            FileNotFoundError: no such file.
+            SceneError: a pose names a joint the model does not have, or a value is not numbers
+                or has the wrong count.
+        """
+        try:
+            self._pose_notes.update(load_srdf_poses(self.model, path))
+        except ValueError as error:
+            raise SceneError(str(error)) from None
+        self.srdf.append(Path(path))
+        return self
+
+    def set_pose(self, name: str) -> Scene:
+        """Start every joint at a named pose (see ``poses``); ``set_start`` afterwards
+        overrides single joints.
+
+        Raises:
+            SceneError: an unknown pose, with the known ones.
+        """
+        if not isinstance(name, str):
+            raise SceneError(f"pose must be a pose name (str), got {name!r}")
+        known = self.poses
+        if name not in known:
+            where = (
+                f" (SRDF: {', '.join(str(p) for p in self.srdf)})"
+                if self.srdf
+                else " (the model has no SRDF: [model] srdf, Scene.load_srdf)"
+            )
+            raise SceneError(
+                _close(name, known, "pose") + where
+                if known
+                else f"unknown pose '{name}': the model has no named poses{where}"
+            )
+        model = self.model
+        q = pinocchio.normalize(model, self.model.referenceConfigurations[name])
+        values: dict[str, Any] = {}
+        for j in range(1, model.njoints):
+            segment = q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]]
+            if _is_angle_pair(model, j):
+                values[model.names[j]] = math.atan2(segment[1], segment[0])
+            elif model.nqs[j] == 1:
+                values[model.names[j]] = float(segment[0])
+            else:
+                values[model.names[j]] = [float(x) for x in segment]
+        self.set_start(values)
+        if name in self._pose_notes and self._pose_notes[name] not in self.notes:
+            self.notes.append(self._pose_notes[name])
+        return self
 
     @property
     def gravity(self) -> np.ndarray:
@@ -842,7 +940,7 @@ def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | lis
 # --- the scene file ----------------------------------------------------------------------------
 
 _TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "limit", "solver"]
-_MODEL_KEYS = ["urdf", "robot", "floating", "locked", "gravity", "limits"]
+_MODEL_KEYS = ["urdf", "robot", "mjcf", "srdf", "floating", "locked", "gravity", "limits"]
 _JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
 _SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
 _LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
@@ -876,17 +974,30 @@ def _required(table: Mapping[str, Any], key: str, where: str) -> Any:
     return table[key]
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read a scene file (TOML; the format is documented in the README).
+def load_scene(path: str | Path, *, floating: bool | None = None) -> Scene:
+    """Read a scene: a scene file (TOML; the format is documented in the README), a scene of
+    the library by name (``pinsettle.scene_names()``), or a model file as a scene with only
+    ``[model]``: a URDF or a MuJoCo MJCF file, told apart by content (root fixed unless
+    ``floating``).
 
     Raises:
-        FileNotFoundError: no such file.
+        FileNotFoundError: no such file or scene name.
         SceneError (a ValueError): a syntax error (with its line), an unknown key, name or
             robot, a value of the wrong type, shape or sign; the message names the file and key.
+            A file that is neither a scene, a URDF nor an MJCF file: each parser's reason.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"scene file not found: {path}")
+    path = scene_path(path)
+    try:
+        kind = file_kind(path)
+    except ValueError as error:
+        raise SceneError(str(error)) from None
+    if kind != "scene":
+        return _scene_from_model_file(path, kind, bool(floating))
+    if floating is not None:
+        raise SceneError(
+            f"{path}: floating applies to a model file (URDF, MJCF); a scene file says it in "
+            "[model] floating"
+        )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
@@ -897,6 +1008,28 @@ def load_scene(path: str | Path) -> Scene:
         return _scene_from_dict(data, path)
     except SceneError as error:
         raise SceneError(f"{path}: {error}") from None
+
+
+def _scene_from_model_file(path: Path, kind: str, floating: bool) -> Scene:
+    """A URDF or MJCF file as a scene with only [model]."""
+    try:
+        if kind == "urdf":
+            scene = Scene.from_urdf(path, floating=floating)
+        else:
+            scene = Scene.from_mjcf(path, floating=floating)
+    except SceneError:
+        raise
+    except ValueError as error:  # load_urdf's reasons name the file already
+        raise SceneError(str(error)) from None
+    scene.name = path.stem
+    scene.description = f"{'URDF' if kind == 'urdf' else 'MJCF'} file" + (
+        ", free-flyer root" if floating else ""
+    )
+    scene.path = path
+    scene.compile()  # loops and elements resolve now, as for a scene file
+    if scene.loops:
+        scene.assemble()
+    return scene
 
 
 def _description(path: Path) -> str:
@@ -925,11 +1058,16 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
     limits = m.get("limits", True)
     if not isinstance(limits, bool):
         raise SceneError(f"[model] limits must be true or false, got {limits!r}")
-    if ("urdf" in m) == ("robot" in m):
+    sources = [key for key in ("urdf", "robot", "mjcf") if key in m]
+    if len(sources) != 1:
         raise SceneError(
-            "[model] needs exactly one of 'urdf' (a file) or 'robot' (an example-robot-data "
-            "name), got " + ("both" if "urdf" in m else "neither")
+            "[model] needs exactly one of 'urdf' (a file), 'robot' (an example-robot-data "
+            "name) or 'mjcf' (a MuJoCo MJCF file), got "
+            + ("neither" if not sources else "all three" if len(sources) == 3 else "both")
+            + (f" ({' and '.join(sources)})" if sources else "")
         )
+    urdf_path: Path | None = None
+    mjcf_scene: Scene | None = None
     if "urdf" in m:
         urdf = m["urdf"]
         if not isinstance(urdf, str):
@@ -939,6 +1077,15 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
             model = load_urdf(urdf_path, floating=floating)
         except (FileNotFoundError, ValueError) as error:
             raise SceneError(f"[model] urdf: {error}") from None
+    elif "mjcf" in m:
+        mjcf = m["mjcf"]
+        if not isinstance(mjcf, str):
+            raise SceneError(f"[model] mjcf must be a path (str), got {mjcf!r}")
+        try:
+            mjcf_scene = Scene.from_mjcf(path.parent / mjcf, floating=floating)
+        except (FileNotFoundError, SceneError) as error:
+            raise SceneError(f"[model] mjcf: {error}") from None
+        model = mjcf_scene.model
     else:
         robot = m["robot"]
         if not isinstance(robot, str):
@@ -950,9 +1097,22 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
             message = error.args[0] if error.args else str(error)
             raise SceneError(f"[model] robot: {message}") from None
 
-    scene = Scene(model, name=path.stem, description=_description(path), limits=limits)
+    if mjcf_scene is not None:
+        scene = mjcf_scene
+        scene.name, scene.description = path.stem, _description(path)
+        scene.limits = limits
+    else:
+        scene = Scene(model, name=path.stem, description=_description(path), limits=limits)
     scene.path = path
     scene.urdf = urdf_path
+    srdf = m.get("srdf")
+    if srdf is not None:
+        if not isinstance(srdf, str):
+            raise SceneError(f"[model] srdf must be a path (str), got {srdf!r}")
+        try:
+            scene.load_srdf(path.parent / srdf)
+        except (FileNotFoundError, SceneError) as error:
+            raise SceneError(f"[model] srdf: {error}") from None
 
     def at(where: str, fn: Any, *args: Any, **kwargs: Any) -> None:
         try:
@@ -968,6 +1128,14 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
     at("[model] locked", scene.lock, *locked)
 
     start = _table(data, "start", "[start]")
+    if "pose" in start and not scene.model.existJointName("pose"):
+        pose = start["pose"]
+        if srdf is None and isinstance(m.get("robot"), str):
+            own = robot_srdf(m["robot"])
+            if own is not None and isinstance(pose, str) and pose not in scene.poses:
+                at("[model] robot's SRDF", scene.load_srdf, own)
+        at("[start] pose", scene.set_pose, pose)
+        start = {joint: value for joint, value in start.items() if joint != "pose"}
     for joint, value in start.items():
         at("[start]", scene.set_start, {joint: value})
 

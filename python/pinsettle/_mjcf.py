@@ -1,0 +1,1297 @@
+"""MuJoCo MJCF model files: everything MJCF says about statics, honoured or refused by name.
+
+The model (bodies, joints, masses) is built by Pinocchio's MJCF parser
+(``pinocchio.buildModelFromMJCF``), but not from the user's file as it is: Pinocchio 4.1 reads
+only part of MJCF and drops the rest without a word (the bodies of a ``<frame>``, every
+top-level body but the first, ``<include>``, the placement of a fixed root body and of a free
+body, ``limited="false"``; it shifts ranges by ``ref``). So the file is read here first, with
+MuJoCo's rules (``<include>``, ``<default>`` classes and ``childclass``, ``<frame>``, the five
+ways to write an orientation, ``<compiler angle eulerseq autolimits inertiafromgeom>``), and
+written again in the plain subset Pinocchio reads right: one joint per body (a body with
+several joints becomes a chain of massless bodies, one joint each, as MuJoCo composes them),
+positions and quaternions only, no defaults, one root. Pinocchio builds the model from that.
+
+What Pinocchio does not carry is taken from the file here: gravity (``<option gravity>`` and
+the ``gravity`` flag), joint ranges as stops (``limited``/``autolimits``, degrees), joint
+springs (``stiffness``, ``springref``), the reference pose ``qpos0`` (``ref``, the pose of a
+free body) as the start, ``connect`` and ``weld`` equalities as loops, keyframes as named
+poses. What has no place in statics with constant loads (damping, friction loss, armature,
+actuators) is listed in ``notes``. What changes the statics and cannot be honoured (tendons
+with springs or limits, ``joint`` equalities, gravity compensation, buoyancy, masses from
+meshes, ...) is an error that names the element.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio
+
+
+class MjcfError(ValueError):
+    """An MJCF file that cannot be read or whose statics cannot be honoured."""
+
+
+@dataclass
+class MjcfModel:
+    """An MJCF file read for statics.
+
+    ``model`` has the file's gravity, its joint ranges as position limits (infinite where a
+    joint is not limited) and its keyframes and ``qpos0`` as reference configurations;
+    ``joint_springs`` are (joint, stiffness, rest); ``loops`` are (frame_a, point_a, frame_b,
+    point_b, kind) as ``Scene.add_loop`` takes them (frames added to the model where an end
+    needs an orientation); ``start`` is ``qpos0`` by joint name where it is not the neutral
+    configuration; ``notes`` say what was read and left out.
+    """
+
+    model: pinocchio.Model
+    name: str
+    joint_springs: list[tuple[str, float, float]] = field(default_factory=list)
+    loops: list[tuple[str, tuple[float, ...], str, tuple[float, ...], str]] = field(
+        default_factory=list
+    )
+    start: dict[str, float | list[float]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def is_mjcf(path: str | Path) -> bool:
+    """Whether the file is XML with a ``<mujoco>`` root element."""
+    try:
+        return _parse(Path(path)).tag == "mujoco"
+    except (MjcfError, OSError):
+        return False
+
+
+# --- small readers ---------------------------------------------------------------------------
+
+
+def _parse(path: Path) -> ET.Element:
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as error:
+        raise MjcfError(f"{path}: not well-formed XML: {error}") from None
+
+
+def _describe(el: ET.Element) -> str:
+    name = el.get("name")
+    return f'<{el.tag} name="{name}">' if name else f"<{el.tag}>"
+
+
+def _floats(text: str, where: str, counts: Sequence[int]) -> np.ndarray:
+    """The numbers of an attribute, with one of the allowed counts."""
+    try:
+        values = [float(x) for x in text.split()]
+    except ValueError:
+        raise MjcfError(f"{where}: expected numbers, got '{text}'") from None
+    if len(values) not in counts:
+        expected = " or ".join(str(n) for n in counts)
+        raise MjcfError(f"{where}: expected {expected} numbers, got {len(values)} ('{text}')")
+    if not all(math.isfinite(x) for x in values):
+        raise MjcfError(f"{where}: numbers must be finite, got '{text}'")
+    return np.array(values, dtype=float)
+
+
+def _flag(text: str, where: str, choices: Sequence[str]) -> str:
+    if text not in choices:
+        raise MjcfError(f"{where}: expected one of {', '.join(choices)}, got '{text}'")
+    return text
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    rotation: np.ndarray = pinocchio.AngleAxis(angle, axis).matrix()
+    return rotation
+
+
+def _z_to(vector: np.ndarray, where: str) -> np.ndarray:
+    """MuJoCo's minimal rotation taking +z to ``vector`` (``mjuu_z2quat``)."""
+    norm = float(np.linalg.norm(vector))
+    if norm < 1e-14:
+        raise MjcfError(f"{where}: zero-length direction")
+    v = vector / norm
+    cross = np.cross([0.0, 0.0, 1.0], v)
+    s = float(np.linalg.norm(cross))
+    axis = np.array([1.0, 0.0, 0.0]) if s < 1e-10 else cross / s
+    return _rotation(axis, math.atan2(s, v[2]))
+
+
+def _to_se3(rotation: np.ndarray, translation: Any) -> pinocchio.SE3:
+    return pinocchio.SE3(np.asarray(rotation, float), np.asarray(translation, float))
+
+
+def _text(values: Any) -> str:
+    return " ".join(repr(float(x)) for x in np.ravel(values))
+
+
+def _quat_wxyz(rotation: np.ndarray) -> np.ndarray:
+    x, y, z, w = pinocchio.Quaternion(rotation).coeffs()
+    return np.array([w, x, y, z])
+
+
+# --- the file as MuJoCo reads it -------------------------------------------------------------
+
+
+@dataclass
+class _Compiler:
+    degree: bool = True
+    eulerseq: str = "xyz"
+    autolimits: bool = True
+    inertiafromgeom: str = "auto"
+    inertiagrouprange: tuple[int, int] = (0, 5)
+    boundmass: float = 0.0
+    boundinertia: float = 0.0
+    meshdir: str | None = None
+    texturedir: str | None = None
+    assetdir: str | None = None
+    strippath: bool = False
+
+    @property
+    def angle(self) -> float:
+        """Radians per unit of the file's angles."""
+        return math.pi / 180.0 if self.degree else 1.0
+
+
+@dataclass
+class _Joint:
+    name: str
+    kind: str  # hinge, slide, ball, free
+    pos: np.ndarray  # in the body frame
+    axis: np.ndarray  # unit, in the body frame
+    attrs: dict[str, str]
+    body: str
+    ref: float = 0.0  # rad or m: the joint's value in the file's pose
+
+
+@dataclass
+class _Geom:
+    attrs: dict[str, str]
+    pose: pinocchio.SE3  # in the body frame
+    fromto: np.ndarray | None  # the two end points, in the body frame
+    label: str
+
+
+@dataclass
+class _Body:
+    name: str
+    pose: pinocchio.SE3  # relative to the parent body
+    element: ET.Element
+    joints: list[_Joint] = field(default_factory=list)
+    inertial: ET.Element | None = None
+    inertial_pose: pinocchio.SE3 | None = None
+    geoms: list[_Geom] = field(default_factory=list)
+    sites: dict[str, pinocchio.SE3] = field(default_factory=dict)
+    children: list[_Body] = field(default_factory=list)
+
+
+# Elements of a body or a frame that have no static effect and are skipped.
+_SKIPPED_IN_BODY = {"camera", "light"}
+# Top-level sections read here, or without static effect.
+_TOP_LEVEL = {
+    "compiler",
+    "option",
+    "size",
+    "visual",
+    "statistic",
+    "default",
+    "custom",
+    "asset",
+    "worldbody",
+    "contact",
+    "equality",
+    "tendon",
+    "actuator",
+    "sensor",
+    "keyframe",
+    "deformable",
+}
+_ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
+_JOINT_KINDS = ("hinge", "slide", "ball", "free")
+_MASS_SHAPES = {"sphere": 1, "capsule": 2, "cylinder": 2, "box": 3, "ellipsoid": 3}
+_ASSET_FILES = {
+    "mesh": ("file",),
+    "hfield": ("file",),
+    "skin": ("file",),
+    "texture": ("file", "fileright", "fileleft", "fileup", "filedown", "filefront", "fileback"),
+}
+
+
+class _Reader:
+    """One MJCF file read with MuJoCo's rules; refusals are collected, then raised at once."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.refusals: list[str] = []
+        self.notes: list[str] = []
+        self.root = self._expand(path)
+        if self.root.tag != "mujoco":
+            raise MjcfError(
+                f"{path}: not an MJCF file: the root element is <{self.root.tag}>, not <mujoco>"
+            )
+        for child in self.root:
+            if child.tag not in _TOP_LEVEL:
+                self.refuse(f"{_describe(child)} (a section without a meaning in statics here)")
+        self.compiler = self._compiler()
+        self.classes, self.main_class = self._defaults()
+        self._check_assets()
+        self.bodies: list[_Body] = []  # top-level bodies
+        self.world_sites: dict[str, pinocchio.SE3] = {}
+        self.body_names: dict[str, _Body] = {}
+        self.joint_names: set[str] = set()
+        self.site_body: dict[str, str] = {}
+        self._count = 0
+        for world in self.root.findall("worldbody"):
+            self._contents(world, None, pinocchio.SE3.Identity(), None)
+
+    def refuse(self, what: str) -> None:
+        self.refusals.append(what)
+
+    # -- includes, compiler, defaults, assets --
+
+    def _expand(self, path: Path) -> ET.Element:
+        """The main file with every <include> replaced by the children of the included file's
+        root (paths relative to the main file's folder, as MuJoCo takes them)."""
+        if not path.is_file():
+            raise FileNotFoundError(f"MJCF file not found: {path}")
+        root = _parse(path)
+        missing: list[str] = []
+        seen: set[Path] = set()
+
+        def expand(parent: ET.Element) -> None:
+            for child in list(parent):
+                if child.tag != "include":
+                    expand(child)
+                    continue
+                name = child.get("file")
+                if not name:
+                    raise MjcfError(f"{path}: <include> without a 'file' attribute")
+                included = path.parent / name
+                if not included.is_file():
+                    missing.append(f"{name} (looked for {included})")
+                    parent.remove(child)
+                    continue
+                if included.resolve() in seen:
+                    raise MjcfError(
+                        f'{path}: <include file="{name}"> includes {included} a second time '
+                        "(MuJoCo includes a file at most once)"
+                    )
+                seen.add(included.resolve())
+                inserted = _parse(included)
+                expand(inserted)
+                at = list(parent).index(child)
+                parent.remove(child)
+                for k, element in enumerate(list(inserted)):
+                    parent.insert(at + k, element)
+
+        expand(root)
+        if missing:
+            raise MjcfError(
+                f"{path}: included file{'s' if len(missing) > 1 else ''} not found: "
+                + "; ".join(missing)
+            )
+        return root
+
+    def _compiler(self) -> _Compiler:
+        c = _Compiler()
+        for el in self.root.findall("compiler"):
+            where = f"{self.path}: <compiler>"
+            a = el.attrib
+            if "angle" in a:
+                c.degree = _flag(a["angle"], f"{where} angle", ("degree", "radian")) == "degree"
+            if "eulerseq" in a:
+                seq = a["eulerseq"]
+                if len(seq) != 3 or any(ch not in "xyzXYZ" for ch in seq):
+                    raise MjcfError(f"{where} eulerseq: three of x y z X Y Z, got '{seq}'")
+                c.eulerseq = seq
+            if "autolimits" in a:
+                c.autolimits = _flag(a["autolimits"], f"{where} autolimits", ("true", "false")) == (
+                    "true"
+                )
+            if "inertiafromgeom" in a:
+                c.inertiafromgeom = _flag(
+                    a["inertiafromgeom"], f"{where} inertiafromgeom", ("true", "false", "auto")
+                )
+            if "inertiagrouprange" in a:
+                low, high = _floats(a["inertiagrouprange"], f"{where} inertiagrouprange", (2,))
+                c.inertiagrouprange = (int(low), int(high))
+            if "boundmass" in a:
+                c.boundmass = float(_floats(a["boundmass"], f"{where} boundmass", (1,))[0])
+            if "boundinertia" in a:
+                c.boundinertia = float(_floats(a["boundinertia"], f"{where} boundinertia", (1,))[0])
+            if (
+                "settotalmass" in a
+                and _floats(a["settotalmass"], f"{where} settotalmass", (1,))[0] > 0
+            ):
+                self.refuse("<compiler settotalmass> (masses scaled to a total)")
+            if a.get("coordinate", "local") != "local":
+                self.refuse(f'<compiler coordinate="{a["coordinate"]}"> (only local)')
+            for key in ("meshdir", "texturedir", "assetdir"):
+                if key in a:
+                    setattr(c, key, a[key])
+            if "strippath" in a:
+                c.strippath = _flag(a["strippath"], f"{where} strippath", ("true", "false")) == (
+                    "true"
+                )
+        return c
+
+    def _defaults(self) -> tuple[dict[str, dict[str, dict[str, str]]], str]:
+        """Default classes: class -> element tag -> attributes, inherited from the enclosing
+        classes (MuJoCo's nested <default> elements)."""
+        classes: dict[str, dict[str, dict[str, str]]] = {}
+
+        def visit(el: ET.Element, inherited: Mapping[str, dict[str, str]], name: str) -> None:
+            if name in classes:
+                raise MjcfError(f"{self.path}: default class '{name}' is defined twice")
+            own = {tag: dict(attrs) for tag, attrs in inherited.items()}
+            for child in el:
+                if child.tag != "default":
+                    own.setdefault(child.tag, {}).update(child.attrib)
+            classes[name] = own
+            for child in el:
+                if child.tag == "default":
+                    nested = child.get("class")
+                    if not nested:
+                        raise MjcfError(f"{self.path}: a nested <default> needs a 'class'")
+                    visit(child, own, nested)
+
+        tops = self.root.findall("default")
+        if len(tops) > 1:
+            raise MjcfError(f"{self.path}: more than one top-level <default>")
+        main = tops[0].get("class", "main") if tops else "main"
+        if tops:
+            visit(tops[0], {}, main)
+        else:
+            classes[main] = {}
+        return classes, main
+
+    def _resolved(
+        self, el: ET.Element, childclass: str | None, tag: str | None = None
+    ) -> dict[str, str]:
+        """An element's attributes with those of its defaults class (its own 'class', else the
+        enclosing childclass, else the main class)."""
+        cls = el.get("class") or childclass or self.main_class
+        if cls not in self.classes:
+            raise MjcfError(
+                f"{self.path}: {_describe(el)} uses the unknown default class '{cls}'; classes: "
+                + ", ".join(self.classes)
+            )
+        attrs = dict(self.classes[cls].get(tag or el.tag, {}))
+        attrs.update(el.attrib)
+        attrs.pop("class", None)
+        return attrs
+
+    def _check_assets(self) -> None:
+        """Every file an asset names exists (MuJoCo refuses a model otherwise)."""
+        c = self.compiler
+        missing = []
+        sections = [*self.root.findall("asset"), *self.root.findall("deformable")]
+        for section in sections:
+            for el in section:
+                if el.tag == "model":
+                    self.refuse(f"{_describe(el)} in <asset> (models attached with <attach>)")
+                for key in _ASSET_FILES.get(el.tag, ()):
+                    name = el.get(key)
+                    if not name:
+                        continue
+                    file = Path(name)
+                    if c.strippath:
+                        file = Path(file.name)
+                    if not file.is_absolute():
+                        folder = c.texturedir if el.tag == "texture" else c.meshdir
+                        folder = folder if folder is not None else c.assetdir
+                        file = self.path.parent / (folder or "") / file
+                    if not file.is_file():
+                        missing.append(f"{el.tag} {_describe(el)} file '{name}' ({file})")
+        if missing:
+            raise MjcfError(
+                f"{self.path}: asset file{'s' if len(missing) > 1 else ''} not found: "
+                + "; ".join(missing)
+            )
+
+    # -- poses --
+
+    def _orientation(self, attrs: Mapping[str, str], where: str) -> np.ndarray:
+        given = [key for key in _ORIENTATIONS if key in attrs]
+        if len(given) > 1:
+            raise MjcfError(f"{where}: more than one orientation ({', '.join(given)})")
+        if not given:
+            return np.eye(3)
+        key = given[0]
+        text = attrs[key]
+        at = f"{where} {key}"
+        if key == "quat":
+            w, x, y, z = _floats(text, at, (4,))
+            norm = math.sqrt(w * w + x * x + y * y + z * z)
+            if norm < 1e-14:
+                raise MjcfError(f"{at}: zero quaternion")
+            rotation: np.ndarray = pinocchio.Quaternion(
+                w / norm, x / norm, y / norm, z / norm
+            ).matrix()
+            return rotation
+        if key == "axisangle":
+            values = _floats(text, at, (4,))
+            axis = values[:3]
+            if np.linalg.norm(axis) < 1e-14:
+                raise MjcfError(f"{at}: zero axis")
+            return _rotation(axis / np.linalg.norm(axis), values[3] * self.compiler.angle)
+        if key == "euler":
+            rotation = np.eye(3)
+            for angle, letter in zip(_floats(text, at, (3,)), self.compiler.eulerseq, strict=True):
+                turn = _rotation(
+                    np.eye(3)["xyz".index(letter.lower())], angle * self.compiler.angle
+                )
+                rotation = rotation @ turn if letter.islower() else turn @ rotation
+            return rotation
+        if key == "xyaxes":
+            values = _floats(text, at, (6,))
+            x_axis, y_axis = values[:3], values[3:]
+            if np.linalg.norm(x_axis) < 1e-14:
+                raise MjcfError(f"{at}: zero x axis")
+            x_axis = x_axis / np.linalg.norm(x_axis)
+            y_axis = y_axis - x_axis * float(x_axis @ y_axis)
+            if np.linalg.norm(y_axis) < 1e-14:
+                raise MjcfError(f"{at}: y axis along the x axis")
+            y_axis = y_axis / np.linalg.norm(y_axis)
+            return np.column_stack([x_axis, y_axis, np.cross(x_axis, y_axis)])
+        return _z_to(_floats(text, at, (3,)), at)
+
+    def _pose(self, attrs: Mapping[str, str], where: str) -> pinocchio.SE3:
+        pos = _floats(attrs["pos"], f"{where} pos", (3,)) if "pos" in attrs else np.zeros(3)
+        return _to_se3(self._orientation(attrs, where), pos)
+
+    # -- the tree --
+
+    def _contents(
+        self,
+        container: ET.Element,
+        body: _Body | None,
+        frame: pinocchio.SE3,
+        childclass: str | None,
+    ) -> None:
+        """The children of a body, of the worldbody (body None) or of a <frame> in them, with
+        the frames' pose composed in."""
+        owner = f"body '{body.name}'" if body is not None else "<worldbody>"
+        for el in container:
+            tag = el.tag
+            where = f"{self.path}: {_describe(el)} in {owner}"
+            if tag == "body":
+                self._body(el, body, frame, childclass)
+            elif tag == "frame":
+                self._contents(
+                    el,
+                    body,
+                    frame * self._pose(el.attrib, where),
+                    el.get("childclass", childclass),
+                )
+            elif tag == "inertial" and body is not None and container is body.element:
+                body.inertial = el
+                body.inertial_pose = self._pose(el.attrib, where)
+            elif tag in ("joint", "freejoint") and body is not None:
+                self._joint(el, body, frame, childclass, where)
+            elif tag == "geom":
+                if body is not None:  # world geoms have no mass that counts
+                    self._geom(el, body, frame, childclass, where)
+            elif tag == "site":
+                self._site(el, body, frame, childclass, where)
+            elif tag in _SKIPPED_IN_BODY:
+                continue
+            else:
+                self.refuse(f"{_describe(el)} in {owner}")
+
+    def _body(
+        self, el: ET.Element, parent: _Body | None, frame: pinocchio.SE3, childclass: str | None
+    ) -> None:
+        self._count += 1
+        name = el.get("name") or f"body{self._count}"
+        where = f'{self.path}: <body name="{name}">'
+        if name == "world" or name in self.body_names:
+            raise MjcfError(f"{where}: the body name '{name}' is used twice")
+        if (
+            "gravcomp" in el.attrib
+            and _floats(el.get("gravcomp", ""), f"{where} gravcomp", (1,))[0]
+        ):
+            self.refuse(f'<body name="{name}" gravcomp> (gravity compensation)')
+        body = _Body(name, frame * self._pose(el.attrib, where), el)
+        self.body_names[name] = body
+        (parent.children if parent is not None else self.bodies).append(body)
+        self._contents(el, body, pinocchio.SE3.Identity(), el.get("childclass", childclass))
+
+    def _joint(
+        self,
+        el: ET.Element,
+        body: _Body,
+        frame: pinocchio.SE3,
+        childclass: str | None,
+        where: str,
+    ) -> None:
+        if el.tag == "freejoint":
+            attrs = dict(el.attrib)
+            kind = "free"
+        else:
+            attrs = self._resolved(el, childclass)
+            kind = _flag(attrs.get("type", "hinge"), f"{where} type", _JOINT_KINDS)
+        name = attrs.get("name") or f"{body.name}_joint{len(body.joints)}"
+        if name in self.joint_names:
+            raise MjcfError(f"{where}: the joint name '{name}' is used twice")
+        self.joint_names.add(name)
+        pos = _floats(attrs["pos"], f"{where} pos", (3,)) if "pos" in attrs else np.zeros(3)
+        axis = _floats(attrs["axis"], f"{where} axis", (3,)) if "axis" in attrs else np.eye(3)[2]
+        if kind in ("hinge", "slide") and np.linalg.norm(axis) < 1e-14:
+            raise MjcfError(f"{where} axis: zero-length axis")
+        axis = frame.rotation @ (axis / max(float(np.linalg.norm(axis)), 1e-300))
+        joint = _Joint(name, kind, frame.act(pos), axis, attrs, body.name)
+        if kind in ("hinge", "slide") and "ref" in attrs:
+            scale = self.compiler.angle if kind == "hinge" else 1.0
+            joint.ref = float(_floats(attrs["ref"], f"{where} ref", (1,))[0]) * scale
+        body.joints.append(joint)
+
+    def _geom(
+        self,
+        el: ET.Element,
+        body: _Body,
+        frame: pinocchio.SE3,
+        childclass: str | None,
+        where: str,
+    ) -> None:
+        attrs = self._resolved(el, childclass)
+        fromto = None
+        if "fromto" in attrs:
+            ends = _floats(attrs["fromto"], f"{where} fromto", (6,))
+            fromto = np.concatenate([frame.act(ends[:3]), frame.act(ends[3:])])
+        pose = frame * self._pose(attrs, where)
+        body.geoms.append(_Geom(attrs, pose, fromto, _describe(el)))
+
+    def _site(
+        self,
+        el: ET.Element,
+        body: _Body | None,
+        frame: pinocchio.SE3,
+        childclass: str | None,
+        where: str,
+    ) -> None:
+        attrs = self._resolved(el, childclass)
+        name = attrs.get("name")
+        if not name:
+            return  # nothing can refer to it
+        if name in self.site_body or name in self.world_sites:
+            raise MjcfError(f"{where}: the site name '{name}' is used twice")
+        if "fromto" in attrs:
+            ends = _floats(attrs["fromto"], f"{where} fromto", (6,))
+            local = _to_se3(
+                _z_to(ends[3:] - ends[:3], f"{where} fromto"), (ends[:3] + ends[3:]) / 2
+            )
+        else:
+            local = self._pose(attrs, where)
+        if body is None:
+            self.world_sites[name] = frame * local
+        else:
+            body.sites[name] = frame * local
+            self.site_body[name] = body.name
+
+    def all_bodies(self) -> list[_Body]:
+        """Every body, depth first (MuJoCo's body order)."""
+        out: list[_Body] = []
+
+        def visit(body: _Body) -> None:
+            out.append(body)
+            for child in body.children:
+                visit(child)
+
+        for body in self.bodies:
+            visit(body)
+        return out
+
+
+# --- what the file says about statics ---------------------------------------------------------
+
+
+@dataclass
+class _Statics:
+    gravity: np.ndarray
+    limits: dict[str, tuple[float, float]]
+    springs: list[tuple[str, float, float]]
+
+
+def _option(reader: _Reader) -> tuple[np.ndarray, dict[str, bool]]:
+    """Gravity and the flags of <option> that matter here (enable / disable)."""
+    gravity = np.array([0.0, 0.0, -9.81])
+    flags = {"gravity": True, "limit": True, "spring": True, "equality": True, "constraint": True}
+    for el in reader.root.findall("option"):
+        where = f"{reader.path}: <option>"
+        if "gravity" in el.attrib:
+            gravity = _floats(el.attrib["gravity"], f"{where} gravity", (3,))
+        density = el.get("density")
+        if density is not None and _floats(density, f"{where} density", (1,))[0] != 0:
+            reader.refuse("<option density> (buoyancy of a fluid medium)")
+        viscosity = el.get("viscosity")
+        wind = el.get("wind")
+        if (
+            wind is not None
+            and np.any(_floats(wind, f"{where} wind", (3,)))
+            and (viscosity is not None and _floats(viscosity, f"{where} viscosity", (1,))[0] != 0)
+        ):
+            reader.refuse("<option wind> (drag of a moving medium)")
+        for flag in el.findall("flag"):
+            for key in flags:
+                if key in flag.attrib:
+                    value = _flag(flag.attrib[key], f"{where} <flag {key}>", ("enable", "disable"))
+                    flags[key] = value == "enable"
+    if not flags["gravity"]:
+        gravity = np.zeros(3)
+        reader.notes.append('gravity off (<option><flag gravity="disable">)')
+    return gravity, flags
+
+
+def _names(items: Sequence[str], limit: int = 4) -> str:
+    shown = ", ".join(items[:limit])
+    return shown + (f" and {len(items) - limit} more" if len(items) > limit else "")
+
+
+def _joint_statics(reader: _Reader, flags: Mapping[str, bool]) -> _Statics:
+    """Ranges, springs and the notes of every joint."""
+    limits: dict[str, tuple[float, float]] = {}
+    springs: list[tuple[str, float, float]] = []
+    ignored: dict[str, list[str]] = {"damping": [], "frictionloss": [], "armature": []}
+    limits_off: list[str] = []
+    springs_off: list[str] = []
+    for body in reader.all_bodies():
+        for joint in body.joints:
+            a = joint.attrs
+            where = f"{reader.path}: <joint name=\"{joint.name}\"> (body '{body.name}')"
+            angle = reader.compiler.angle if joint.kind in ("hinge", "ball") else 1.0
+            # limited / autolimits, as MuJoCo decides them
+            limited = _flag(a.get("limited", "auto"), f"{where} limited", ("true", "false", "auto"))
+            if limited == "auto":
+                if not reader.compiler.autolimits and "range" in a:
+                    raise MjcfError(
+                        f'{where}: a range without limited="true" or "false" while <compiler '
+                        'autolimits="false"> (MuJoCo refuses this too)'
+                    )
+                on = "range" in a and reader.compiler.autolimits
+            else:
+                on = limited == "true"
+            if on:
+                if joint.kind == "free":
+                    reader.refuse(f'<joint name="{joint.name}"> range on a free joint')
+                elif joint.kind == "ball":
+                    reader.refuse(
+                        f'<joint name="{joint.name}"> range on a ball joint (a cone limit)'
+                    )
+                elif "range" not in a:
+                    raise MjcfError(f'{where}: limited="true" without a range')
+                else:
+                    low, high = _floats(a["range"], f"{where} range", (2,)) * angle
+                    if not low < high:
+                        raise MjcfError(
+                            f"{where} range: lower {low:g} must be below upper {high:g}"
+                        )
+                    if flags["limit"] and flags["constraint"]:
+                        limits[joint.name] = (float(low), float(high))
+                    else:
+                        limits_off.append(joint.name)
+            # springs
+            stiffness = _floats(a.get("stiffness", "0"), f"{where} stiffness", (1, 2, 3))
+            if np.any(stiffness[1:]):
+                reader.refuse(
+                    f'<joint name="{joint.name}" stiffness="{a["stiffness"]}"> (a polynomial '
+                    "spring)"
+                )
+            if "springdamper" in a and np.all(
+                _floats(a["springdamper"], f"{where} springdamper", (2,)) > 0
+            ):
+                reader.refuse(
+                    f'<joint name="{joint.name}" springdamper> (a stiffness from the mass matrix)'
+                )
+            k = float(stiffness[0])
+            if k < 0:
+                raise MjcfError(f"{where} stiffness: must be >= 0, got {k:g}")
+            if k > 0:
+                if joint.kind not in ("hinge", "slide"):
+                    reader.refuse(
+                        f'<joint name="{joint.name}" stiffness> on a {joint.kind} joint (joint '
+                        "springs on hinge and slide joints only)"
+                    )
+                elif flags["spring"]:
+                    rest = float(_floats(a.get("springref", "0"), f"{where} springref", (1,))[0])
+                    springs.append((joint.name, k, rest * angle))
+                else:
+                    springs_off.append(joint.name)
+            for key, names in ignored.items():
+                if key in a and np.any(_floats(a[key], f"{where} {key}", (1, 2, 3))):
+                    names.append(joint.name)
+    for key, names in ignored.items():
+        if names:
+            reader.notes.append(
+                f"ignored: joint {key} of {_names(names)} (no force at rest)"
+                if key != "frictionloss"
+                else f"ignored: joint friction loss of {_names(names)} (dry friction is not "
+                "modelled: the rest is the frictionless one)"
+            )
+    if limits_off:
+        reader.notes.append(
+            f"ranges of {_names(limits_off)} not applied: limits are disabled "
+            '(<option><flag limit|constraint="disable">)'
+        )
+    if springs_off:
+        reader.notes.append(
+            f"springs of {_names(springs_off)} not applied: springs are disabled "
+            '(<option><flag spring="disable">)'
+        )
+    return _Statics(np.zeros(3), limits, springs)
+
+
+def _other_sections(reader: _Reader) -> None:
+    """Tendons, actuators, deformables: refused when they act at rest, else noted."""
+    for section in reader.root.findall("tendon"):
+        for el in section:
+            attrs = reader._resolved(el, None, "tendon")
+            where = f"{reader.path}: {_describe(el)} in <tendon>"
+            if np.any(_floats(attrs.get("stiffness", "0"), f"{where} stiffness", (1, 2, 3))):
+                reader.refuse(f"{_describe(el)} in <tendon> with a stiffness (a tendon spring)")
+            limited = attrs.get("limited", "auto")
+            if limited == "true" or (
+                limited == "auto" and reader.compiler.autolimits and "range" in attrs
+            ):
+                reader.refuse(f"{_describe(el)} in <tendon> with a range (a tendon limit)")
+    tendons = [el.get("name") or el.tag for s in reader.root.findall("tendon") for el in s]
+    if tendons:
+        reader.notes.append(f"ignored: tendons {_names(tendons)} (no spring, no limit)")
+    actuators = [el.get("name") or el.tag for s in reader.root.findall("actuator") for el in s]
+    if actuators:
+        reader.notes.append(
+            f"ignored: {len(actuators)} actuator{'s' if len(actuators) > 1 else ''} "
+            f"({_names(actuators)}): statics with constant loads only, no control"
+        )
+    for section in reader.root.findall("deformable"):
+        for el in section:
+            if el.tag != "skin":  # a skin is drawn only
+                reader.refuse(f"{_describe(el)} in <deformable>")
+
+
+# --- the plain MJCF Pinocchio reads ------------------------------------------------------------
+
+
+def _joint_motion(joint: _Joint, value: float) -> pinocchio.SE3:
+    """The body's motion by a hinge or slide joint at ``value`` (MuJoCo: about the anchor)."""
+    if joint.kind == "slide":
+        return _to_se3(np.eye(3), joint.axis * value)
+    rotation = _rotation(joint.axis, value)
+    return _to_se3(rotation, joint.pos - rotation @ joint.pos)
+
+
+class _Writer:
+    """The plain MJCF: one root, one joint per body, no defaults, positions and quaternions."""
+
+    def __init__(self, reader: _Reader, free_root: _Body | None, root_joint: str | None) -> None:
+        self.reader = reader
+        c = reader.compiler
+        self.xml = ET.Element("mujoco", model=reader.root.get("model") or reader.path.stem)
+        ET.SubElement(
+            self.xml,
+            "compiler",
+            angle="radian",
+            autolimits="true",
+            inertiafromgeom="auto",
+            boundinertia=repr(c.boundinertia),
+        )
+        world = ET.SubElement(self.xml, "worldbody")
+        if free_root is not None:
+            # The free body is the root, at the origin: Pinocchio misplaces a free body that has
+            # a pose of its own; its pose in the file becomes the start.
+            root = ET.SubElement(world, "body", name=free_root.name)
+            ET.SubElement(root, "freejoint", name=root_joint or free_root.joints[0].name)
+            self._fill(root, free_root)
+        else:
+            # A massless root at the world's origin holds the top-level bodies: Pinocchio reads
+            # only the first top-level body and drops the placement of a fixed root.
+            root = ET.SubElement(world, "body", name="world")
+            self._zero_inertial(root)
+            for body in reader.bodies:
+                self._body(root, body, body.pose)
+
+    @staticmethod
+    def _zero_inertial(el: ET.Element) -> None:
+        ET.SubElement(el, "inertial", pos="0 0 0", mass="0", diaginertia="0 0 0")
+
+    @staticmethod
+    def _place(el: ET.Element, pose: pinocchio.SE3) -> None:
+        el.set("pos", _text(pose.translation))
+        el.set("quat", _text(_quat_wxyz(pose.rotation)))
+
+    def _body(self, parent: ET.Element, body: _Body, pose: pinocchio.SE3) -> None:
+        joints = body.joints
+        if any(j.kind == "free" for j in joints):
+            raise MjcfError(
+                f"{self.reader.path}: body '{body.name}' has a free joint but is not a top-level "
+                "body"
+            )
+        el = parent
+        for k, joint in enumerate(joints):
+            last = k == len(joints) - 1
+            # A body with several joints: a chain of massless bodies, one joint each, composed
+            # in the body's order as MuJoCo composes them. The pose is the file's pose moved
+            # back by the joint's ref, so that Pinocchio's q is MuJoCo's qpos.
+            el = ET.SubElement(el, "body", name=body.name if last else f"{body.name}/{joint.name}")
+            motion = _joint_motion(joint, -joint.ref) if joint.kind != "ball" else None
+            self._place(el, pose * motion if motion is not None else pose)
+            ET.SubElement(
+                el,
+                "joint",
+                name=joint.name,
+                type=joint.kind,
+                pos=_text(joint.pos),
+                axis=_text(joint.axis),
+            )
+            if not last:
+                self._zero_inertial(el)
+            pose = pinocchio.SE3.Identity()
+        if not joints:
+            el = ET.SubElement(parent, "body", name=body.name)
+            self._place(el, pose)
+        self._fill(el, body)
+
+    def _fill(self, el: ET.Element, body: _Body) -> None:
+        """Mass, sites and child bodies of a body into its element."""
+        self._mass(el, body)
+        for name, pose in body.sites.items():
+            site = ET.SubElement(el, "site", name=name)
+            self._place(site, pose)
+        for child in body.children:
+            self._body(el, child, child.pose)
+
+    def _mass(self, el: ET.Element, body: _Body) -> None:
+        """The body's inertial, or the geoms its mass comes from (MuJoCo's rules: explicit
+        unless inertiafromgeom is true or the inertial is missing; geoms in the inertia group
+        range with a non-zero mass or density)."""
+        reader = self.reader
+        c = reader.compiler
+        use_geoms = c.inertiafromgeom == "true" or (
+            c.inertiafromgeom == "auto" and body.inertial is None
+        )
+        if not use_geoms:
+            if body.inertial is None:
+                reader.refuse(
+                    f'<body name="{body.name}"> without <inertial> while <compiler '
+                    'inertiafromgeom="false">'
+                )
+                return
+            a = body.inertial.attrib
+            where = f"{reader.path}: <inertial> of body '{body.name}'"
+            mass = max(float(_floats(a.get("mass", ""), f"{where} mass", (1,))[0]), c.boundmass)
+            if mass < 0:
+                raise MjcfError(f"{where} mass: must be >= 0, got {mass:g}")
+            inertial = ET.SubElement(el, "inertial", mass=repr(mass))
+            assert body.inertial_pose is not None
+            self._place(inertial, body.inertial_pose)
+            if "fullinertia" in a:
+                inertial.set(
+                    "fullinertia", _text(_floats(a["fullinertia"], f"{where} fullinertia", (6,)))
+                )
+            else:
+                inertial.set(
+                    "diaginertia",
+                    _text(_floats(a.get("diaginertia", ""), f"{where} diaginertia", (3,))),
+                )
+            return
+        low, high = c.inertiagrouprange
+        counted = []
+        for geom in body.geoms:
+            a = geom.attrs
+            where = f"{reader.path}: {geom.label} in body '{body.name}'"
+            group = int(_floats(a.get("group", "0"), f"{where} group", (1,))[0])
+            if not low <= group <= high:
+                continue
+            if "mass" in a:
+                weighs = _floats(a["mass"], f"{where} mass", (1,))[0] != 0
+            else:
+                weighs = _floats(a.get("density", "1000"), f"{where} density", (1,))[0] != 0
+            if not weighs:
+                continue
+            kind = a.get("type", "sphere")
+            what = f"{geom.label} of body '{body.name}', whose mass comes from its geoms"
+            if kind not in _MASS_SHAPES or "mesh" in a:
+                reader.refuse(
+                    f"{what}: a {kind}{' fitted to a mesh' if 'mesh' in a else ''} (masses of "
+                    "meshes, height fields and SDFs are not computed: give the body an "
+                    "<inertial>)"
+                )
+                continue
+            if a.get("shellinertia", "false") == "true":
+                reader.refuse(f"{what}: shellinertia")
+                continue
+            counted.append(geom)
+        if counted and c.boundmass > 0:
+            reader.refuse(
+                f"<compiler boundmass> with body '{body.name}' whose mass comes from its geoms"
+            )
+            return
+        if not counted:
+            if c.boundmass > 0:
+                ET.SubElement(
+                    el,
+                    "inertial",
+                    pos="0 0 0",
+                    mass=repr(c.boundmass),
+                    diaginertia=_text([c.boundinertia] * 3),
+                )
+            return
+        for geom in counted:
+            a = geom.attrs
+            kind = a.get("type", "sphere")
+            where = f"{reader.path}: {geom.label} in body '{body.name}'"
+            # Pinocchio computes the mass and inertia of these shapes as MuJoCo does (checked by
+            # the tests); contype and conaffinity 1: Pinocchio leaves out geoms it takes for
+            # visual ones, MuJoCo counts them.
+            out = ET.SubElement(el, "geom", type=kind, contype="1", conaffinity="1", group="0")
+            needed = _MASS_SHAPES[kind]
+            if geom.fromto is not None and kind != "sphere":
+                out.set("fromto", _text(geom.fromto))
+                size = _floats(a.get("size", ""), f"{where} size", (1, 2, 3))[:1]
+            else:
+                self._place(out, geom.pose)
+                size = _floats(a.get("size", ""), f"{where} size", tuple(range(needed, 4)))[:needed]
+            if np.any(size <= 0):
+                raise MjcfError(f"{where} size: must be positive, got {a.get('size')}")
+            out.set("size", _text(size))
+            if "mass" in a:
+                out.set("mass", _text(_floats(a["mass"], f"{where} mass", (1,))))
+            else:
+                out.set(
+                    "density", _text(_floats(a.get("density", "1000"), f"{where} density", (1,)))
+                )
+
+
+def _structure(reader: _Reader, floating: bool) -> tuple[_Body | None, str | None]:
+    """The free root body, if any, and the name of a free joint added by ``floating``."""
+    free = [b for b in reader.bodies if any(j.kind == "free" for j in b.joints)]
+    for body in reader.all_bodies():
+        if any(j.kind == "free" for j in body.joints) and len(body.joints) > 1:
+            raise MjcfError(f"{reader.path}: body '{body.name}' has a free joint and other joints")
+    if free:
+        if len(reader.bodies) > 1:
+            raise MjcfError(
+                f"{reader.path}: {len(free)} free bod{'ies' if len(free) > 1 else 'y'} ("
+                + _names([b.name for b in free])
+                + f") among {len(reader.bodies)} top-level bodies; a Pinocchio model has one "
+                "root: one free body, or fixed bodies only"
+            )
+        return free[0], None
+    if not floating:
+        return None, None
+    if len(reader.bodies) != 1:
+        raise MjcfError(
+            f"{reader.path}: floating: {len(reader.bodies)} top-level bodies ("
+            + _names([b.name for b in reader.bodies])
+            + "); a free-flyer goes on a single root body (or give a body a <freejoint/>)"
+        )
+    root = reader.bodies[0]
+    if root.joints:
+        raise MjcfError(
+            f"{reader.path}: floating: the root body '{root.name}' is attached by joint "
+            f"'{root.joints[0].name}' already; give it a <freejoint/> in the file instead"
+        )
+    return root, "root_joint"
+
+
+def _build(xml: ET.Element, path: Path) -> pinocchio.Model:
+    with tempfile.TemporaryDirectory(prefix="pinsettle-mjcf-") as folder:
+        plain = Path(folder) / "model.xml"
+        ET.ElementTree(xml).write(plain, encoding="utf-8", xml_declaration=True)
+        try:
+            return pinocchio.buildModelFromMJCF(str(plain))
+        except (RuntimeError, ValueError) as error:
+            message = str(error).split("message:")[-1].strip()
+            raise MjcfError(f"{path}: Pinocchio's MJCF parser: {message}") from None
+
+
+def _qpos_order(reader: _Reader, free_root: _Body | None, root_joint: str | None) -> list[_Joint]:
+    """The joints in MuJoCo's qpos order (depth first, in body order), a free-flyer added by
+    ``floating`` first."""
+    joints = [j for body in reader.all_bodies() for j in body.joints]
+    if root_joint is not None and free_root is not None:
+        joints.insert(0, _Joint(root_joint, "free", np.zeros(3), np.zeros(3), {}, free_root.name))
+    return joints
+
+
+def _world_pose(reader: _Reader, body: _Body) -> pinocchio.SE3:
+    chain: list[_Body] = []
+
+    def find(nodes: list[_Body]) -> bool:
+        for node in nodes:
+            chain.append(node)
+            if node is body or find(node.children):
+                return True
+            chain.pop()
+        return False
+
+    find(reader.bodies)
+    pose = pinocchio.SE3.Identity()
+    for node in chain:
+        pose = pose * node.pose
+    return pose
+
+
+def _reference(
+    reader: _Reader,
+    model: pinocchio.Model,
+    joints: list[_Joint],
+    free_root: _Body | None,
+) -> tuple[np.ndarray, dict[str, float | list[float]]]:
+    """MuJoCo's qpos0 in Pinocchio's configuration, and by joint name where not neutral."""
+    q: np.ndarray = pinocchio.neutral(model)
+    start: dict[str, float | list[float]] = {}
+    for joint in joints:
+        j = model.getJointId(joint.name)
+        iq = model.idx_qs[j]
+        if joint.kind == "free" and free_root is not None:
+            pose = _world_pose(reader, free_root)
+            value = [*pose.translation, *pinocchio.Quaternion(pose.rotation).coeffs()]
+            q[iq : iq + 7] = value
+            start[joint.name] = [float(x) for x in value]
+        elif joint.kind in ("hinge", "slide") and joint.ref != 0.0:
+            q[iq] = joint.ref
+            start[joint.name] = joint.ref
+    return q, start
+
+
+def _keyframes(
+    reader: _Reader, model: pinocchio.Model, joints: list[_Joint], q0: np.ndarray, added: bool
+) -> dict[str, np.ndarray]:
+    """The keyframes' qpos in Pinocchio's configuration (quaternions w x y z -> x y z w)."""
+    sizes = {"hinge": 1, "slide": 1, "ball": 4, "free": 7}
+    file_joints = joints[1:] if added else joints
+    nq = sum(sizes[j.kind] for j in file_joints)
+    poses: dict[str, np.ndarray] = {}
+    mocap: list[str] = []
+    for section in reader.root.findall("keyframe"):
+        for k, key in enumerate(section.findall("key")):
+            name = key.get("name") or f"key{k}"
+            where = f'{reader.path}: <key name="{name}">'
+            if "mpos" in key.attrib or "mquat" in key.attrib:
+                mocap.append(name)
+            if "qpos" not in key.attrib:
+                poses[name] = q0.copy()
+                continue
+            qpos = _floats(key.attrib["qpos"], f"{where} qpos", (nq,))
+            q = q0.copy()
+            at = 0
+            for joint in file_joints:
+                n = sizes[joint.kind]
+                values = qpos[at : at + n]
+                at += n
+                iq = model.idx_qs[model.getJointId(joint.name)]
+                if n == 7:
+                    values = np.concatenate([values[:3], values[4:], values[3:4]])
+                elif n == 4:
+                    values = np.concatenate([values[1:], values[:1]])
+                q[iq : iq + n] = values
+            poses[name] = pinocchio.normalize(model, q)
+    if mocap:
+        reader.notes.append(
+            f"keyframe{'s' if len(mocap) > 1 else ''} {_names(mocap)}: the poses of mocap bodies "
+            "(mpos, mquat) are not applied"
+        )
+    return poses
+
+
+class _Ends:
+    """Loop ends: a frame name and a point, frames added to the model where an end needs its
+    own orientation."""
+
+    def __init__(self, reader: _Reader, model: pinocchio.Model, q0: np.ndarray) -> None:
+        self.reader = reader
+        self.model = model
+        self.data = model.createData()
+        pinocchio.framesForwardKinematics(model, self.data, q0)
+
+    def body(self, name: str, where: str) -> str:
+        """The frame of a body ('universe' for the world)."""
+        if name == "world":
+            return "universe"
+        if name not in self.reader.body_names:
+            raise MjcfError(f"{where}: unknown body '{name}'")
+        return name
+
+    def placement(self, frame: str) -> pinocchio.SE3:
+        """The frame's pose at qpos0."""
+        return self.data.oMf[self.frame_id(frame)]
+
+    def frame_id(self, frame: str) -> int:
+        for i, f in enumerate(self.model.frames):
+            if f.name == frame and (frame == "universe" or f.type == pinocchio.FrameType.BODY):
+                return i
+        raise MjcfError(f"{self.reader.path}: frame '{frame}' is missing from the model")
+
+    def site(self, name: str, where: str) -> tuple[str, pinocchio.SE3]:
+        """A site as (frame of its body, its pose in that frame)."""
+        if name in self.reader.world_sites:
+            return "universe", self.reader.world_sites[name]
+        if name not in self.reader.site_body:
+            raise MjcfError(f"{where}: unknown site '{name}'")
+        body = self.reader.site_body[name]
+        return body, self.reader.body_names[body].sites[name]
+
+    def add(self, name: str, frame: str, local: pinocchio.SE3) -> str:
+        """A frame on the body of ``frame`` at ``local`` in it; returns its name."""
+        parent = self.model.frames[self.frame_id(frame)]
+        fid = self.frame_id(frame)
+        self.model.addFrame(
+            pinocchio.Frame(
+                name,
+                parent.parentJoint,
+                fid,
+                parent.placement * local,
+                pinocchio.FrameType.OP_FRAME,
+            )
+        )
+        return name
+
+
+def _loops(
+    reader: _Reader,
+    model: pinocchio.Model,
+    q0: np.ndarray,
+    flags: Mapping[str, bool],
+) -> list[tuple[str, tuple[float, ...], str, tuple[float, ...], str]]:
+    """The connect and weld equalities as loops (frame_a, point_a, frame_b, point_b, kind)."""
+    loops: list[tuple[str, tuple[float, ...], str, tuple[float, ...], str]] = []
+    ends = _Ends(reader, model, q0)
+    inactive: list[str] = []
+    disabled: list[str] = []
+    zero = (0.0, 0.0, 0.0)
+    for section in reader.root.findall("equality"):
+        for k, el in enumerate(section):
+            a = reader._resolved(el, None)
+            label = a.get("name") or f"equality{k}"
+            where = f"{reader.path}: {_describe(el)} in <equality>"
+            if el.tag not in ("connect", "weld"):
+                reader.refuse(
+                    f"{_describe(el)} in <equality> (a {el.tag} equality: only connect and "
+                    "weld are loops here)"
+                )
+                continue
+            if _flag(a.get("active", "true"), f"{where} active", ("true", "false")) == "false":
+                inactive.append(label)
+                continue
+            if not (flags["equality"] and flags["constraint"]):
+                disabled.append(label)
+                continue
+            sites = "site1" in a or "site2" in a
+            if sites:
+                if not ("site1" in a and "site2" in a) or "body1" in a or "body2" in a:
+                    raise MjcfError(f"{where}: give site1 and site2, or body1 (and body2)")
+                fa, pa = ends.site(a["site1"], where)
+                fb, pb = ends.site(a["site2"], where)
+                if el.tag == "connect" or _weld_as_point(a, where):
+                    loops.append((fa, tuple(pa.translation), fb, tuple(pb.translation), "point"))
+                else:
+                    loops.append(
+                        (
+                            ends.add(f"{label}/site1", fa, pa),
+                            zero,
+                            ends.add(f"{label}/site2", fb, pb),
+                            zero,
+                            "frame",
+                        )
+                    )
+                continue
+            if "body1" not in a:
+                raise MjcfError(f"{where}: needs body1 (or site1 and site2)")
+            fa = ends.body(a["body1"], where)
+            fb = ends.body(a.get("body2", "world"), where)
+            x_a, x_b = ends.placement(fa), ends.placement(fb)
+            if el.tag == "connect":
+                if "anchor" not in a:
+                    raise MjcfError(f"{where}: a connect by bodies needs an anchor")
+                anchor = _floats(a["anchor"], f"{where} anchor", (3,))
+                # The point on body2 is where the anchor is at qpos0 (MuJoCo's rule).
+                on_b = x_b.actInv(x_a.act(anchor))
+                loops.append((fa, tuple(anchor), fb, tuple(on_b), "point"))
+                continue
+            anchor = _floats(a.get("anchor", "0 0 0"), f"{where} anchor", (3,))
+            relpose = _floats(a.get("relpose", "0 1 0 0 0 0 0"), f"{where} relpose", (7,))
+            if np.any(relpose[3:]):
+                w, x, y, z = relpose[3:] / np.linalg.norm(relpose[3:])
+                on_a = _to_se3(pinocchio.Quaternion(w, x, y, z).matrix(), relpose[:3])
+            else:  # the relative pose of qpos0
+                on_a = x_a.actInv(x_b) * _to_se3(np.eye(3), anchor)
+            if _weld_as_point(a, where):
+                loops.append((fa, tuple(on_a.translation), fb, tuple(anchor), "point"))
+            else:
+                loops.append(
+                    (ends.add(f"{label}/body1", fa, on_a), zero, fb, tuple(anchor), "frame")
+                )
+    if inactive:
+        reader.notes.append(f'ignored: inactive equalities {_names(inactive)} (active="false")')
+    if disabled:
+        reader.notes.append(f"ignored: equalities {_names(disabled)}: disabled by <option><flag>")
+    return loops
+
+
+def _weld_as_point(attrs: Mapping[str, str], where: str) -> bool:
+    """A weld with torquescale 0 holds no rotation: MuJoCo says it acts as a connect."""
+    return float(_floats(attrs.get("torquescale", "1"), f"{where} torquescale", (1,))[0]) == 0.0
+
+
+# --- the entry point ---------------------------------------------------------------------------
+
+
+def load_mjcf(path: str | Path, floating: bool = False) -> MjcfModel:
+    """Read an MJCF file for statics (see the module docstring).
+
+    ``floating``: a free-flyer on the root body (the file's single top-level body, which must
+    have no joint); a file with a ``<freejoint>`` is free already.
+
+    Raises:
+        FileNotFoundError: no such file.
+        MjcfError (a ValueError): not MJCF, a missing include or asset, or something with a
+            static effect that cannot be honoured (the message names the elements).
+    """
+    path = Path(path)
+    reader = _Reader(path)
+    gravity, flags = _option(reader)
+    statics = _joint_statics(reader, flags)
+    _other_sections(reader)
+    free_root, root_joint = _structure(reader, floating)
+    writer = _Writer(reader, free_root, root_joint)
+    if reader.refusals:
+        raise MjcfError(f"{path}: cannot be honoured in statics: " + "; ".join(reader.refusals))
+    if not reader.bodies:
+        raise MjcfError(f"{path}: no body in <worldbody>: nothing to settle")
+    model = _build(writer.xml, path)
+    joints = _qpos_order(reader, free_root, root_joint)
+    missing = [j.name for j in joints if not model.existJointName(j.name)]
+    if missing or model.njoints - 1 != len(joints):
+        raise MjcfError(
+            f"{path}: Pinocchio's model has {model.njoints - 1} joints for the file's "
+            f"{len(joints)}" + (f"; missing: {_names(missing)}" if missing else "")
+        )
+    if model.nv == 0:
+        raise MjcfError(f"{path}: no joint: every body is fixed, nothing to settle")
+    lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    for joint in joints:
+        if joint.kind in ("hinge", "slide"):
+            iq = model.idx_qs[model.getJointId(joint.name)]
+            lower[iq], upper[iq] = statics.limits.get(joint.name, (-math.inf, math.inf))
+    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
+    model.gravity = pinocchio.Motion(gravity, np.zeros(3))
+    q0, start = _reference(reader, model, joints, free_root)
+    for name, q in _keyframes(reader, model, joints, q0, root_joint is not None).items():
+        model.referenceConfigurations[name] = q
+    model.referenceConfigurations["qpos0"] = q0
+    loops = _loops(reader, model, q0, flags)
+    if reader.refusals:
+        raise MjcfError(f"{path}: cannot be honoured in statics: " + "; ".join(reader.refusals))
+    return MjcfModel(
+        model=model,
+        name=str(writer.xml.get("model")),
+        joint_springs=statics.springs,
+        loops=loops,
+        start=start,
+        notes=reader.notes,
+    )

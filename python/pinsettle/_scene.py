@@ -1010,6 +1010,20 @@ def load_scene(path: str | Path, *, floating: bool | None = None) -> Scene:
         raise SceneError(f"{path}: {error}") from None
 
 
+def _check_loops(scene: Scene, where: str) -> None:
+    """Elements resolved now, not at the first solve; a start the loops cannot be closed from,
+    or loops that lock everything, are errors of the file."""
+    scene.compile()
+    if not scene.loops:
+        return
+    q = scene.assemble()[0]
+    if scene.mobility(q) == 0:
+        raise SceneError(
+            f"{where}: the loops leave the mechanism no degree of freedom (every joint "
+            "motion would open a loop): it is a structure, with nothing to settle"
+        )
+
+
 def _scene_from_model_file(path: Path, kind: str, floating: bool) -> Scene:
     """A URDF or MJCF file as a scene with only [model]."""
     try:
@@ -1026,9 +1040,10 @@ def _scene_from_model_file(path: Path, kind: str, floating: bool) -> Scene:
         ", free-flyer root" if floating else ""
     )
     scene.path = path
-    scene.compile()  # loops and elements resolve now, as for a scene file
-    if scene.loops:
-        scene.assemble()
+    try:
+        _check_loops(scene, "<equality>")
+    except SceneError as error:
+        raise SceneError(f"{path}: {error}") from None
     return scene
 
 

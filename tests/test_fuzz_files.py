@@ -1,11 +1,18 @@
-"""Fuzzing the file readers: mutated scene files and URDFs never crash, hang or traceback.
+"""Fuzzing the file readers: mutated scene files, URDFs and MJCF files never crash, hang or
+traceback.
 
 1,000 cases, each a scene of robots/ (with its URDF, or the URDF of its example-robot-data robot
 in place of ``robot = ...``) with one to three seeded random mutations: lines deleted,
 duplicated or cut short, garbage and non-UTF-8 bytes, broken XML, NaN, infinities and huge or
 negative numbers in origins, inertias, limits and TOML values, inertials removed, joints naming
 missing links, cycles, unknown joint types, mimic tags, wrong types in TOML values, unknown
-keys, names of joints and frames that do not exist, missing files. Each case goes through
+keys, names of joints and frames that do not exist, missing files. 300 more cases are MuJoCo
+MJCF files (written below with default classes, frames, several joints in a body, ranges,
+springs, refs, equalities, keyframes and an include), solved directly or from a scene's
+``[model] mjcf``, with the same kinds of mutations and MJCF's own: weird numbers in poses,
+orientations, ranges, springs, masses, sizes, anchors and keyframes, unknown classes and bodies,
+elements renamed (a body made a frame, a joint a free joint, ...), enumerations made wrong,
+missing includes and meshes. Each case goes through
 ``pinsettle.__main__.main(["solve", ...])``, the function the ``pinsettle solve`` command
 runs, with a small step and time budget, and must either run (exit 0 or 1) or end with exit 2
 and one line ``pinsettle: error: ...``: no traceback, no crash, no hang. All cases run in one
@@ -37,6 +44,7 @@ import pytest
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 SEED = 20261123
 CASES = 1000
+MJCF_CASES = 300  # after the 1,000: cases 1000 to 1299
 SUBPROCESS_EVERY = 50  # 20 of the 1,000 through the real command line
 SOLVE_FLAGS = ["--max-steps", "200", "--max-time", "1"]
 CASE_BUDGET = 10.0  # s per case in process: max_time 1 s plus loading; more is a hang
@@ -317,6 +325,216 @@ def _urdf_limit(rng: random.Random, text: str) -> tuple[str, str]:
     return text[: m.start()] + new + text[m.end() :], f"{m.group()} -> {new!r}"
 
 
+MJCF_NUMERIC = {"pos", "quat", "euler", "axisangle", "xyaxes", "zaxis", "axis", "range", "ref"}
+MJCF_NUMERIC |= {"stiffness", "springref", "damping", "mass", "diaginertia", "fullinertia"}
+MJCF_NUMERIC |= {"size", "fromto", "anchor", "relpose", "gravity", "qpos", "torquescale"}
+MJCF_NUMERIC |= {"density", "group", "springdamper", "inertiagrouprange", "boundmass"}
+MJCF_NAMES = {"name", "class", "childclass", "body1", "body2", "site1", "site2", "joint", "mesh"}
+MJCF_ENUMS = {
+    "type": ["hinge", "slide", "ball", "free", "capsule", "mesh", "plane", "bogus", ""],
+    "limited": ["true", "false", "auto", "yes", ""],
+    "angle": ["degree", "radian", "grad"],
+    "autolimits": ["true", "false", "maybe"],
+    "inertiafromgeom": ["true", "false", "auto", "no"],
+    "eulerseq": ["xyz", "ZYX", "xxz", "ab", "xyzx"],
+    "active": ["true", "false", "0"],
+}
+MJCF_TAGS = ["body", "frame", "joint", "freejoint", "geom", "site", "inertial", "include"]
+MJCF_TAGS += ["default", "connect", "weld", "fixed", "worldbody", "bogus"]
+MJCF_GARBAGE = [
+    "<body>",
+    "</body>",
+    "<frame>",
+    '<joint type="free"/>',
+    '<joint name="j1"/>',
+    '<include file="missing.xml"/>',
+    '<geom type="mesh" mesh="none"/>',
+    '<tendon><fixed name="t" stiffness="1"/></tendon>',
+    '<equality><weld body1="nowhere"/></equality>',
+    '<equality><joint joint1="j1"/></equality>',
+    '<body name="extra"><joint/><geom size="0.1"/></body>',
+    '<default class="main"><joint/></default>',
+    '<asset><mesh name="m" file="gone.stl"/></asset>',
+    "<!--",
+]
+
+
+def _mjcf_attribute(
+    rng: random.Random, text: str, names: set[str], new: str | None
+) -> tuple[str, str]:
+    matches = [m for m in ATTRIBUTE.finditer(text) if m.group(1) in names]
+    if not matches:
+        return _delete_line(rng, text)
+    m = rng.choice(matches)
+    if new is None:  # a number made weird
+        parts = m.group(2).split() or [""]
+        parts[rng.randrange(len(parts))] = rng.choice(WEIRD_NUMBERS)
+        new = " ".join(parts)
+    start, end = m.span(2)
+    return text[:start] + new + text[end:], f"{m.group(1)}={m.group(2)!r} -> {new!r}"
+
+
+def _mjcf_number(rng: random.Random, text: str) -> tuple[str, str]:
+    return _mjcf_attribute(rng, text, MJCF_NUMERIC, None)
+
+
+def _mjcf_name(rng: random.Random, text: str) -> tuple[str, str]:
+    names = re.findall(r'name="([^"]*)"', text) or ["x"]
+    return _mjcf_attribute(rng, text, MJCF_NAMES, rng.choice(["no_such", "", *names]))
+
+
+def _mjcf_enum(rng: random.Random, text: str) -> tuple[str, str]:
+    key = rng.choice(sorted(MJCF_ENUMS))
+    return _mjcf_attribute(rng, text, {key}, rng.choice(MJCF_ENUMS[key]))
+
+
+def _mjcf_tag(rng: random.Random, text: str) -> tuple[str, str]:
+    """An element renamed (its closing tag too, when it has one)."""
+    matches = list(re.finditer(r"<(\w+)[\s>/]", text))
+    if not matches:
+        return _delete_line(rng, text)
+    m = rng.choice(matches)
+    old, new = m.group(1), rng.choice(MJCF_TAGS)
+    text = text[: m.start(1)] + new + text[m.end(1) :]
+    close = text.find(f"</{old}>", m.start())
+    if close >= 0 and rng.random() < 0.8:
+        text = text[:close] + f"</{new}>" + text[close + len(old) + 3 :]
+    return text, f"<{old}> -> <{new}>"
+
+
+def _mjcf_garbage(rng: random.Random, text: str) -> tuple[str, str]:
+    lines = _lines(text)
+    i = rng.randrange(len(lines) + 1)
+    garbage = rng.choice(MJCF_GARBAGE)
+    lines.insert(i, garbage)
+    return "\n".join(lines), f"inserted {garbage!r} at line {i + 1}"
+
+
+# Line-level mutations mostly break the XML; the others reach the MJCF reader's rules.
+MJCF_MUTATIONS = [
+    _delete_line,
+    _duplicate_line,
+    _truncate,
+    _insert_garbage,
+    _mjcf_garbage,
+    _mjcf_garbage,
+    *[_mjcf_number] * 5,
+    _mjcf_name,
+    _mjcf_name,
+    _mjcf_enum,
+    _mjcf_enum,
+    _mjcf_tag,
+]
+
+# MJCF files to mutate: (main file, included part or None). Small and fast to solve.
+MJCF_ARM = """<mujoco model="arm">
+  <compiler angle="degree" eulerseq="zyx"/>
+  <option gravity="0 0 -9.81"/>
+  <default>
+    <joint damping="0.1"/>
+    <default class="hinge">
+      <joint type="hinge" axis="0 1 0" stiffness="2" springref="10" range="-120 120"/>
+      <geom type="capsule" size="0.03 0.1"/>
+    </default>
+  </default>
+  <worldbody>
+    <geom type="plane" size="1 1 0.1"/>
+    <frame pos="0 0 0.5" euler="0 0 20">
+      <body name="upper" childclass="hinge">
+        <joint name="shoulder" ref="10"/>
+        <joint name="roll" axis="1 0 0" limited="false"/>
+        <inertial pos="0.2 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+        <body name="lower" pos="0.4 0 0" euler="0 30 0">
+          <joint name="elbow" range="-90 10"/>
+          <geom fromto="0 0 0 0.3 0 0"/>
+          <site name="tip" pos="0.3 0 0"/>
+          <body name="slider" pos="0.3 0 0">
+            <joint name="slide" type="slide" axis="1 0 0" range="-0.1 0.1" stiffness="50"/>
+            <geom type="sphere" size="0.04" mass="0.2"/>
+          </body>
+        </body>
+      </body>
+    </frame>
+  </worldbody>
+  <actuator><motor name="m" joint="shoulder"/></actuator>
+  <keyframe><key name="home" qpos="0.1 0 -0.5 0"/></keyframe>
+</mujoco>
+"""
+MJCF_FOURBAR = """<mujoco model="fourbar">
+  <compiler angle="radian"/>
+  <default><joint axis="0 1 0"/></default>
+  <worldbody>
+    <body name="crank" axisangle="0 1 0 -1.4">
+      <joint name="crank_joint" ref="-1.4" stiffness="4" springref="-1.2"/>
+      <inertial pos="0.075 0 0" mass="0.5" diaginertia="0.001 0.001 0.00005"/>
+      <body name="coupler" pos="0.15 0 0" axisangle="0 1 0 1.0">
+        <joint name="coupler_joint" ref="1.0"/>
+        <inertial pos="0.2 0 0" mass="1" diaginertia="0.013 0.013 0.0001"/>
+        <site name="coupler_end" pos="0.4 0 0"/>
+      </body>
+    </body>
+    <body name="rocker" pos="0.4 0 0" axisangle="0 1 0 -1.6">
+      <joint name="rocker_joint" ref="-1.6"/>
+      <inertial pos="0.15 0 0" mass="0.8" diaginertia="0.006 0.006 0.00008"/>
+      <site name="rocker_end" pos="0.3 0 0"/>
+    </body>
+  </worldbody>
+  <equality>
+    <connect name="loop" site1="coupler_end" site2="rocker_end"/>
+  </equality>
+</mujoco>
+"""
+MJCF_FREE = """<mujoco model="free">
+  <include file="part.xml"/>
+  <worldbody>
+    <body name="torso" pos="0 0 1" quat="1 0 0.1 0">
+      <freejoint name="root"/>
+      <inertial pos="0 0 0" mass="5" diaginertia="0.1 0.1 0.1"/>
+      <body name="arm" pos="0 0 -0.3">
+        <joint name="ball" type="ball"/>
+        <geom class="limb" fromto="0 0 0 0 0 -0.3"/>
+      </body>
+    </body>
+  </worldbody>
+  <equality><weld name="hold" body1="torso"/></equality>
+</mujoco>
+"""
+MJCF_PART = """<mujoco>
+  <default><default class="limb"><geom type="capsule" size="0.03" density="500"/></default>
+  </default>
+</mujoco>
+"""
+MJCF_BASES = [("arm", MJCF_ARM, None), ("fourbar", MJCF_FOURBAR, None)]
+MJCF_BASES += [("free", MJCF_FREE, MJCF_PART)]
+
+
+def make_mjcf_case(index: int, root: Path) -> Case:
+    """Case ``index`` (from CASES on): a folder with a mutated MJCF file (and its included
+    part), solved directly or from a scene file around it."""
+    rng = random.Random(f"{SEED}-mjcf-{index}")
+    name, text, part = rng.choice(MJCF_BASES)
+    folder = root / f"case{index:04d}_mjcf_{name}"
+    folder.mkdir(parents=True)
+    model = folder / "model.xml"
+    case = Case(index, folder, model, [f"from MJCF {name}"])
+    for _ in range(rng.choice([1, 1, 2, 3])):
+        if part is not None and rng.random() < 0.2:
+            part, what = rng.choice(MJCF_MUTATIONS)(rng, part)
+            case.mutations.append(f"part.xml: {what}")
+        else:
+            text, what = rng.choice(MJCF_MUTATIONS)(rng, text)
+            case.mutations.append(f"model.xml: {what}")
+    model.write_text(text, encoding="utf-8", errors="surrogatepass")
+    if part is not None:
+        (folder / "part.xml").write_text(part, encoding="utf-8", errors="surrogatepass")
+    if rng.random() < 0.4:
+        extra = rng.choice(["", '[start]\npose = "home"\n', "floating = true\n"])
+        case.scene = folder / "scene.toml"
+        case.scene.write_text(f'[model]\nmjcf = "model.xml"\n{extra}')
+        case.mutations.append(f"solved from scene.toml: {extra!r}")
+    return case
+
+
 TOML_MUTATIONS = [
     _delete_line,
     _duplicate_line,
@@ -444,7 +662,8 @@ def _describe(case: Case, why: str) -> str:
 @pytest.fixture(scope="module")
 def fuzzed(tmp_path_factory) -> list[Case]:
     root = tmp_path_factory.mktemp("fuzz")
-    return [make_case(i, root) for i in range(CASES)]
+    cases = [make_case(i, root) for i in range(CASES)]
+    return cases + [make_mjcf_case(i, root) for i in range(CASES, CASES + MJCF_CASES)]
 
 
 def test_mutated_files_through_the_cli_code_path(fuzzed, tmp_path):
@@ -524,7 +743,7 @@ def test_a_sample_through_the_real_command_line(fuzzed):
         if why:
             failures.append(_describe(case, why))
     assert not failures, "\n".join(failures)
-    assert len(sample) == CASES // SUBPROCESS_EVERY
+    assert len(sample) == (CASES + MJCF_CASES) // SUBPROCESS_EVERY
 
 
 def test_the_cases_are_reproducible(tmp_path):

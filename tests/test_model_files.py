@@ -795,11 +795,11 @@ def test_load_scene_takes_a_library_name():
 
 def test_neither_urdf_nor_mjcf_names_each_parser(tmp_path):
     cases = {
-        "notes.txt": ("hello: world\n", ["scene (TOML)", "URDF (urdfdom)", "MJCF (Pinocchio"]),
-        "arm.urdf": ("not xml at all\n", ["URDF (urdfdom)", "MJCF (Pinocchio's MJCF parser)"]),
+        "notes.txt": ("hello: world\n", ["scene (TOML)", "URDF (urdfdom)", "as MJCF: not well"]),
+        "arm.urdf": ("not xml at all\n", ["URDF (urdfdom)", "as MJCF: not well-formed XML"]),
         "thing.xml": (
             "<thing/>",
-            ["Could not find the 'robot' element", "This is not a standard mujoco model"],
+            ["Could not find the 'robot' element", "as MJCF: the root element is <thing>"],
         ),
     }
     for name, (text, fragments) in cases.items():
@@ -810,6 +810,13 @@ def test_neither_urdf_nor_mjcf_names_each_parser(tmp_path):
         for fragment in fragments:
             assert fragment in line, line
     assert "scene (TOML)" not in one_line_error(run("solve", str(tmp_path / "thing.xml")))
+    # A file that opens as MJCF or URDF but is not well-formed: that reader's reason only.
+    broken = tmp_path / "broken.xml"
+    broken.write_text("<!-- a robot -->\n<mujoco model='m'>\n  <worldbody>\n</mujoco>\n")
+    line = one_line_error(run("solve", str(broken)))
+    assert f"{broken}: not well-formed XML: mismatched tag: line 4" in line
+    broken.write_text("<robot name='r'>\n  <link name='a'>\n</robot>\n")
+    assert "the URDF does not parse" in one_line_error(run("solve", str(broken)))
 
 
 # --- SRDF poses ---------------------------------------------------------------------------

@@ -11,9 +11,8 @@ value as zeros without a word.
 from __future__ import annotations
 
 import math
-import os
+import re
 import sys
-import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -65,12 +64,20 @@ def file_kind(path: Path) -> str:
     """
     if path.suffix.lower() == ".toml":
         return "scene"
+    xml_error = ""
     try:
         root = ET.parse(path).getroot().tag
-    except ET.ParseError:
-        root = None
+    except ET.ParseError as error:
+        root, xml_error = None, f"not well-formed XML: {error}"
     except OSError as error:
         raise ValueError(f"{path}: cannot read the file: {error}") from None
+    if root is None:
+        # Not well-formed XML that opens as a URDF or an MJCF file: that reader's reasons.
+        head = path.read_bytes()[:4096].decode("utf-8", errors="replace")
+        opening = re.search(
+            r"<\s*(robot|mujoco)[\s>/]", re.sub(r"<!--.*?-->", "", head, flags=re.S)
+        )
+        root = opening.group(1) if opening else None
     if root == "robot":
         return "urdf"
     if root == "mujoco":
@@ -83,24 +90,15 @@ def file_kind(path: Path) -> str:
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
             reasons.append(f"as a scene (TOML): {_first_reason(error)}")
     try:
-        load_urdf(path)
-        reasons.append("as a URDF: not a <robot> file")  # pragma: no cover
+        load_urdf(path)  # urdfdom's XML reader is more lenient than ElementTree
+        return "urdf"
     except (ValueError, RuntimeError) as error:
         reasons.append(f"as a URDF (urdfdom): {_first_reason(error).split('does not parse: ')[-1]}")
-    with tempfile.TemporaryFile(mode="w+b") as captured:
-        # Pinocchio's MJCF parser may print on the process's stderr: keep it off the terminal.
-        sys.stderr.flush()
-        saved = os.dup(2)
-        os.dup2(captured.fileno(), 2)
-        try:
-            pinocchio.buildModelFromMJCF(str(path))
-            reason = "not a <mujoco> file"  # pragma: no cover
-        except (ValueError, RuntimeError) as error:
-            reason = _first_reason(error)
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-    reasons.append(f"as MJCF (Pinocchio's MJCF parser): {reason}")
+    # MJCF is read by pinsettle's own reader (ElementTree first): its reason is the XML's.
+    # Pinocchio's MJCF parser is never run on a file that is not well-formed XML: its XML
+    # reader accepts more, and its MJCF reader can fail hard on what it then finds.
+    reason = f"the root element is <{root}>, not <mujoco>" if root is not None else xml_error
+    reasons.append(f"as MJCF: {reason}")
     raise ValueError(
         f"{path}: neither a scene, a URDF nor an MJCF file; read " + "; read ".join(reasons)
     )

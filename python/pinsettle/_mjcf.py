@@ -235,7 +235,7 @@ class _Reader:
             )
         for child in self.root:
             if child.tag not in _TOP_LEVEL:
-                self.refuse(f"{_describe(child)} (a section without a meaning in statics here)")
+                self.refuse(f"{_describe(child)} (a section pinsettle does not read)")
         self.compiler = self._compiler()
         self.classes, self.main_class = self._defaults()
         self._check_assets()
@@ -906,10 +906,11 @@ class _Writer:
             group = int(_floats(a.get("group", "0"), f"{where} group", (1,))[0])
             if not low <= group <= high:
                 continue
-            if "mass" in a:
-                weighs = _floats(a["mass"], f"{where} mass", (1,))[0] != 0
-            else:
-                weighs = _floats(a.get("density", "1000"), f"{where} density", (1,))[0] != 0
+            key = "mass" if "mass" in a else "density"
+            amount = float(_floats(a.get(key, "1000"), f"{where} {key}", (1,))[0])
+            if amount < 0:
+                raise MjcfError(f"{where} {key}: must be >= 0, got {amount:g}")
+            weighs = amount != 0
             if not weighs:
                 continue
             kind = a.get("type", "sphere")

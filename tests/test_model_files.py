@@ -308,6 +308,13 @@ def test_mjcf_model_is_mujocos(xml, tmp_path, mujoco):
             expected = data.qfrc_bias - data.qfrc_spring
             assert np.abs(scene.static_force(q) - expected).max() < 1e-12
     assert pinocchio.computeTotalMass(model) == pytest.approx(float(np.sum(mj.body_mass)), 1e-14)
+    # Depth-first joint order, as pinsettle requires (a joint's subtree right after it): the
+    # two-joint body and the branches come out in MuJoCo's order.
+    for j in range(1, model.njoints):
+        subtree = list(model.subtrees[j])
+        assert subtree == list(range(j, j + len(subtree))), model.names[j]
+    names = [mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_JOINT, k) for k in range(mj.njnt)]
+    assert list(model.names)[1:] == names
     # The start is MuJoCo's qpos0: the refs, and the free body where the file puts it.
     assert np.abs(scene.q0() - to_pinocchio_q(mj, mj.qpos0)).max() < 1e-15
     assert np.abs(model.gravity.linear - mj.opt.gravity).max() == 0

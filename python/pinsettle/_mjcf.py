@@ -1173,7 +1173,8 @@ def _loops(
             if el.tag not in ("connect", "weld"):
                 reader.refuse(
                     f"{_describe(el)} in <equality> (a {el.tag} equality: only connect and "
-                    "weld are loops here)"
+                    "weld equalities are honoured, as loops; without it its joints or bodies "
+                    "settle independently)"
                 )
                 continue
             if _flag(a.get("active", "true"), f"{where} active", ("true", "false")) == "false":

@@ -748,7 +748,7 @@ def test_mjcf_bad_values_are_named(tmp_path):
     for joint, fragment in [
         ('range="1 abc"', "range: expected numbers, got '1 abc'"),
         ('range="1"', "range: expected 2 numbers, got 1"),
-        ('range="30 -30"', "range: lower 0.523599 must be below upper -0.523599"),
+        ('range="30 -30"', "range: lower 30 must be below upper -30"),
         ('limited="true"', 'limited="true" without a range'),
         ('type="cardan"', "type: expected one of hinge, slide, ball, free, got 'cardan'"),
         ('axis="0 0 0"', "axis: zero-length axis"),

@@ -612,7 +612,6 @@ class _Reader:
 
 @dataclass
 class _Statics:
-    gravity: np.ndarray
     limits: dict[str, tuple[float, float]]
     springs: list[tuple[str, float, float]]
 
@@ -685,11 +684,12 @@ def _joint_statics(reader: _Reader, flags: Mapping[str, bool]) -> _Statics:
                 elif "range" not in a:
                     raise MjcfError(f'{where}: limited="true" without a range')
                 else:
-                    low, high = _floats(a["range"], f"{where} range", (2,)) * angle
-                    if not low < high:
+                    given = _floats(a["range"], f"{where} range", (2,))
+                    if not given[0] < given[1]:
                         raise MjcfError(
-                            f"{where} range: lower {low:g} must be below upper {high:g}"
+                            f"{where} range: lower {given[0]:g} must be below upper {given[1]:g}"
                         )
+                    low, high = given * angle
                     if flags["limit"] and flags["constraint"]:
                         limits[joint.name] = (float(low), float(high))
                     else:
@@ -742,7 +742,7 @@ def _joint_statics(reader: _Reader, flags: Mapping[str, bool]) -> _Statics:
             f"springs of {_names(springs_off)} not applied: springs are disabled "
             '(<option><flag spring="disable">)'
         )
-    return _Statics(np.zeros(3), limits, springs)
+    return _Statics(limits, springs)
 
 
 def _other_sections(reader: _Reader) -> None:

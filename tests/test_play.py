@@ -316,6 +316,119 @@ def test_live_page_shows_the_robot(live, browser, tmp_path):
     assert drawn_fraction(pixels) > 0.01
 
 
+# --- impacts on a stop: the link flashes ------------------------------------------------------
+
+
+def _pendulum_on_stops():
+    """The pendulum released at 0.45 rad between stops at -0.3 and 0.5 rad: it swings through
+    the bottom, hits the lower stop, and settles hanging down between them."""
+    scene = pinsettle.Scene.from_urdf(ROBOTS / "pendulum.urdf")
+    return scene.set_limit("hinge", lower=-0.3, upper=0.5).set_start(hinge=0.45)
+
+
+@pytest.fixture(scope="module")
+def impacts(tmp_path_factory):
+    play = _play()
+    scene = _pendulum_on_stops()
+    result = pinsettle.solve(scene, **play.TRACE_SETTINGS)
+    html = tmp_path_factory.mktemp("impacts") / "impacts.html"
+    viz = play.play(scene, result, html=html, live=False)
+    return scene, result, viz, html
+
+
+def test_impacts_are_traced_with_their_joint(impacts):
+    scene, result, viz, html = impacts
+    trace = result.trace
+    kinds = np.array(trace.event_kind)
+    hinge = scene.model.getJointId("hinge")
+    assert np.count_nonzero(kinds == "impact") >= 1
+    assert trace.event_joint.shape == kinds.shape
+    assert np.all(trace.event_joint[kinds == "impact"] == hinge)
+    assert np.all(trace.event_joint[kinds != "impact"] == -1)
+    # An impact in step k (from the state of step k to that of k + 1): the hinge was above
+    # its lower stop at k, and is on it at k + 1, the event's time.
+    assert trace.stride == 1
+    hits = kinds == "impact"
+    for step, at in zip(trace.event_step[hits], trace.event_time[hits], strict=True):
+        k = int(np.searchsorted(trace.step, step))
+        assert trace.step[k] == step and trace.step[k + 1] == step + 1
+        assert trace.q[k, 0] > -0.3
+        assert trace.q[k + 1, 0] == pytest.approx(-0.3, abs=1e-12)
+        assert trace.time[k + 1] == pytest.approx(at, rel=1e-12)
+    assert result.converged and abs(result.q[0]) < 1e-6 and not result.at_limit
+
+
+def test_impacts_flash_the_link_that_hit(impacts):
+    scene, result, viz, html = impacts
+    play = _play()
+    timeline = viz.timeline
+    trace = result.trace
+    kinds = np.array(trace.event_kind)
+    hinge = scene.model.getJointId("hinge")
+    t0 = trace.time[0]
+    expected = np.sort((trace.event_time[kinds == "impact"] - t0) / timeline.speed)
+    assert np.allclose(timeline.events["impact"], expected)
+    assert np.all(timeline.impact_joints == hinge)
+    # The link the hinge carries: hidden while it flashes, its copy in the impact colour shown
+    # instead, from each impact for FLASH_SECONDS; itself again at the end.
+    grid = timeline.frame_times()
+    since = grid[:, None] - expected[None, :]
+    flashing = np.any((since >= 0) & (since < play.FLASH_SECONDS), axis=1)
+    assert flashing.any() and not flashing[-1]
+    clips = {str(path.lower()): clip for path, clip in viz.animation.clips.items()}
+    links = [obj for obj in viz.visual_model.geometryObjects if obj.parentJoint == hinge]
+    assert links
+    for obj in links:
+        base = f"/meshcat/pinsettle/pinocchio/visuals/{obj.name}"
+        shown = clips[base].tracks["visible"]
+        flash = clips[base + "_impact"].tracks["visible"]
+        assert np.allclose(np.array(shown.frames) / play.FPS, grid)
+        assert np.array_equal(shown.values, ~flashing)
+        assert np.array_equal(flash.values, flashing)
+        # The copy moves with the link.
+        position = clips[base].tracks["position"].values
+        assert np.allclose(clips[base + "_impact"].tracks["position"].values, position)
+    others = [obj for obj in viz.visual_model.geometryObjects if obj.parentJoint != hinge]
+    for obj in others:
+        assert "visible" not in clips[f"/meshcat/pinsettle/pinocchio/visuals/{obj.name}"].tracks
+    # The energy plot's legend names the joint; the page counts the impacts.
+    assert play._impact_names(result, "impact") == ": hinge"
+    assert '"impact": [' in html.read_text(encoding="utf-8")
+
+
+def test_impact_joints_of_a_scene_with_locked_joints_are_the_full_models():
+    # joint1 locked: the solver's model has joint2 and joint3 as its joints 1 and 2.
+    scene = pinsettle.Scene.from_urdf(ROBOTS / "planar_3link.urdf").lock("joint1")
+    scene.set_limit("joint3", lower=-0.2, upper=0.2).set_start(joint1=0.3, joint2=1.2)
+    result = pinsettle.solve(scene, **_play().TRACE_SETTINGS)
+    trace = result.trace
+    impacts = np.array(trace.event_kind) == "impact"
+    assert impacts.any()
+    joint3 = scene.model.getJointId("joint3")
+    assert joint3 == 3 and np.all(trace.event_joint[impacts] == joint3)
+    iq = scene.model.idx_qs[joint3]
+    for step in trace.event_step[impacts]:
+        k = int(np.searchsorted(trace.step, step + 1))
+        assert trace.step[k] == step + 1
+        assert abs(trace.q[k, iq]) == pytest.approx(0.2, abs=1e-12)
+
+
+def _impact_pixels(pixels: np.ndarray) -> float:
+    """Share of the view in the impact colour (a lit pink-red: red high, green low)."""
+    r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
+    return float(np.mean((r > 0.55) & (g < 0.3) & (b > 0.15) & (b < 0.6)))
+
+
+def test_screenshot_shows_the_flash_at_an_impact(impacts, browser, tmp_path):
+    scene, result, viz, html = impacts
+    at = float(viz.timeline.events["impact"][0]) + 0.3 * _play().FLASH_SECONDS
+    flash = screenshot(browser, f"{html.as_uri()}#t={at:.4f}", tmp_path / "flash.png")
+    end = screenshot(browser, html.as_uri() + "#end", tmp_path / "end.png")
+    before = screenshot(browser, f"{html.as_uri()}#t={max(at - 0.35, 0):.4f}", tmp_path / "b.png")
+    assert _impact_pixels(flash) > 0.001, "no flash at the impact"
+    assert _impact_pixels(end) == 0 and _impact_pixels(before) == 0
+
+
 # --- users' meshes: STL files without normals or colour -------------------------------------
 
 

@@ -88,7 +88,7 @@ class StatusLine:
         value = _short(residual) if math.isfinite(residual) else "-"
         peaks = progress.peaks
         full = (
-            f"solving: {progress.steps:,} steps | {progress.sim_time:.4g} s simulated | "
+            f"solving: {progress.steps:,} steps | {progress.sim_time:#.4g} s simulated | "
             f"KE {_short(progress.kinetic_energy)} J | "
             f"{peaks:,} damping event{'' if peaks == 1 else 's'} | residual {value}{trend} | "
             f"{progress.wall_time:.1f} s"

@@ -44,10 +44,11 @@ class Trace:
 class Progress:
     """A running solve's state, given to ``solve(..., progress=f)`` every ``check_every`` steps.
 
-    ``steps`` taken so far, ``sim_time`` simulated (s), ``kinetic_energy`` now (J, the exact
-    measure), ``peaks`` the damping events so far, ``residual`` the last assessed residual (N m
-    or N, as ``Result.residual``; nan before the first assessment), ``wall_time`` since the
-    solve started (s).
+    ``steps`` taken so far, ``sim_time`` simulated (s), ``kinetic_energy`` of the last step
+    evaluated (J, the exact measure: that of the state one step before), ``peaks`` the damping
+    events so far, ``residual`` at the current configuration (N m or N, as
+    ``Result.residual``; nan if the core has none to give), ``wall_time`` since the solve
+    started (s).
     """
 
     steps: int
@@ -351,7 +352,6 @@ def assess_stability(model: Any, q: Any, *, limits: bool | None = None) -> Stabi
         q = as_vector(q, "q", model.model.nq, "model.nq")
         compiled = model.compile(q)
         stops = compiled.stops_for(_limits_flag(limits, model.limits))
-        compiled.check_loops(stops)
         raw = _core.stiffness(
             compiled.model, q[compiled.q_index], compiled.elements, compiled.loops, stops
         )
@@ -418,7 +418,6 @@ def solve(
         if np.any(locked_v != 0.0):
             raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
         stops = compiled.stops_for(_limits_flag(limits, scene.limits))
-        compiled.check_loops(stops)
         equal = compiled.equal_limits(stops)
         solved = compiled.model
         raw = _core.solve(
@@ -430,7 +429,7 @@ def solve(
             compiled.elements,
             compiled.loops,
             stops,
-            **_progress_argument(report),
+            progress=report,
         )
         raw["q"] = compiled.full_q(raw["q"])
         raw["loops"] = len(scene.loops)
@@ -439,7 +438,7 @@ def solve(
             if raw["trace"]["q"] is not None:
                 raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
             raw["trace"]["event_joint"] = _full_joints(
-                compiled.model, full, raw["trace"].get("event_joint", [])
+                compiled.model, full, raw["trace"]["event_joint"]
             )
         naming = full
     else:
@@ -453,7 +452,7 @@ def solve(
         stops = (True, []) if _limits_flag(limits, True) else None
         equal = [] if stops is None else list(_core.joint_stops(model, stops)["equal_limits"])
         solved = model
-        raw = _core.solve(model, q, v, s, callback, None, None, stops, **_progress_argument(report))
+        raw = _core.solve(model, q, v, s, callback, None, None, stops, progress=report)
         raw["loops"] = 0
         naming = model
     trace = raw.pop("trace")
@@ -474,10 +473,6 @@ def solve(
         equal_limits=tuple(equal),
         units={name: _unit(solved, name) for name in named},
     )
-
-
-def _progress_argument(report: Any) -> dict[str, Any]:  # TEMPORARY until the build has it
-    return {} if report is None else {"progress": report}
 
 
 def _full_joints(reduced: pinocchio.Model, full: pinocchio.Model, joints: Any) -> np.ndarray:

@@ -23,7 +23,7 @@ import sys
 import time
 import types
 import webbrowser
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, overload
@@ -66,7 +66,11 @@ _BASE_COLOR = (0.35, 0.36, 0.38, 1.0)
 _MESH_GREY = (0.62, 0.64, 0.67, 1.0)
 _SPRING_COLOR = 0xE8590C
 _END_COLOR = 0x343A40
-_EVENT_COLORS = {"damping": 0xFFB000, "push": 0x1C7ED6, "rollback": 0xE03131}
+_EVENT_COLORS = {"damping": 0xFFB000, "push": 0x1C7ED6, "rollback": 0xE03131, "impact": 0xD6336C}
+#: The kinds of velocity change a trace records (``Trace.event_kind``), in display order.
+EVENT_KINDS = ("damping", "push", "rollback", "impact")
+#: A link whose joint hits a stop is drawn in this colour for ``FLASH_SECONDS``.
+_IMPACT_COLOR = (0.93, 0.16, 0.42, 1.0)
 _CAMERA_DIRECTION = np.array([0.45, -1.0, 0.35])  # from the mechanism towards the camera
 _CAMERA_FOV = 40.0  # degrees, vertical
 
@@ -132,8 +136,9 @@ def auto_speed(sim_time: float) -> float:
 @dataclass(frozen=True)
 class Timeline:
     """What the animation shows: keyframe times (s of playback) and configurations (the last
-    two are the final pose, held), the event times (s of playback) by kind, the speed and the
-    length of the motion (s of playback, without the hold)."""
+    two are the final pose, held), the event times (s of playback) by kind (sorted), the speed
+    and the length of the motion (s of playback, without the hold). ``impact_joints`` gives
+    the joint (index in the scene's model) of each of ``events['impact']``."""
 
     times: np.ndarray
     q: np.ndarray
@@ -141,6 +146,7 @@ class Timeline:
     duration: float
     sim_time: float
     events: dict[str, np.ndarray]
+    impact_joints: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
     def end(self) -> float:
@@ -202,10 +208,27 @@ def make_timeline(result: Result, nq: int, speed: float | None = None) -> Timeli
     events: dict[str, np.ndarray] = {}
     kinds = np.asarray(trace.event_kind, dtype=object)
     event_t = (np.asarray(trace.event_time, dtype=float) - t0) / speed
-    for kind in ("damping", "push", "rollback"):
+    joints = np.asarray(trace.event_joint, dtype=np.int64)
+    if joints.shape != kinds.shape:  # a trace without joints: no link to flash
+        joints = np.full(kinds.shape, -1, dtype=np.int64)
+    impact_joints = np.zeros(0, dtype=np.int64)
+    for kind in EVENT_KINDS:
         chosen = (kinds == kind) & np.isfinite(event_t) if kinds.size else np.zeros(0, dtype=bool)
-        events[kind] = np.sort(event_t[chosen])
-    return Timeline(times, poses, speed, duration, sim_time, events)
+        order = np.argsort(event_t[chosen], kind="stable")
+        events[kind] = event_t[chosen][order]
+        if kind == "impact":
+            impact_joints = joints[chosen][order]
+    return Timeline(times, poses, speed, duration, sim_time, events, impact_joints)
+
+
+def _pulse(grid: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """At each time of ``grid``, how strong the flash of the events at ``times`` is: 1 at an
+    event, fading to 0 over ``FLASH_SECONDS`` (the strongest of those under way)."""
+    if not times.size:
+        return np.zeros(grid.shape)
+    since = grid[:, None] - times[None, :]
+    pulse = np.where((since >= 0) & (since < FLASH_SECONDS), 1 - since / FLASH_SECONDS, 0.0)
+    return np.asarray(pulse.max(axis=1), dtype=float)
 
 
 # --- geometry -------------------------------------------------------------------------------
@@ -639,7 +662,7 @@ _OVERLAY_JS = """
       info.speed.toPrecision(3) + ")" + (held ? ", final pose held" : "");
     const parts = [];
     let total = 0;
-    for (const kind of ["damping", "push", "rollback"]) {
+    for (const kind of ["damping", "push", "rollback", "impact"]) {
       const times = info.events[kind];
       if (!times.length && kind !== "damping") continue;
       const k = upto(times, t);
@@ -658,14 +681,20 @@ _OVERLAY_JS = """
 })();
 """
 
-# page.html#end opens on the final pose, paused (for a quick look, a screenshot or a test).
+# page.html#end opens on the final pose, paused (for a quick look, a screenshot or a test);
+# page.html#t=1.5 on the frame 1.5 s into the playback, paused.
 _END_JS = """
-if (location.hash === "#end") {
+(function () {
   const animator = viewer.animator;
-  animator.playing = false;
-  animator.seek(animator.duration);
-  animator.time = animator.duration;
-}
+  const at = location.hash === "#end" ? animator.duration
+    : location.hash.startsWith("#t=") ? parseFloat(location.hash.slice(3)) : NaN;
+  if (isFinite(at)) {
+    const t = Math.min(Math.max(at, 0), animator.duration);
+    animator.playing = false;
+    animator.seek(t);
+    animator.time = t;
+  }
+})();
 """
 
 _APPLY_JS = """
@@ -830,6 +859,7 @@ def _build(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
     scales = np.array([obj.meshScale for obj in visual.geometryObjects]).reshape(-1, 1, 3)
     ends = np.zeros((n_keys, len(scene.springs), 2, 3))
     com = np.zeros((n_keys, 3))
+    joint_at = np.zeros((n_keys, model.njoints, 3))
     for k, q in enumerate(timeline.q):
         pinocchio.forwardKinematics(model, data, q)
         pinocchio.updateFramePlacements(model, data)
@@ -840,6 +870,7 @@ def _build(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
             ends[k, s, 0] = data.oMf[frames[s]].act(np.array(spring.a_point))
             ends[k, s, 1] = data.oMf[frames_b[s]].act(np.array(spring.b_point))
         com[k] = pinocchio.centerOfMass(model, data, q, False)
+        joint_at[k] = [placement.translation for placement in data.oMi]
 
     corners = _local_corners(visual)  # (ngeoms, 8, 3): each shape's bounding box
     cloud = [np.einsum("kgij,gcj->kgci", placements[:, :, :3, :3] / scales, corners)]
@@ -870,7 +901,8 @@ def _build(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
     animation = Animation(default_framerate=FPS)
     key_frames = (timeline.times * FPS).tolist()
 
-    def add_pose_tracks(path: Any, matrices: np.ndarray) -> None:
+    def add_pose_tracks(path: Any, matrices: np.ndarray, frames: list[float] | None = None) -> None:
+        frames = key_frames if frames is None else frames
         tracks: dict[str, list[list[float]]] = {"position": [], "quaternion": [], "scale": []}
         for matrix in matrices:
             position, quaternion, scale = _decompose(matrix)
@@ -879,11 +911,9 @@ def _build(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
             tracks["scale"].append(scale)
         clip = AnimationClip(fps=FPS)
         for name, jstype in (("position", "vector3"), ("quaternion", "quaternion")):
-            clip.tracks[name] = AnimationTrack(name, jstype, list(key_frames), tracks[name])
+            clip.tracks[name] = AnimationTrack(name, jstype, list(frames), tracks[name])
         if not np.allclose(tracks["scale"], 1.0):
-            clip.tracks["scale"] = AnimationTrack(
-                "scale", "vector3", list(key_frames), tracks["scale"]
-            )
+            clip.tracks["scale"] = AnimationTrack("scale", "vector3", list(frames), tracks["scale"])
         animation.clips[path] = clip
 
     for g, obj in enumerate(visual.geometryObjects):
@@ -931,11 +961,9 @@ def _build(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
     grid_frames = (grid * FPS).tolist()
     tiny = 1e-3
     for kind, times in timeline.events.items():
-        if not times.size:
+        if not times.size or kind == "impact":  # impacts flash the link that hit (below)
             continue
-        since = grid[:, None] - times[None, :]
-        pulse = np.where((since >= 0) & (since < FLASH_SECONDS), 1 - since / FLASH_SECONDS, 0)
-        level = np.maximum(pulse.max(axis=1), tiny)
+        level = np.maximum(_pulse(grid, times), tiny)
         node = root[f"events/{kind}"]
         node.set_object(
             mg.Sphere(0.12 * radius),
@@ -954,8 +982,67 @@ def _build(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
         )
         animation.clips[node.path] = clip
 
+    # Impacts on a stop: the link the joint carries turns _IMPACT_COLOR for a moment (a copy
+    # of its shapes in that colour is shown in their place); a ball at a joint without shapes.
+    for joint in np.unique(timeline.impact_joints):
+        if not 0 < joint < model.njoints:
+            continue
+        flashing = _pulse(grid, timeline.events["impact"][timeline.impact_joints == joint]) > 0
+        shapes = [g for g, obj in enumerate(visual.geometryObjects) if obj.parentJoint == joint]
+        for g in shapes:
+            obj = visual.geometryObjects[g]
+            node = _load_flash_shape(viz, obj)
+            node.set_transform(placements[-1, g])
+            node.set_property("visible", False)
+            add_pose_tracks(node.path, placements[:, g])
+            _add_visibility(animation, node.path, grid_frames, flashing)
+            shape = viz.viewer[viz.getViewerNodeName(obj, pinocchio.GeometryType.VISUAL)]
+            _add_visibility(animation, shape.path, grid_frames, ~flashing)
+        if not shapes:
+            node = root[f"events/impact_{joint}"]
+            node.set_object(
+                mg.Sphere(0.05 * radius), mg.MeshPhongMaterial(color=_EVENT_COLORS["impact"])
+            )
+            at = np.tile(np.eye(4), (grid.size, 1, 1))
+            at[:, :3, 3] = np.array(
+                [np.interp(grid, timeline.times, joint_at[:, joint, i]) for i in range(3)]
+            ).T
+            node.set_transform(at[-1])
+            node.set_property("visible", False)
+            add_pose_tracks(node.path, at, grid_frames)
+            _add_visibility(animation, node.path, grid_frames, flashing)
+
     viz.display(timeline.q[-1])  # the final pose, also where the animation ends
     return animation
+
+
+def _load_flash_shape(viz: Any, obj: pinocchio.GeometryObject) -> Any:
+    """A copy of the shape ``obj`` in _IMPACT_COLOR, loaded next to it; its meshcat node."""
+    import meshcat.geometry as mg
+
+    flash = obj.copy()
+    flash.name = f"{obj.name}_impact"
+    flash.meshColor = np.array(_IMPACT_COLOR)
+    node = viz.viewer[viz.getViewerNodeName(flash, pinocchio.GeometryType.VISUAL)]
+    if obj.meshPath.lower().endswith(".dae"):
+        # As a bare geometry: pinocchio loads a DAE with the file's own materials.
+        color = int.from_bytes(bytes(int(255 * c) for c in _IMPACT_COLOR[:3]), "big")
+        node.set_object(
+            mg.DaeMeshGeometry.from_file(obj.meshPath), mg.MeshPhongMaterial(color=color)
+        )
+    else:
+        viz.loadViewerGeometryObject(flash, pinocchio.GeometryType.VISUAL)
+    return node
+
+
+def _add_visibility(animation: Any, path: Any, frames: list[float], shown: np.ndarray) -> None:
+    """Show the node at ``path`` at the keyframes where ``shown`` holds, hide it elsewhere."""
+    from meshcat.animation import AnimationClip, AnimationTrack
+
+    clip = animation.clips.setdefault(path, AnimationClip(fps=FPS))
+    clip.tracks["visible"] = AnimationTrack(
+        "visible", "boolean", list(frames), [bool(x) for x in shown]
+    )
 
 
 def play(
@@ -1069,7 +1156,12 @@ def plot_energy(result: Result, path: str | Path, *, title: str | None = None) -
     ax.set_yscale("log")
     kinds = np.asarray(trace.event_kind, dtype=object)
     event_t = np.asarray(trace.event_time, dtype=float)
-    styles = {"damping": ("#f59f00", 0.35), "push": ("#1c7ed6", 0.9), "rollback": ("#e03131", 0.9)}
+    styles = {
+        "damping": ("#f59f00", 0.35),
+        "push": ("#1c7ed6", 0.9),
+        "rollback": ("#e03131", 0.9),
+        "impact": ("#d6336c", 0.8),
+    }
     for kind, (color, alpha) in styles.items():
         times = event_t[kinds == kind] if kinds.size else np.zeros(0)
         if times.size:
@@ -1081,7 +1173,7 @@ def plot_energy(result: Result, path: str | Path, *, title: str | None = None) -
                 colors=color,
                 alpha=alpha,
                 lw=0.7,
-                label=f"{kind} events ({times.size})",
+                label=f"{kind} events ({times.size}{_impact_names(result, kind)})",
             )
     ax.set_xlabel("simulated time (s)")
     ax.set_ylabel("kinetic energy")
@@ -1096,6 +1188,22 @@ def plot_energy(result: Result, path: str | Path, *, title: str | None = None) -
     ax.legend(fontsize=8, loc="upper right", framealpha=0.9)
     fig.savefig(path, format="png")
     return path
+
+
+def _impact_names(result: Result, kind: str) -> str:
+    """For the legend of impacts: which joints hit a stop (at most three named)."""
+    trace = result.trace
+    if kind != "impact" or trace is None or len(trace.event_joint) != len(trace.event_kind):
+        return ""
+    names = list(result.joints)  # the model's joints 1, 2, ... in order
+    hit = sorted(
+        {int(j) for j, k in zip(trace.event_joint, trace.event_kind, strict=True) if k == kind}
+    )
+    named = [names[j - 1] for j in hit if 0 < j <= len(names)]
+    if not named:
+        return ""
+    more = f" and {len(named) - 3} more" if len(named) > 3 else ""
+    return ": " + ", ".join(named[:3]) + more
 
 
 # ``import pinsettle.play`` binds the module to ``pinsettle.play``: make the module callable, so

@@ -24,6 +24,7 @@ from ._solve import (
     static_force,
     static_residual,
 )
+from ._sweep import distinct_rests, sweep
 from .robots import load_robot, load_urdf, robot_names, robot_urdf
 from .scenes import scene_names, scene_path, scenes_dir
 
@@ -38,6 +39,7 @@ __all__ = [
     "StabilityReport",
     "Trace",
     "assess_stability",
+    "distinct_rests",
     "get_cmake_dir",
     "kinetic_energies",
     "load_robot",
@@ -52,6 +54,7 @@ __all__ = [
     "solve",
     "static_force",
     "static_residual",
+    "sweep",
 ]
 
 

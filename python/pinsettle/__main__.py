@@ -343,6 +343,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_start_flag(play)
     _add_setting_flags(play)
     play.set_defaults(func=_play)
+    # The sweep command lives with the sweep (pandas is imported only when it runs).
+    from pinsettle import _sweep_cli
+
+    _sweep_cli.add_parser(sub, _add_setting_flags, _add_limits_flag, _setting_overrides)
     scenes = sub.add_parser("scenes", help="list the scenes of the library with a description")
     scenes.set_defaults(func=_scenes)
     robots = sub.add_parser("robots", help="list the robot names")

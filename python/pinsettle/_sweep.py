@@ -1,0 +1,759 @@
+"""Sweeps: many equilibria of one scene, one row each in a pandas table.
+
+``sweep(scene, vary=..., starts=...)`` plans the cases (a grid or a zip of scene values, times
+the starts), runs them on local threads (each solve runs in C++ with the GIL released) or on a
+Dask cluster (``_sweep_cluster``), and returns the table. Every case is an ordinary
+``pinsettle.solve`` of a copy of the scene with its values changed, so a row is, bit for bit,
+what solving that case alone gives, whatever the number of workers.
+
+pandas is imported only when a table is built and Dask only for a cluster: importing pinsettle
+or solving imports neither.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent import futures
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio
+
+from . import _core
+from ._scene import Scene, load_scene
+from ._settings import Settings, make_settings
+from ._sweep_cases import (
+    OUTPUT_COLUMNS,
+    REST_TOLERANCE,
+    Collect,
+    DataFrame,
+    Interrupts,
+    JointColumns,
+    Key,
+    MissingDependencyError,
+    Runner,
+    Spec,
+    Task,
+    joint_columns,
+    joint_row,
+    key_values,
+    pandas,
+    parse_key,
+    q_from_row,
+    rest_distance,
+    scene_data,
+    start_q,
+    value_columns,
+)
+from .scenes import scene_path
+
+__all__ = ["MissingDependencyError", "distinct_rests", "sweep"]
+
+# --- the plan -----------------------------------------------------------------------------------
+
+
+@dataclass
+class Plan:
+    """The cases of a sweep: their columns (the varied values, the start) and how they are
+    grouped into tasks."""
+
+    keys: list[Key]
+    combos: list[tuple[Any, ...]]
+    starts: list[np.ndarray]
+    given_starts: bool
+    continuation: bool
+    columns: dict[str, list[Any]]
+    specs: list[Spec]
+
+    @property
+    def size(self) -> int:
+        return len(self.specs)
+
+    def branch_cases(self, start: int) -> list[int]:
+        """The cases of the branch of start ``start``, in order."""
+        n = len(self.starts)
+        return [c * n + start for c in range(len(self.combos))]
+
+
+def random_starts(scene: Scene, limits: bool | None, n: int, seed: int) -> list[np.ndarray]:
+    """``n`` starts drawn uniformly: a 1-DoF joint inside its stops (+-pi where it has none, on
+    a side without one), a multi-DoF joint by a tangent vector of entries in +-pi from neutral;
+    locked joints at the scene's start."""
+    model = scene.model
+    compiled = scene.compile()
+    stops = compiled.stops_for(scene.limits if limits is None else limits)
+    bounds = {
+        str(name): (lower, upper)
+        for name, _, _, lower, upper in (
+            _core.joint_stops(compiled.model, stops)["stops"] if stops is not None else []
+        )
+    }
+    lows: list[float] = []
+    highs: list[float] = []
+    for j in range(1, model.njoints):
+        name = str(model.names[j])
+        if name in scene.locked:
+            continue
+        if model.nvs[j] == 1:
+            lower, upper = bounds.get(name, (-math.inf, math.inf))
+            lo = lower if math.isfinite(lower) else -math.pi
+            hi = upper if math.isfinite(upper) else math.pi
+            if lo >= hi:  # a single stop beyond +-pi: a turn from it
+                lo, hi = (
+                    (lower, lower + 2 * math.pi) if math.isfinite(lower) else (hi - 2 * math.pi, hi)
+                )
+            lows.append(lo)
+            highs.append(hi)
+        else:
+            lows += [-math.pi] * model.nvs[j]
+            highs += [math.pi] * model.nvs[j]
+    draws = np.random.default_rng(seed).uniform(np.array(lows), np.array(highs), (n, len(lows)))
+    base = scene.q0()
+    out = []
+    for row in draws:
+        q, v, k = base.copy(), np.zeros(model.nv), 0
+        single: list[tuple[int, float]] = []
+        for j in range(1, model.njoints):
+            if str(model.names[j]) in scene.locked:
+                continue
+            if model.nvs[j] == 1:
+                single.append((j, float(row[k])))
+                k += 1
+            else:
+                iv, nv = model.idx_vs[j], model.nvs[j]
+                v[iv : iv + nv] = row[k : k + nv]
+                q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]] = pinocchio.neutral(model)[
+                    model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]
+                ]
+                k += nv
+        if v.any():
+            q = pinocchio.integrate(model, q, v)
+        for j, x in single:
+            iq = model.idx_qs[j]
+            if model.nqs[j] == 2:
+                q[iq : iq + 2] = (math.cos(x), math.sin(x))
+            else:
+                q[iq] = x
+        out.append(q)
+    return out
+
+
+def _starts(scene: Scene, starts: Any, limits: bool | None) -> list[np.ndarray] | None:
+    """The start configurations of ``starts``: None, an array (n, model.nq) or
+    ('random', n, seed)."""
+    if starts is None:
+        return None
+    nq = scene.model.nq
+    if isinstance(starts, tuple) and starts and isinstance(starts[0], str):
+        if starts[0] != "random" or len(starts) != 3:
+            raise ValueError(
+                f"starts must be an array of start configurations or ('random', n, seed), got "
+                f"{starts!r}"
+            )
+        _, n, seed = starts
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"starts ('random', n, seed): n must be an integer >= 1, got {n!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(
+                f"starts ('random', n, seed): seed must be an integer >= 0, got {seed!r}"
+            )
+        return random_starts(scene, limits, int(n), int(seed))
+    if isinstance(starts, (str, bytes, Mapping)):
+        raise TypeError(
+            f"starts must be an array of start configurations (n, model.nq = {nq}) or "
+            f"('random', n, seed), got {type(starts).__name__}"
+        )
+    try:
+        array = np.asarray(starts, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"starts must be an array of numbers, shape (n, model.nq = {nq}), got {starts!r}"
+        ) from None
+    if array.ndim == 1 and nq == 1:
+        array = array.reshape(-1, 1)
+    if array.ndim != 2 or array.shape[1] != nq or array.shape[0] < 1:
+        raise ValueError(
+            f"starts must have shape (n, model.nq = {nq}) with n >= 1, got {array.shape}"
+        )
+    bad = np.argwhere(~np.isfinite(array))
+    if bad.size:
+        i, k = bad[0]
+        raise ValueError(f"starts[{i}][{k}] is {array[i, k]}; every entry must be finite")
+    return [row.copy() for row in array]
+
+
+def make_plan(
+    scene: Scene,
+    vary: Mapping[str, Any] | None,
+    starts: Any,
+    pair: bool,
+    continuation: bool | None,
+    limits: bool | None,
+) -> Plan:
+    """The cases of a sweep, every input checked (errors name the key or argument)."""
+    if vary is not None and not isinstance(vary, Mapping):
+        raise TypeError(f"vary must be a dict of key -> values, got {type(vary).__name__}")
+    vary = dict(vary or {})
+    keys = [parse_key(text, scene) for text in vary]
+    values = [key_values(key, vary[key.text]) for key in keys]
+    if pair:
+        lengths = {key.text: len(v) for key, v in zip(keys, values, strict=True)}
+        if len(set(lengths.values())) > 1:
+            raise ValueError(
+                "zip=True pairs the values of every key: they need as many values each, got "
+                + ", ".join(f"{k}: {n}" for k, n in lengths.items())
+            )
+        combos = list(zip(*values, strict=True)) if values else [()]
+    else:
+        combos = list(itertools.product(*values))
+    if not isinstance(continuation, (bool, np.bool_, type(None))):
+        raise TypeError(f"continuation must be True, False or None, got {continuation!r}")
+    start_keys = [key.text for key in keys if key.kind == "start"]
+    if continuation and start_keys:
+        raise ValueError(
+            "continuation starts each case from the previous rest, so a start cannot vary along "
+            f"it: remove {', '.join(start_keys)} or pass continuation=False"
+        )
+    if continuation is None:
+        continuation = len(combos) > 1 and (len(keys) == 1 or pair) and not start_keys
+    given = _starts(scene, starts, limits)
+    start_list = given if given is not None else [scene.q0()]
+    columns: dict[str, list[Any]] = {}
+    specs: list[Spec] = []
+    model = scene.model
+    start_joints = {key.name for key in keys if key.kind == "start"}
+    start_columns = [j for j in joint_columns(scene) if j.name not in start_joints]
+    for c, combo in enumerate(combos):
+        changes = tuple((i, v) for i, v in enumerate(combo) if keys[i].kind != "start")
+        for s, q_start in enumerate(start_list):
+            q0 = q_start
+            for i, v in enumerate(combo):
+                if keys[i].kind == "start":
+                    q0 = start_q(model, q0, keys[i], v)
+            first = not continuation or c == 0
+            specs.append(Spec(len(specs), changes, q0 if first else None))
+            row: dict[str, Any] = {}
+            if given is not None:
+                row["start"] = s
+            for key, v in zip(keys, combo, strict=True):
+                row.update(value_columns(key, v))
+            if given is not None:
+                values_at = joint_row(model, start_columns, q_start)
+                names = [f"start.{col}" for j in start_columns for col in j.columns]
+                row.update(dict(zip(names, values_at, strict=True)))
+            for name, value in row.items():
+                columns.setdefault(name, []).append(value)
+    return Plan(keys, combos, start_list, given is not None, bool(continuation), columns, specs)
+
+
+def make_tasks(
+    plan: Plan,
+    done: Mapping[int, Mapping[str, Any]],
+    chunk: int,
+    rest_of: Callable[[int], np.ndarray | None],
+) -> list[Task]:
+    """The tasks of the cases not in ``done``: chunks of ``chunk`` independent cases, or one
+    branch per start with continuation (a branch begun in ``done`` goes on from its last
+    converged rest, ``rest_of(case)``)."""
+    if not plan.continuation:
+        todo = [spec for spec in plan.specs if spec.case not in done]
+        return [Task(tuple(todo[k : k + chunk])) for k in range(0, len(todo), max(1, chunk))]
+    tasks = []
+    for s in range(len(plan.starts)):
+        cases = plan.branch_cases(s)
+        left = [c for c in cases if c not in done]
+        if not left:
+            continue
+        previous = None
+        for c in cases[: cases.index(left[0])]:
+            q = rest_of(c)
+            if q is not None:
+                previous = (plan.specs[c].changes, q)
+        specs = tuple(plan.specs[c] for c in left)
+        if previous is None and specs[0].q0 is None:
+            first = plan.specs[cases[0]]
+            specs = (Spec(specs[0].case, specs[0].changes, first.q0),) + specs[1:]
+        tasks.append(Task(specs, branch=True, previous=previous))
+    return tasks
+
+
+# --- local workers ------------------------------------------------------------------------------
+
+
+def cpu_count() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover (not Linux)
+        return os.cpu_count() or 1
+
+
+def run_local(
+    runner: Runner, tasks: Sequence[Task], workers: int, collect: Collect, stop: Interrupts
+) -> None:
+    """Run the tasks on ``workers`` threads (each solve in C++ with the GIL released), giving
+    each task's rows to ``collect`` once, in the calling thread. After a first Ctrl-C
+    (``stop.count``) no new case starts and the cases in flight finish and are collected; after
+    a second, the cases in flight are aborted and left out.
+
+    Solves never run in the calling thread, so Ctrl-C never aborts one by itself."""
+    pending: dict[futures.Future[list[tuple[int, dict[str, Any]]]], Task] = {}
+    queue = iter(tasks)
+
+    def stopping() -> bool:
+        return stop.count >= 1
+
+    def aborting() -> bool:
+        return stop.count >= 2
+
+    with futures.ThreadPoolExecutor(workers, thread_name_prefix="pinsettle-sweep") as pool:
+        while True:
+            # A few tasks ahead of the workers, not all: Ctrl-C then leaves little in flight.
+            while not stopping() and len(pending) < 2 * workers:
+                task = next(queue, None)
+                if task is None:
+                    break
+                pending[pool.submit(runner.run, task, stopping, aborting)] = task
+            if not pending:
+                return
+            done, _ = futures.wait(list(pending), 0.1, futures.FIRST_COMPLETED)
+            for future in done:
+                del pending[future]
+                rows = future.result()
+                if aborting():
+                    rows = [(case, row) for case, row in rows if row["status"] != "aborted"]
+                collect(rows)
+
+
+# --- the table ------------------------------------------------------------------------------------
+
+
+class Table:
+    """The rows of a sweep as they come, and the DataFrame they make."""
+
+    def __init__(self, plan: Plan, runner: Runner) -> None:
+        self.plan = plan
+        self.runner = runner
+        self.rows: dict[int, dict[str, Any]] = {}
+
+    @property
+    def joint_names(self) -> list[str]:
+        return [c for joint in self.runner.joints for c in joint.columns]
+
+    def output_columns(self) -> list[str]:
+        out = ["status", *self.joint_names, "residual", "stability", "min_stiffness_eigenvalue"]
+        if self.runner.has_stops:
+            out.append("at_limit")
+        out += ["steps", "wall_time"]
+        if self.plan.continuation:
+            out.append("jump")
+        return [*out, "error"]
+
+    def add(self, rows: Iterable[tuple[int, dict[str, Any]]]) -> None:
+        for case, row in rows:
+            if case in self.rows:  # each case once: a second copy would be a bug
+                raise RuntimeError(f"case {case} came back twice")
+            self.rows[case] = row
+
+    def rest_of(self, case: int) -> np.ndarray | None:
+        """A done case's rest (full configuration), None if it did not converge."""
+        row = self.rows.get(case)
+        if row is None or row["status"] != "converged":
+            return None
+        values = [row[c] for c in self.joint_names]
+        model = self.runner.base.model
+        q0 = self.runner.data["q0"]
+        return q_from_row(model, self.runner.joints, values, q0)
+
+    def frame(self, attrs: Mapping[str, Any]) -> DataFrame:
+        pd = pandas()
+        cases = sorted(self.rows)
+        data: dict[str, Any] = {"case": np.array(cases, dtype=np.int64)}
+        for name, values in self.plan.columns.items():
+            column = [values[c] for c in cases]
+            data[name] = np.array(column, dtype=np.int64 if name == "start" else float)
+        for name in self.output_columns():
+            column = [self.rows[c].get(name) for c in cases]
+            if name == "steps":
+                data[name] = pd.array(column, dtype="Int64")
+            elif name == "jump":
+                data[name] = pd.array(column, dtype="boolean")
+            elif name in ("status", "stability", "at_limit", "error"):
+                data[name] = pd.array(column, dtype="string")
+            else:
+                data[name] = np.array(column, dtype=float)
+        frame = pd.DataFrame(data)
+        frame.attrs["pinsettle"] = dict(attrs)
+        return frame
+
+    def load(self, previous: DataFrame) -> None:
+        """Take the rows of an earlier run of the same sweep (``resume``), after checking that
+        its cases are this sweep's.
+
+        Raises:
+            ValueError: a missing column, a case number outside this sweep, or a case whose
+                varied values differ from this sweep's.
+        """
+        pd = pandas()
+        if not isinstance(previous, pd.DataFrame):
+            raise TypeError(f"resume must be a pandas.DataFrame, got {type(previous).__name__}")
+        needed = ["case", *self.plan.columns, *self.output_columns()]
+        missing = [c for c in needed if c not in previous.columns]
+        if missing:
+            raise ValueError(
+                f"resume: the table is not of this sweep: it has no column {', '.join(missing)}"
+            )
+        cases = previous["case"].to_numpy()
+        outside = [int(c) for c in cases if not 0 <= c < self.plan.size]
+        if outside:
+            raise ValueError(
+                f"resume: the table is not of this sweep: case {outside[0]} is outside its "
+                f"{self.plan.size} cases"
+            )
+        for name, values in self.plan.columns.items():
+            given, planned = previous[name].to_numpy(), np.asarray(values)[cases]
+            wrong = np.flatnonzero(given != planned)
+            if wrong.size:
+                k = wrong[0]
+                raise ValueError(
+                    f"resume: the table is not of this sweep: case {cases[k]} has {name} = "
+                    f"{given[k]}, this sweep {planned[k]}"
+                )
+        columns = {name: previous[name].tolist() for name in self.output_columns()}
+        for k, case in enumerate(cases):
+            row: dict[str, Any] = {}
+            for name, values in columns.items():
+                value = values[k]
+                absent = (
+                    value is None
+                    or value is pd.NA
+                    or (isinstance(value, float) and math.isnan(value))
+                )
+                if name in ("status", "stability", "at_limit", "error"):
+                    row[name] = "" if absent else str(value)
+                elif name in ("steps", "jump"):
+                    row[name] = None if absent else value
+                else:
+                    row[name] = value
+            if row.get("jump") is not None:
+                row["jump"] = str(row["jump"]) in ("True", "true", "1")
+            if row["steps"] is not None:
+                row["steps"] = int(row["steps"])
+            self.add([(int(case), row)])
+
+
+# --- progress -------------------------------------------------------------------------------------
+
+
+Progress = Callable[[int, int], None]
+
+
+class ProgressBar:
+    """Cases done, rate and time left on one terminal line (stderr), redrawn at most 10 times a
+    second; nothing when stderr is not a terminal."""
+
+    def __init__(self, stream: Any = None) -> None:
+        self.stream = sys.stderr if stream is None else stream
+        self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.started = time.perf_counter()
+        self.drawn = 0.0
+        self.first = 0
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if done < total and now - self.drawn < 0.1:
+            return
+        self.drawn = now
+        elapsed = max(now - self.started, 1e-9)
+        rate = done / elapsed
+        left = (total - done) / rate if rate > 0 else math.inf
+        width = 30
+        filled = int(width * done / max(total, 1))
+        eta = "--:--" if not math.isfinite(left) else _clock(left)
+        line = (
+            f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} cases  "
+            f"{rate:.1f}/s  {eta} left "
+        )
+        self.stream.write(line)
+        if done >= total:
+            self.stream.write("\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _clock(seconds: float) -> str:
+    seconds = int(round(seconds))
+    hours, rest = divmod(seconds, 3600)
+    return f"{hours}:{rest // 60:02d}:{rest % 60:02d}" if hours else f"{rest // 60}:{rest % 60:02d}"
+
+
+# --- the public entry points ----------------------------------------------------------------------
+
+
+def _as_scene(scene: Any) -> Scene:
+    if isinstance(scene, Scene):
+        return scene
+    if isinstance(scene, pinocchio.Model):
+        return Scene(scene)
+    if isinstance(scene, (str, os.PathLike)):
+        return load_scene(scene_path(scene))
+    raise TypeError(
+        "scene must be a pinsettle.Scene, a pinocchio.Model or a scene file (path or library "
+        f"name), got {type(scene).__name__}"
+    )
+
+
+def _workers(workers: Any) -> int:
+    if workers is None:
+        return cpu_count()
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1 (threads), got {workers!r}")
+    return int(workers)
+
+
+def sweep(
+    scene: Any,
+    vary: Mapping[str, Any] | None = None,
+    starts: Any = None,
+    *,
+    zip: bool = False,
+    continuation: bool | None = None,
+    workers: int | None = None,
+    client: Any = None,
+    scheduler: str | None = None,
+    progress: bool | Progress = True,
+    settings: Settings | Mapping[str, Any] | None = None,
+    limits: bool | None = None,
+    resume: DataFrame | None = None,
+    chunk_size: int | None = None,
+    connect_timeout: float = 5.0,
+    **overrides: Any,
+) -> DataFrame:
+    """Solve many cases of a scene and return a ``pandas.DataFrame``, one row per case.
+
+    Args:
+        scene: a ``pinsettle.Scene``, a ``pinocchio.Model`` or a scene file (path or library
+            name).
+        vary: scene value -> the values it takes: ``"start.JOINT"``, a field of a force element
+            by its index (``"joint_spring[0].stiffness"``, ``"spring[1].rest_length"``,
+            ``"load[0].effort"``, ``"load[2].force"``), ``"gravity"``, or
+            ``"payload.FRAME.mass"`` (a point mass at the frame's origin, kg). A vector value
+            takes vectors, or numbers: a magnitude along the scene's own vector. Several keys
+            make the full grid; ``zip=True`` pairs their values instead.
+        starts: start configurations (n, model.nq), or ``("random", n, seed)``: uniform inside
+            the joints' stops (+-pi where there are none). Every value of ``vary`` is solved
+            from each start. None: the scene's start.
+        continuation: each case starts from the previous case's rest (one branch per start), and
+            the ``jump`` column marks where the rest left its branch (a fold, a snap-through).
+            Default: on for a 1-D ``vary`` (one key, or ``zip=True``) without start keys.
+        workers: local threads (default: every core); each solve runs in C++ with the GIL
+            released. Results are identical, bit for bit, whatever the number.
+        client: a ``dask.distributed.Client``: the cases go to its cluster in chunks (needs
+            ``pinsettle[cluster]``); ``scheduler``: the address of a scheduler to connect to
+            (``"tcp://host:8786"``, within ``connect_timeout`` seconds).
+        progress: a progress bar on stderr when it is a terminal (True), none (False), or a
+            function called with (cases done, cases) as they finish.
+        settings, limits, **overrides: as for ``pinsettle.solve``, for every case.
+        resume: the table of an earlier, interrupted run of the same sweep: its cases are kept,
+            not solved again.
+        chunk_size: cases per task (default: about four tasks per worker thread on a
+            cluster, up to 16 cases locally).
+
+    Returns:
+        The table: ``case``; ``start`` and the start's joint values (``start.JOINT``) when
+        ``starts`` is given; the varied values (one column per key; ``key[k]`` for vectors);
+        ``status``; each free joint's value by name; ``residual``; ``stability``;
+        ``min_stiffness_eigenvalue``; ``at_limit`` (joints on a stop, where the scene has
+        stops); ``steps``; ``wall_time`` (s); ``jump`` (with continuation); ``error`` (why a
+        case could not be solved, else empty). ``df.attrs["pinsettle"]`` holds the scene's name,
+        the keys, the joints' kinds (for ``distinct_rests``), the workers, the sweep's wall time
+        and whether it was interrupted (Ctrl-C: the cases in flight finish, the table holds
+        the cases done).
+
+    Raises:
+        TypeError, ValueError: an unknown key, an index past the scene's elements, a value of
+            the wrong type or size, no values, starts of the wrong shape, a bad setting (the
+            message names it). A case whose value the scene refuses (a negative stiffness) is
+            not an error of the sweep: its row has status 'error' and the reason.
+        ConnectionError: ``scheduler`` does not answer, or the cluster has no worker.
+        ImportError: pandas (``pinsettle[sweep]``) or dask (``pinsettle[cluster]``) missing.
+    """
+    pandas()  # missing pandas: say so before any work
+    pair = zip
+    base = _as_scene(scene)
+    use = make_settings(base.settings if settings is None else settings, overrides)
+    use.check()
+    if limits is not None and not isinstance(limits, (bool, np.bool_)):
+        raise TypeError(f"limits must be True, False or None, got {limits!r}")
+    if not (callable(progress) or isinstance(progress, bool)):
+        raise TypeError(f"progress must be True, False or a function, got {progress!r}")
+    if client is not None and scheduler is not None:
+        raise ValueError("give client= or scheduler=, not both")
+    cluster = client is not None or scheduler is not None
+    if cluster and workers is not None:
+        raise ValueError(
+            "workers= sets local threads; with client= or scheduler= the cluster's workers run "
+            "the cases"
+        )
+    threads = 0 if cluster else _workers(workers)
+    if chunk_size is not None and (
+        isinstance(chunk_size, bool)
+        or not isinstance(chunk_size, (int, np.integer))
+        or chunk_size < 1
+    ):
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    plan = make_plan(base, vary, starts, pair, continuation, limits)
+    runner = Runner(scene_data(base), plan.keys, use.to_dict(), limits, plan.continuation)
+    table = Table(plan, runner)
+    if resume is not None:
+        table.load(resume)
+    report: Progress
+    bar = None
+    if progress is True:
+        bar = ProgressBar()
+        report = bar
+    elif callable(progress):
+        report = progress
+    else:
+        report = lambda done, total: None  # noqa: E731
+
+    def collect(rows: list[tuple[int, dict[str, Any]]]) -> None:
+        table.add(rows)
+        report(len(table.rows), plan.size)
+
+    started = time.perf_counter()
+    resumed = len(table.rows)
+    with Interrupts() as stop:
+        if cluster:
+            from . import _sweep_cluster
+
+            with _sweep_cluster.connect(client, scheduler, connect_timeout) as dask_client:
+                threads = _sweep_cluster.total_threads(dask_client)
+                chunk = chunk_size or max(1, math.ceil(plan.size / (4 * threads)))
+                tasks = make_tasks(plan, table.rows, chunk, table.rest_of)
+                _sweep_cluster.run(dask_client, runner, tasks, collect, stop)
+        else:
+            # Chunks of a few cases: fewer wake-ups of this thread; Ctrl-C still stops
+            # between cases.
+            chunk = chunk_size or min(16, max(1, plan.size // (8 * threads)))
+            tasks = make_tasks(plan, table.rows, chunk, table.rest_of)
+            run_local(runner, tasks, threads, collect, stop)
+    interrupted = stop.count > 0
+    if bar is not None and interrupted:
+        bar.close()
+    elapsed = time.perf_counter() - started
+    attrs = {
+        "scene": base.name,
+        "vary": [key.text for key in plan.keys],
+        "zip": bool(pair),
+        "continuation": plan.continuation,
+        "joints": [dataclasses.asdict(joint) for joint in runner.joints],
+        "rest_tolerance": REST_TOLERANCE,
+        "cases": plan.size,
+        "solved": len(table.rows) - resumed,
+        "resumed": resumed,
+        "interrupted": interrupted,
+        "workers": threads,
+        "cluster": cluster,
+        "wall_time": elapsed,
+    }
+    return table.frame(attrs)
+
+
+def distinct_rests(
+    df: DataFrame, *, tol: float = REST_TOLERANCE, scene: Scene | None = None
+) -> DataFrame:
+    """The distinct rests of a sweep and the fraction of its cases that reached each: the
+    basins of a multistable mechanism.
+
+    Converged rows are grouped by the varied scene values (starts aside), then, within a
+    group, a rest joins the first rest found closer than ``tol`` (rad or m: the largest
+    difference of a joint, angles modulo 2 pi, rotations by their angle), in case order.
+
+    Args:
+        df: a table of ``pinsettle.sweep``. Its joints' kinds come from ``df.attrs`` (kept by
+            Parquet), or from ``scene`` (a table read back from CSV).
+
+    Returns:
+        One row per rest: the group's varied values, ``rest`` (0, 1, ... within the group),
+        the joint values of its first case, ``stability``, ``count`` (cases that reached it),
+        ``fraction`` (of the group's cases, failed ones included) and ``first_case``.
+    """
+    pd = pandas()
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"df must be a pandas.DataFrame, got {type(df).__name__}")
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
+        raise ValueError(f"tol must be a number > 0 (rad or m), got {tol!r}")
+    meta = df.attrs.get("pinsettle", {})
+    if scene is not None:
+        joints = [
+            j if all(c in df.columns for c in j.columns) else renamed
+            for j, renamed in zip(
+                joint_columns(scene), joint_columns(scene, list(scene.model.names)), strict=True
+            )
+        ]
+    elif "joints" in meta:
+        joints = [JointColumns(j["name"], j["kind"], tuple(j["columns"])) for j in meta["joints"]]
+    else:
+        raise ValueError(
+            "df has no record of its joints (df.attrs['pinsettle'], which a CSV file does not "
+            "keep): pass the scene, distinct_rests(df, scene=...)"
+        )
+    names = [c for joint in joints for c in joint.columns]
+    needed = ["case", "status", "stability", *names]
+    missing = [c for c in needed if c not in df.columns]
+    if missing:
+        raise ValueError(f"df is not a sweep table: no column {', '.join(missing)}")
+    varied = [
+        c
+        for c in df.columns
+        if c not in needed
+        and c not in OUTPUT_COLUMNS
+        and c != "start"
+        and not c.startswith("start.")
+        and c not in ("min_stiffness_eigenvalue", "residual")
+    ]
+    out: list[dict[str, Any]] = []
+    groups = df.groupby(varied, sort=False, dropna=False) if varied else [((), df)]
+    for values, group in groups:
+        values = values if isinstance(values, tuple) else (values,)
+        rests: list[dict[str, Any]] = []
+        points: list[np.ndarray] = []
+        for _, row in group.sort_values("case").iterrows():
+            if row["status"] != "converged":
+                continue
+            point = row[names].to_numpy(dtype=float)
+            for k, other in enumerate(points):
+                if rest_distance(joints, point, other) < tol:
+                    rests[k]["count"] += 1
+                    break
+            else:
+                points.append(point)
+                rests.append(
+                    {
+                        **dict(zip(varied, values, strict=True)),
+                        "rest": len(rests),
+                        **dict(zip(names, point, strict=True)),
+                        "stability": row["stability"],
+                        "count": 1,
+                        "first_case": int(row["case"]),
+                    }
+                )
+        for rest in rests:
+            rest["fraction"] = rest["count"] / len(group)
+            out.append(rest)
+    columns = [*varied, "rest", *names, "stability", "count", "fraction", "first_case"]
+    return pd.DataFrame(out, columns=columns)

@@ -1,0 +1,317 @@
+"""``pinsettle sweep``: many cases of a scene from the command line, a table in a file.
+
+A progress bar on stderr when it is a terminal (not with --json), a summary (counts by status,
+distinct rests, jumps, throughput), the table written to --out (Parquet or CSV). Ctrl-C stops
+after the cases in flight and writes what is done; the same command with the same --out skips
+the cases already there (resume).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import _sweep, _sweep_cases
+from ._scene import load_scene
+from .scenes import scene_path
+
+#: Exit status of a sweep stopped by Ctrl-C (what a shell reports for SIGINT).
+EXIT_INTERRUPTED = 130
+FORMATS = (".parquet", ".csv")
+
+
+def add_parser(
+    sub: Any,
+    add_setting_flags: Callable[[argparse.ArgumentParser], None],
+    add_limits_flag: Callable[[argparse.ArgumentParser, str], None],
+    overrides: Callable[[argparse.Namespace], dict[str, Any]],
+) -> None:
+    """The ``sweep`` subcommand (the setting and limits flags are the other commands')."""
+    parser = sub.add_parser(
+        "sweep",
+        help="solve many cases of a scene (a grid of values, random starts) into a table",
+        description="Solve a scene for every combination of --vary values and starts, on every "
+        "core (or a Dask cluster with --scheduler), and write one row per case to --out. "
+        "Ctrl-C stops after the cases in flight and writes what is done; the same command "
+        "again resumes. Exit status: 0 every case converged, 1 some did not, 2 bad input, 130 "
+        "interrupted.",
+    )
+    parser.add_argument("scene", help="scene file (.toml) or scene name")
+    parser.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="KEY=LO:HI:N",
+        help="a scene value and its values: N evenly spaced from LO to HI, or a list V1,V2,... "
+        "(repeatable: the full grid). Keys: start.JOINT, joint_spring[i].stiffness|rest|damping, "
+        "spring[i].stiffness|rest_length|damping, load[i].effort|force|torque|point, gravity, "
+        "payload.FRAME.mass (a vector value: a magnitude along the scene's own vector)",
+    )
+    parser.add_argument("--random", type=int, metavar="N", help="N random starts in the limits")
+    parser.add_argument("--seed", type=int, metavar="S", help="seed of --random (default 0)")
+    parser.add_argument("--zip", action="store_true", help="pair the --vary values, no grid")
+    parser.add_argument(
+        "--continuation",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="start each case from the previous rest and mark jumps (default: on for one "
+        "--vary key or --zip)",
+    )
+    parser.add_argument("--workers", type=int, metavar="N", help="local threads (default: cores)")
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a Dask scheduler, tcp://HOST:PORT (pinsettle[cluster])",
+    )
+    parser.add_argument("--out", metavar="FILE", help="the table: FILE.parquet or FILE.csv")
+    parser.add_argument("--json", action="store_true", help="print one JSON object, no bar")
+    add_limits_flag(parser, "scene model")
+    add_setting_flags(parser)
+    parser.set_defaults(func=lambda args: run(args, overrides(args)))
+
+
+def parse_vary(items: list[str]) -> dict[str, list[float]]:
+    """--vary KEY=LO:HI:N or KEY=V1,V2,... as key -> values.
+
+    Raises:
+        ValueError: the form, a number, N < 1, or a key given twice; naming the flag.
+    """
+    out: dict[str, list[float]] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key or not text:
+            raise ValueError(f"--vary expects KEY=LO:HI:N or KEY=V1,V2,..., got '{item}'")
+        if key in out:
+            raise ValueError(f"--vary {key} is given twice")
+        try:
+            if ":" in text:
+                lo, hi, n = text.split(":")
+                count = int(n)
+                if count < 1:
+                    raise ValueError(f"--vary {item}: N must be an integer >= 1, got {count}")
+                values = np.linspace(float(lo), float(hi), count).tolist()
+            else:
+                values = [float(x) for x in text.split(",")]
+        except ValueError as error:
+            if str(error).startswith("--vary"):
+                raise
+            raise ValueError(
+                f"--vary {item}: expected LO:HI:N (numbers, N an integer) or V1,V2,... (numbers)"
+            ) from None
+        bad = [x for x in values if not math.isfinite(x)]
+        if bad:
+            raise ValueError(f"--vary {item}: values must be finite, got {bad[0]}")
+        out[key] = values
+    return out
+
+
+def _out_path(text: str | None) -> Path | None:
+    if text is None:
+        return None
+    path = Path(text)
+    if path.suffix not in FORMATS:
+        raise ValueError(f"--out {text}: the file must end in .parquet or .csv")
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"--out {text}: no such folder: {path.parent}")
+    if path.is_dir():
+        raise IsADirectoryError(f"--out {text} is a folder")
+    if path.suffix == ".parquet":
+        try:
+            importlib.import_module("pyarrow")
+        except ImportError:
+            raise _sweep_cases.MissingDependencyError(
+                f"--out {text}: Parquet needs pyarrow: {_sweep_cases.SWEEP_EXTRA}"
+            ) from None
+    return path
+
+
+def read_table(path: Path) -> Any:
+    """A table written by ``write_table``."""
+    pd = _sweep_cases.pandas()
+    try:
+        if path.suffix == ".parquet":
+            return pd.read_parquet(path)
+        # Numbers read back exactly (pandas 3 does by default; 2.x needs asking).
+        exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+        return pd.read_csv(path, keep_default_na=False, na_values=[""], **exact)
+    except Exception as error:  # a file of something else: say which and why
+        raise ValueError(f"--out {path}: cannot read the table there to resume: {error}") from None
+
+
+def write_table(df: Any, path: Path) -> None:
+    """Write the table next to ``path`` then move it there: an interrupted write leaves the
+    old file whole."""
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        if path.suffix == ".parquet":
+            df.to_parquet(temporary, index=False)
+        else:
+            df.to_csv(temporary, index=False)
+        os.replace(temporary, path)
+    finally:
+        temporary.unlink(missing_ok=True)
+
+
+def records(df: Any) -> list[dict[str, Any]]:
+    """The rows as JSON-ready dicts: numbers exact (repr), missing values None."""
+
+    def plain(value: Any) -> Any:
+        if isinstance(value, np.generic):
+            value = value.item()
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            return None
+        if type(value).__name__ == "NAType":
+            return None
+        return value
+
+    return [{k: plain(v) for k, v in row.items()} for row in df.to_dict(orient="records")]
+
+
+def summary(df: Any, out: Path | None) -> dict[str, Any]:
+    """What the sweep found, as JSON-ready values."""
+    meta = df.attrs["pinsettle"]
+    counts = {str(k): int(v) for k, v in df["status"].value_counts(sort=False).items()}
+    rests = _sweep.distinct_rests(df)
+    jumps = df[df["jump"].fillna(False)] if "jump" in df.columns else df.iloc[0:0]
+    varied = [c for c in df.columns if c in meta["vary"] or c.split("[")[0] in meta["vary"]]
+    solved, wall = meta["solved"], meta["wall_time"]
+    return {
+        "scene": meta["scene"],
+        "cases": meta["cases"],
+        "done": len(df),
+        "solved": solved,
+        "resumed": meta["resumed"],
+        "interrupted": meta["interrupted"],
+        "workers": meta["workers"],
+        "cluster": meta["cluster"],
+        "wall_time_s": wall,
+        "cases_per_s": solved / wall if wall > 0 else None,
+        "status_counts": counts,
+        "distinct_rests": records(rests),
+        "jumps": records(jumps[["case", *varied]]),
+        "out": None if out is None else str(out),
+    }
+
+
+def _print_summary(df: Any, info: dict[str, Any]) -> None:
+    where = "on the cluster's" if info["cluster"] else "on"
+    rate = info["cases_per_s"]
+    print(
+        f"{info['scene']}: {info['done']} of {info['cases']} cases"
+        + (f" ({info['resumed']} from the file)" if info["resumed"] else "")
+        + f"; {info['solved']} solved in {info['wall_time_s']:.3g} s {where} "
+        f"{info['workers']} worker{'s' if info['workers'] != 1 else ''}"
+        + (f", {rate:.4g} cases/s" if rate else "")
+    )
+    print("status   " + ", ".join(f"{k} {v}" for k, v in info["status_counts"].items()))
+    rests = info["distinct_rests"]
+    meta = df.attrs["pinsettle"]
+    varied = [c for c in df.columns if c in meta["vary"] or c.split("[")[0] in meta["vary"]]
+    varied = [c for c in varied if not c.startswith("start.")]
+    joints = [c for j in meta["joints"] for c in j["columns"]]
+    groups = {tuple(r.get(c) for c in varied) for r in rests}
+    if len(groups) <= 1:
+        tolerance = _sweep_cases.REST_TOLERANCE
+        print(f"rests    {len(rests)} distinct (stable or neutral, to {tolerance:g})")
+        for rest in rests[:10]:
+            values = "  ".join(f"{c} {rest[c]: .6f}" for c in joints[:6])
+            print(
+                f"  {values}  {rest['stability']}, {rest['count']} cases "
+                f"({100 * rest['fraction']:.1f}%)"
+            )
+        if len(rests) > 10:
+            print(f"  ... {len(rests) - 10} more")
+    else:
+        per = [sum(1 for r in rests if tuple(r.get(c) for c in varied) == g) for g in groups]
+        print(
+            f"rests    {min(per)} to {max(per)} distinct for each of the {len(groups)} values "
+            "of the varied keys"
+        )
+    if "jump" in df.columns:
+        jumps = info["jumps"]
+        text = ", ".join(
+            f"case {j['case']} (" + ", ".join(f"{c} = {j[c]:.6g}" for c in j if c != "case") + ")"
+            for j in jumps[:10]
+        )
+        print(
+            f"jumps    {len(jumps)}"
+            + (f": {text}" if jumps else " (the rest stayed on its branch)")
+        )
+    if info["out"]:
+        print(f"wrote    {info['out']} ({len(df)} rows)")
+    elif len(df) <= 30:
+        shown = ["case", *varied, "status", *joints[:6], "residual", "stability"]
+        if "jump" in df.columns:
+            shown.append("jump")
+        print(df[shown].to_string(index=False))
+    else:
+        print("(the table has more than 30 rows: --out FILE.parquet or FILE.csv keeps it)")
+    if info["interrupted"]:
+        print(
+            "interrupted: run the same command again to solve the cases left"
+            + ("" if info["out"] else " (with --out, to keep what is done)")
+        )
+
+
+def run(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    try:
+        return _run(args, overrides)
+    except BrokenPipeError:  # output piped into head: the command's own handling
+        raise
+    except (ConnectionError, _sweep_cases.MissingDependencyError) as error:
+        print(f"pinsettle: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:  # before or after the cases: nothing in flight to keep
+        print("pinsettle: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _run(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    _sweep_cases.pandas()
+    vary = parse_vary(args.vary)
+    if args.seed is not None and args.random is None:
+        raise ValueError("--seed goes with --random N")
+    if args.random is not None and args.random < 1:
+        raise ValueError(f"--random N: N must be an integer >= 1, got {args.random}")
+    if args.workers is not None and args.scheduler is not None:
+        raise ValueError("--workers sets local threads; with --scheduler the cluster's run")
+    if not vary and args.random is None:
+        raise ValueError("nothing to sweep: give --vary KEY=LO:HI:N and/or --random N")
+    out = _out_path(args.out)
+    scene = load_scene(scene_path(args.scene))
+    resume = read_table(out) if out is not None and out.exists() else None
+    starts = None if args.random is None else ("random", args.random, args.seed or 0)
+    df = _sweep.sweep(
+        scene,
+        vary,
+        starts,
+        zip=args.zip,
+        continuation=args.continuation,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.json,
+        limits=False if args.no_limits else None,
+        resume=resume,
+        **overrides,
+    )
+    if out is not None:
+        write_table(df, out)
+    info = summary(df, out)
+    if args.json:
+        if out is None:
+            info["rows"] = records(df)
+        print(json.dumps(info))
+    else:
+        _print_summary(df, info)
+    if info["interrupted"]:
+        return EXIT_INTERRUPTED
+    return 0 if info["status_counts"].get("converged", 0) == len(df) else 1

@@ -1,0 +1,249 @@
+"""Sweeps on a Dask cluster: the cases go to the workers in chunks, the scene as data.
+
+The scene travels as a pickle of plain data (``_sweep.scene_data``: the ``pinocchio.Model``,
+which pickles, and the element lists), sent once to every worker (``Client.scatter``); a worker
+rebuilds the scene once per sweep and runs its tasks with the same code as the local threads
+(``_sweep.Runner``), so the rows are the same. A worker needs only pinsettle installed.
+
+Dask re-runs the tasks of a worker that dies elsewhere; a task that killed its workers too
+often (Dask's ``KilledWorker``) or failed otherwise has its cases marked 'error' with the
+reason. Each task's rows are taken once, from its one result.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import pickle
+import re
+import socket
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from ._sweep_cases import Collect, Interrupts, MissingDependencyError, Runner, Task
+
+CLUSTER_EXTRA = "pip install 'pinsettle[cluster]'"
+
+#: How long a cluster may be left without any worker before the cases still to run are marked
+#: (Dask would wait for a worker forever).
+NO_WORKER_TIMEOUT = 20.0
+
+_ADDRESS = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d+)$")
+
+
+def _distributed() -> Any:
+    try:
+        return importlib.import_module("distributed")
+    except ImportError:
+        raise MissingDependencyError(
+            f"a sweep on a Dask cluster needs dask.distributed: {CLUSTER_EXTRA}"
+        ) from None
+
+
+class CaseError(RuntimeError):
+    """Why the cluster could not run a case (its row's ``error``)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def check_address(address: Any) -> tuple[str, str | None, str, int]:
+    """The scheduler address as (address, scheme or None, host, port).
+
+    Raises:
+        TypeError, ValueError: not a string, or not of the form [tcp://]HOST:PORT.
+    """
+    if not isinstance(address, str):
+        raise TypeError(
+            f"scheduler must be an address string like 'tcp://host:8786', got "
+            f"{type(address).__name__} {address!r}"
+        )
+    match = _ADDRESS.match(address.strip())
+    port = int(match.group("port")) if match else 0
+    if match is None or not 0 < port < 65536:
+        raise ValueError(
+            f"scheduler address '{address}': expected tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786)"
+        )
+    return address.strip(), match.group("scheme"), match.group("host").strip("[]"), port
+
+
+def _probe(host: str, port: int, timeout: float, address: str) -> None:
+    """Fail fast, without a Dask client, when nothing listens at the address or what listens
+    does not speak first as a Dask scheduler does (its handshake; a Dask client would wait for
+    it for ever)."""
+    deadline = time.monotonic() + timeout
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as probe:
+            probe.settimeout(max(0.05, deadline - time.monotonic()))
+            first = probe.recv(1)
+    except OSError as error:
+        reason = "timed out" if isinstance(error, TimeoutError) else str(error)
+        raise ConnectionError(
+            f"scheduler {address} does not answer ({reason}, waited at most {timeout:g} s)"
+        ) from None
+    if not first:
+        raise ConnectionError(
+            f"scheduler {address} does not answer (it closed the connection at once)"
+        )
+
+
+@contextmanager
+def connect(client: Any, scheduler: str | None, timeout: float) -> Iterator[Any]:
+    """The client to run on: ``client`` as given, or a new one connected to ``scheduler``
+    (closed afterwards). Either must have at least one worker within ``timeout`` seconds.
+
+    Raises:
+        ConnectionError: the scheduler does not answer, or has no worker.
+    """
+    distributed = _distributed()
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not timeout > 0:
+        raise ValueError(f"connect_timeout must be a number of seconds > 0, got {timeout!r}")
+    if client is not None:
+        if not isinstance(client, distributed.Client):
+            raise TypeError(
+                f"client must be a dask.distributed.Client, got {type(client).__name__}"
+            )
+        if client.status != "running":
+            raise ConnectionError(f"the Dask client is not connected (status '{client.status}')")
+        _wait_for_workers(client, timeout, "the client's cluster")
+        yield client
+        return
+    address, scheme, host, port = check_address(scheduler)
+    if scheme in (None, "tcp"):
+        _probe(host, port, timeout, address)
+    try:
+        own = distributed.Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError) as error:
+        raise ConnectionError(f"scheduler {address} does not answer: {error}") from None
+    try:
+        _wait_for_workers(own, timeout, f"the scheduler at {address}")
+        yield own
+    finally:
+        own.close()
+
+
+def _wait_for_workers(client: Any, timeout: float, what: str) -> None:
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except (TimeoutError, OSError):
+        raise ConnectionError(f"{what} has no worker (waited {timeout:g} s)") from None
+
+
+def total_threads(client: Any) -> int:
+    """Worker threads of the cluster now."""
+    return max(1, int(sum(client.nthreads().values())))
+
+
+# --- on a worker ----------------------------------------------------------------------------------
+
+_RUNNERS: OrderedDict[str, Runner] = OrderedDict()
+_RUNNERS_LOCK = threading.Lock()
+
+
+def _runner(blob: bytes) -> Runner:
+    """The runner of a sweep, built once per worker process (a few sweeps kept)."""
+    token = hashlib.sha256(blob).hexdigest()
+    with _RUNNERS_LOCK:
+        runner = _RUNNERS.get(token)
+        if runner is None:
+            spec = pickle.loads(blob)
+            runner = Runner(
+                spec["data"], spec["keys"], spec["settings"], spec["limits"], spec["continuation"]
+            )
+            _RUNNERS[token] = runner
+            while len(_RUNNERS) > 4:
+                _RUNNERS.popitem(last=False)
+        return runner
+
+
+def remote_run(blob: bytes, task: Task) -> list[tuple[int, dict[str, Any]]]:
+    """A task's rows, computed on a worker."""
+    return _runner(blob).run(task)
+
+
+# --- on the client --------------------------------------------------------------------------------
+
+
+def _blob(runner: Runner) -> bytes:
+    return pickle.dumps(
+        {
+            "data": runner.data,
+            "keys": runner.keys,
+            "settings": runner.settings.to_dict(),
+            "limits": runner.limits,
+            "continuation": runner.continuation,
+        },
+        protocol=pickle.HIGHEST_PROTOCOL,
+    )
+
+
+def _failed(runner: Runner, task: Task, reason: str) -> list[tuple[int, dict[str, Any]]]:
+    rows = []
+    for spec in task.specs:
+        row = runner.outputs(CaseError(reason))
+        if runner.continuation:
+            row["jump"] = None
+        rows.append((spec.case, row))
+    return rows
+
+
+def _reason(error: BaseException) -> str:
+    if type(error).__name__ == "KilledWorker":
+        return f"the workers running this case died (Dask gave up on it: {error})"
+    return f"the cluster could not run this case: {type(error).__name__}: {error}"
+
+
+def run(
+    client: Any, runner: Runner, tasks: Sequence[Task], collect: Collect, stop: Interrupts
+) -> None:
+    """Run the tasks on the cluster, giving each task's rows to ``collect`` once. Ctrl-C
+    (``stop.count``) cancels the tasks not finished; their cases are left out."""
+    if not tasks:
+        return
+    blob = _blob(runner)
+    shared = client.scatter(blob, broadcast=True, hash=False)
+    token = hashlib.sha256(blob).hexdigest()[:12]
+    submitted = {
+        client.submit(
+            remote_run, shared, task, pure=False, key=f"pinsettle-sweep-{token}-{k}"
+        ): task
+        for k, task in enumerate(tasks)
+    }
+    pending = dict(submitted)
+    no_worker_since: float | None = None
+    checked = time.monotonic()
+    try:
+        while pending:
+            if stop.count:
+                return
+            # Polled (no as_completed: that needs the client to be Dask's default one).
+            ready = [future for future in pending if future.done()]
+            for future in ready:
+                task = pending.pop(future)
+                if future.status == "finished":
+                    collect(future.result())
+                else:
+                    error = future.exception() if future.status == "error" else None
+                    reason = _reason(error) if error is not None else f"task {future.status}"
+                    collect(_failed(runner, task, reason))
+            if ready:
+                continue
+            time.sleep(0.02)
+            if time.monotonic() - checked > 1.0:
+                checked = time.monotonic()
+                if client.nthreads():
+                    no_worker_since = None
+                elif no_worker_since is None:
+                    no_worker_since = checked
+                elif checked - no_worker_since > NO_WORKER_TIMEOUT:
+                    for task in pending.values():
+                        collect(_failed(runner, task, "no worker left on the cluster"))
+                    pending.clear()
+    finally:
+        if pending:
+            client.cancel(list(pending))
+        client.cancel([shared])

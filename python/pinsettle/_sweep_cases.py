@@ -238,6 +238,9 @@ def scene_data(scene: Scene) -> dict[str, Any]:
         "description": scene.description,
         "path": None if scene.path is None else str(scene.path),
         "urdf": None if scene.urdf is None else str(scene.urdf),
+        "mjcf": None if scene.mjcf is None else str(scene.mjcf),
+        "srdf": [str(path) for path in scene.srdf],
+        "notes": list(scene.notes),
         "limits": scene.limits,
         "settings": scene.settings.to_dict(),
         "joint_springs": list(scene.joint_springs),
@@ -302,6 +305,9 @@ def build_scene(data: Mapping[str, Any], keys: Sequence[Key], changes: Changes) 
     )
     scene.path = None if data["path"] is None else Path(data["path"])
     scene.urdf = None if data["urdf"] is None else Path(data["urdf"])
+    scene.mjcf = None if data["mjcf"] is None else Path(data["mjcf"])
+    scene.srdf = [Path(path) for path in data["srdf"]]
+    scene.notes = list(data["notes"])
     if gravity is not None:
         at(gravity[0], setattr, scene, "gravity", gravity[1])
 

@@ -210,7 +210,7 @@ def test_weld_loop_against_constrained_minimisation(tmp_path: Path) -> None:
     q_weld[:5] = [1.2, -0.6, -0.5, -0.4, 0.3]  # joint5 makes link5 level with the world
     q_weld[4] = -sum(q_weld[:4])
     locked = [f"joint{k}" for k in range(6, 21)]
-    scene = pinsettle.Scene(model, limits=False)  # stops with loops are not supported yet
+    scene = pinsettle.Scene(model, limits=False)  # the URDF's +-100 rad limits are no stops
     scene.lock(*locked)
     data = model.createData()
     pinocchio.framesForwardKinematics(model, data, q_weld)
@@ -294,7 +294,7 @@ def test_bad_loop_definitions(tmp_path: Path, loop: str, expected: list[str]) ->
 
 
 def test_bad_loops_from_python() -> None:
-    # The URDF's +-100 rad limits off: stops with loops are not supported yet.
+    # The URDF's +-100 rad limits off: they are no stops.
     scene = pinsettle.Scene.from_urdf(ROBOTS / "fourbar.urdf", limits=False)
     with pytest.raises(pinsettle.SceneError, match="kind must be 'point' or 'frame'"):
         scene.add_loop("coupler", "rocker", kind="weld")

@@ -491,10 +491,21 @@ def test_trace_records_configurations_and_events_for_playback():
     assert r.start_clamped == {"panda_joint4": pytest.approx(0.0698)}
     # Every damping event is listed, in order, inside the run.
     assert t.event_kind.count("damping") == r.peaks
-    assert np.all(np.diff(t.event_step) > 0) and t.event_step[-1] < r.steps
+    assert np.all(np.diff(t.event_step) >= 0) and t.event_step[-1] < r.steps
     # A damping event re-evaluates the dynamics without advancing time: one step each.
-    earlier = np.arange(len(t.event_step))
-    assert np.allclose(t.event_time, (t.event_step - earlier) * r.settings.dt, atol=1e-9)
+    kinds = np.array(t.event_kind)
+    damping = kinds == "damping"
+    earlier = np.cumsum(damping) - damping  # damping events before each event
+    dt = r.settings.dt
+    assert np.allclose(t.event_time[damping], (t.event_step - earlier)[damping] * dt, atol=1e-9)
+    # The arm falls onto panda_joint2's upper stop: an impact, at the end of its step, naming
+    # the joint; the other events name none.
+    impact = kinds == "impact"
+    assert impact.any() and set(kinds) <= {"damping", "impact"}
+    assert np.allclose(t.event_time[impact], (t.event_step - earlier + 1)[impact] * dt, atol=1e-9)
+    hit = {full.names[int(j)] for j in t.event_joint[impact]}
+    assert "panda_joint2" in hit and hit <= set(r.at_limit) | set(r.start_clamped) | hit
+    assert np.all(t.event_joint[~impact] == -1)
 
 
 def test_settings_repr_replace_to_dict_eq():

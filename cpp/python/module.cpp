@@ -217,15 +217,15 @@ namespace
     const Eigen::Index m = static_cast<Eigen::Index>(r.events.size());
     Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> event_step(m);
     Eigen::VectorXd event_time(m);
+    Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> event_joint(m);
     py::list event_kind;
     for (Eigen::Index k = 0; k < m; ++k)
     {
       const TraceEvent & e = r.events[static_cast<std::size_t>(k)];
       event_step[k] = e.step;
       event_time[k] = e.time;
-      event_kind.append(
-        e.kind == EventKind::Damping ? "damping"
-                                     : (e.kind == EventKind::Push ? "push" : "rollback"));
+      event_kind.append(toString(e.kind));
+      event_joint[k] = e.kind == EventKind::Impact ? static_cast<std::int64_t>(e.joint) : -1;
     }
     py::dict trace;
     trace["step"] = step;
@@ -237,7 +237,20 @@ namespace
     trace["event_step"] = event_step;
     trace["event_time"] = event_time;
     trace["event_kind"] = event_kind;
+    trace["event_joint"] = event_joint;
     out["trace"] = trace;
+    return out;
+  }
+
+  py::dict progressDict(const RunProgress & p)
+  {
+    py::dict out;
+    out["steps"] = p.steps;
+    out["sim_time"] = p.sim_time;
+    out["kinetic_energy"] = p.kinetic_energy;
+    out["peaks"] = p.peaks;
+    out["residual"] = p.residual();
+    out["wall_time"] = p.wall_time;
     return out;
   }
 
@@ -249,7 +262,8 @@ namespace
     const py::object & callback,
     const py::object & elements_spec,
     const py::object & loops_spec,
-    const py::object & stops_spec)
+    const py::object & stops_spec,
+    const py::object & progress)
   {
     const pinocchio::Model & model = modelFrom(model_obj);
     const std::unique_ptr<ForceElements> elements = elementsFrom(model, elements_spec);
@@ -260,7 +274,8 @@ namespace
     // Polled with the GIL released in between: Ctrl-C (SIGINT) ends the run as "aborted" and
     // keeps the state; an exception from the user's callback ends it and is re-raised.
     std::optional<py::error_already_set> error;
-    const AbortCallback hook = [&]() -> bool {
+    // progress(dict) is told where the run stands at each poll; its return value is ignored.
+    const AbortCallback hook = [&](const RunProgress & p) -> bool {
       py::gil_scoped_acquire gil;
       if (PyErr_CheckSignals() != 0)
       {
@@ -272,10 +287,12 @@ namespace
         error.emplace();
         return true;
       }
-      if (callback.is_none())
-        return false;
       try
       {
+        if (!progress.is_none())
+          progress(progressDict(p));
+        if (callback.is_none())
+          return false;
         return py::bool_(callback());
       }
       catch (py::error_already_set & e)
@@ -362,7 +379,7 @@ PYBIND11_MODULE(_core, m)
   m.def(
     "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
     py::arg("callback") = py::none(), py::arg("elements") = py::none(),
-    py::arg("loops") = py::none(), py::arg("stops") = py::none());
+    py::arg("loops") = py::none(), py::arg("stops") = py::none(), py::arg("progress") = py::none());
 
   m.def(
     "joint_stops",

@@ -47,9 +47,15 @@ namespace pinsettle
     /// \brief Project q onto the loops (Gauss-Newton, least norm) and v onto the motions they
     /// allow at the projected q (orthogonal projection in joint coordinates).
     ///
+    /// \param[in] pinned Indices in v of 1-DoF joints held where they are (joints on a stop:
+    ///            their q and v do not change), or nullptr.
     /// \return The largest constraint error left (m or rad).
     ///
-    double project(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v);
+    double project(
+      pinocchio::Data & data,
+      Eigen::VectorXd & q,
+      Eigen::VectorXd & v,
+      const std::vector<Eigen::Index> * pinned = nullptr);
 
   private:
     struct Impl;

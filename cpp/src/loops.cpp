@@ -18,6 +18,7 @@
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
+#include <Eigen/QR>
 #include <Eigen/SVD>
 
 #include <algorithm>
@@ -170,11 +171,19 @@ namespace pinsettle
       Eigen::VectorXd & q_next,
       Eigen::VectorXd & error_next,
       pinocchio::Data::Matrix6x & work_a,
-      pinocchio::Data::Matrix6x & work_b)
+      pinocchio::Data::Matrix6x & work_b,
+      const std::vector<Eigen::Index> * pinned = nullptr)
     {
-      evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
+      // A pinned joint's column is left out: the least-norm steps never move it.
+      const auto evaluate = [&]() {
+        evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
+        if (pinned != nullptr)
+          for (const Eigen::Index i : *pinned)
+            J.col(i).setZero();
+        svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      };
+      evaluate();
       double size = error.lpNorm<Eigen::Infinity>();
-      svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
       for (int it = 0; it < max_iterations && size > tolerance; ++it)
       {
         solveLeastNorm(svd, svdRank(svd), error, dq);
@@ -194,8 +203,7 @@ namespace pinsettle
             break;
           }
         }
-        evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
-        svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        evaluate();
         if (!improved)
           break;
       }
@@ -257,7 +265,8 @@ namespace pinsettle
     const LoopConstraints & loops,
     Eigen::VectorXd & q,
     double tolerance,
-    int max_iterations)
+    int max_iterations,
+    const std::vector<Eigen::Index> * pinned)
   {
     if (loops.empty())
       return 0.;
@@ -267,7 +276,7 @@ namespace pinsettle
     pinocchio::Data::Matrix6x work_a(6, model.nv), work_b(6, model.nv);
     return gaussNewton(
       model, data, loops, q, tolerance, max_iterations, error, J, svd, dq, q_next, error_next,
-      work_a, work_b);
+      work_a, work_b, pinned);
   }
 
   double assembleLoops(
@@ -315,6 +324,17 @@ namespace pinsettle
     }
     return pinocchio::difference(model, start, q).lpNorm<Eigen::Infinity>();
   }
+
+  // The stiffness of the closed mechanism along the motions N (orthonormal, allowed by the
+  // loops), with the loop reactions lambda.
+  StabilityReport assessOnMotions(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces,
+    const Eigen::VectorXd & lambda,
+    const Eigen::MatrixXd & N);
 
   namespace
   {
@@ -365,6 +385,18 @@ namespace pinsettle
     Eigen::VectorXd lambda;
     projectedForce(model, data, loops, q, forces, &lambda);
     const Eigen::MatrixXd N = computeLoopMotion(model, data, loops, q).basis;
+    return assessOnMotions(model, data, loops, q, forces, lambda, N);
+  }
+
+  StabilityReport assessOnMotions(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces,
+    const Eigen::VectorXd & lambda,
+    const Eigen::MatrixXd & N)
+  {
     const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
     // The reactions' stiffness d(J^T lambda)/dq along the allowed motions, lambda held.
     const double h = 1e-6;
@@ -383,6 +415,138 @@ namespace pinsettle
     report.softest_direction = N * report.softest_direction;
     report.basis = N;
     return report;
+  }
+
+  StopBalance balanceStops(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const JointStops & stops,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau)
+  {
+    // Joints on a stop: their reactions mu (side * mu >= 0) enter as P E^T mu, P the projector
+    // onto the allowed motions; a stop that would pull is let go and the others solved again.
+    struct OnStop
+    {
+      const JointStops::Stop * stop;
+      StopSide side;
+      bool active;
+    };
+    std::vector<OnStop> on;
+    for (const JointStops::Stop & s : stops.stops())
+    {
+      if (q[s.iq] <= s.lower)
+        on.push_back(OnStop{&s, StopSide::Lower, true});
+      else if (q[s.iq] >= s.upper)
+        on.push_back(OnStop{&s, StopSide::Upper, true});
+    }
+    StopBalance balance;
+    balance.unbalanced = tau;
+    Eigen::VectorXd mu;
+    if (!on.empty())
+    {
+      const Eigen::MatrixXd N = computeLoopMotion(model, data, loops, q).basis;
+      for (std::size_t pass = 0; pass <= on.size(); ++pass)
+      {
+        std::vector<std::size_t> active;
+        for (std::size_t k = 0; k < on.size(); ++k)
+          if (on[k].active)
+            active.push_back(k);
+        Eigen::MatrixXd B(model.nv, static_cast<Eigen::Index>(active.size()));
+        for (std::size_t c = 0; c < active.size(); ++c)
+          B.col(static_cast<Eigen::Index>(c)) =
+            N * N.row(on[active[c]].stop->iv).transpose(); // P e_i
+        mu = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(on.size()));
+        if (!active.empty())
+        {
+          const Eigen::VectorXd x = B.completeOrthogonalDecomposition().solve(tau);
+          for (std::size_t c = 0; c < active.size(); ++c)
+            mu[static_cast<Eigen::Index>(active[c])] = x[static_cast<Eigen::Index>(c)];
+          balance.unbalanced = tau - B * x;
+        }
+        // Let go of the stop that pulls hardest, if any.
+        std::size_t worst = on.size();
+        double worst_pull = 0.;
+        for (const std::size_t k : active)
+        {
+          const double sign = on[k].side == StopSide::Lower ? 1. : -1.;
+          const double pull = -sign * mu[static_cast<Eigen::Index>(k)];
+          if (pull > worst_pull)
+          {
+            worst_pull = pull;
+            worst = k;
+          }
+        }
+        if (worst == on.size())
+          break;
+        on[worst].active = false;
+      }
+    }
+    for (std::size_t k = 0; k < on.size(); ++k)
+    {
+      const double sign = on[k].side == StopSide::Lower ? 1. : -1.;
+      balance.contacts.push_back(
+        StopContact{
+          on[k].stop->joint, on[k].side,
+          on[k].active ? std::max(0., sign * mu[static_cast<Eigen::Index>(k)]) : 0.});
+    }
+    balance.residual = balance.unbalanced.lpNorm<Eigen::Infinity>();
+    return balance;
+  }
+
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const JointStops & stops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    // The loop reactions lambda of the rest: J^T lambda = tau - E^T mu, the stops' reactions
+    // mu taken out first.
+    const Eigen::VectorXd tau_net = computeStaticForce(model, data, loops, q, forces);
+    const StopBalance balance = balanceStops(model, data, loops, stops, q, tau_net);
+    Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+    const double tolerance = 1e-9 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
+    std::vector<Eigen::Index> held;
+    for (const StopContact & c : balance.contacts)
+      if (c.reaction > tolerance)
+      {
+        const Eigen::Index iv = model.idx_vs[c.joint];
+        held.push_back(iv);
+        tau[iv] -= c.side == StopSide::Lower ? c.reaction : -c.reaction;
+      }
+    const Eigen::MatrixXd J = computeLoopJacobian(model, data, loops, q);
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Eigen::Index rank = svdRank(svd);
+    const Eigen::VectorXd lambda = svd.matrixU().leftCols(rank)
+                                   * (svd.matrixV().leftCols(rank).transpose() * tau)
+                                       .cwiseQuotient(svd.singularValues().head(rank));
+    // The motions the loops allow that keep the held joints still: N times the null space of
+    // the held rows of N.
+    const Eigen::MatrixXd N = svd.matrixV().rightCols(model.nv - rank);
+    Eigen::MatrixXd motions = N;
+    if (!held.empty())
+    {
+      Eigen::MatrixXd rows(static_cast<Eigen::Index>(held.size()), N.cols());
+      for (std::size_t k = 0; k < held.size(); ++k)
+        rows.row(static_cast<Eigen::Index>(k)) = N.row(held[k]);
+      Eigen::JacobiSVD<Eigen::MatrixXd> held_svd(rows, Eigen::ComputeFullV);
+      const Eigen::Index held_rank = svdRank(held_svd);
+      motions = N * held_svd.matrixV().rightCols(N.cols() - held_rank);
+    }
+    if (motions.cols() == 0)
+    {
+      // Every motion is held: the rest is stable, as for a tree whose joints all rest on stops.
+      StabilityReport report;
+      report.verdict = Stability::Stable;
+      report.basis = motions;
+      report.stiffness.resize(0, 0);
+      report.softest_direction = Eigen::VectorXd::Zero(model.nv);
+      return report;
+    }
+    return assessOnMotions(model, data, loops, q, forces, lambda, motions);
   }
 
   TimeScale computeTimeScale(
@@ -496,12 +660,16 @@ namespace pinsettle
       data.v[i] = data.oMi[i].actInv(data.ov[i]);
   }
 
-  double LoopStepper::project(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v)
+  double LoopStepper::project(
+    pinocchio::Data & data,
+    Eigen::VectorXd & q,
+    Eigen::VectorXd & v,
+    const std::vector<Eigen::Index> * pinned)
   {
     Impl & d = *impl_;
     const double left = gaussNewton(
       d.model, data, d.loops, q, 1e-13, 10, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
-      d.work_a, d.work_b);
+      d.work_a, d.work_b, pinned);
     // v <- v - J^+ J v: the nearest velocity the loops allow.
     const Eigen::Index rank = svdRank(d.svd);
     d.error_next.noalias() = d.J * v;

@@ -24,14 +24,15 @@ namespace pinsettle
     abort_ = abort ? &abort : nullptr;
   }
 
-  bool RunClock::mustStop(Status & status) const
+  bool RunClock::mustStop(RunProgress & progress, Status & status) const
   {
-    if (check_clock_ && elapsed() > max_time_)
+    progress.wall_time = elapsed();
+    if (check_clock_ && progress.wall_time > max_time_)
     {
       status = Status::TimeLimit;
       return true;
     }
-    if (abort_ != nullptr && (*abort_)())
+    if (abort_ != nullptr && (*abort_)(progress))
     {
       status = Status::Aborted;
       return true;
@@ -89,9 +90,10 @@ namespace pinsettle
     return true;
   }
 
-  void RunawayMonitor::start(Eigen::Index nv, std::int64_t first_sample)
+  void RunawayMonitor::start(Eigen::Index nv, std::int64_t first_sample, double floor)
   {
     first_sample_ = first_sample;
+    floor_ = floor;
     drift_.setZero(nv);
     reset(0, 0.);
   }
@@ -104,6 +106,7 @@ namespace pinsettle
     removed_ = 0.;
     switch_loss_ = 0.;
     released_sample_ = 0.;
+    increment_sample_ = 0.;
     drift_sample_ = 0.;
     growing_ = 0;
     drift_.setZero();
@@ -112,12 +115,15 @@ namespace pinsettle
   bool RunawayMonitor::sample(double e)
   {
     const double released = e - e_reset_ + removed_ + switch_loss_;
+    const double increment = released - released_sample_;
     const double drift = drift_.lpNorm<Eigen::Infinity>();
-    growing_ = released_sample_ > 0. && released >= kRunawayRatio * released_sample_
-                   && drift_sample_ > 0. && drift >= kRunawayRatio * drift_sample_
+    growing_ = increment > floor_ && increment_sample_ > 0.
+                   && increment >= kRunawayRatio * increment_sample_ && drift_sample_ > 0.
+                   && drift >= kRunawayRatio * drift_sample_
                  ? growing_ + 1
                  : 0;
     released_sample_ = released;
+    increment_sample_ = increment;
     drift_sample_ = drift;
     next_sample_ *= 2;
     return growing_ >= kRunawayDoublings;

@@ -46,6 +46,22 @@ namespace pinsettle
     return "unknown";
   }
 
+  const char * toString(EventKind kind)
+  {
+    switch (kind)
+    {
+    case EventKind::Damping:
+      return "damping";
+    case EventKind::Push:
+      return "push";
+    case EventKind::Rollback:
+      return "rollback";
+    case EventKind::Impact:
+      return "impact";
+    }
+    return "unknown";
+  }
+
   namespace
   {
     template<typename T>

@@ -19,9 +19,22 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 
 namespace pinsettle
 {
+
+  namespace
+  {
+    // "joint 'name'" of the joint that owns tangent coordinate iv (index in model.nv).
+    std::string jointOfCoordinate(const pinocchio::Model & model, Eigen::Index iv)
+    {
+      for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+        if (iv >= model.idx_vs[j] && iv < model.idx_vs[j] + model.nvs[j])
+          return "joint '" + model.names[j] + "'";
+      return "coordinate " + std::to_string(iv);
+    }
+  } // namespace
 
   void checkConfiguration(
     const pinocchio::Model & model, const Eigen::VectorXd & q, const char * name)
@@ -160,11 +173,7 @@ namespace pinsettle
     {
       if (&stops_->model() != &model)
         throw std::invalid_argument("stops: they were made for another model than the solver's");
-      if (loops_ != nullptr)
-        throw std::invalid_argument(
-          "joint stops on a mechanism with loops are not supported yet: solve it without stops "
-          "(a scene's [model] limits = false)");
-      hold_.reset(new StopHold(*stops_));
+      hold_.reset(new StopHold(*stops_, loops_));
     }
   }
 
@@ -172,13 +181,21 @@ namespace pinsettle
 
   Eigen::VectorXd Solver::staticForce(const Eigen::VectorXd & q, const ForceModel * forces)
   {
+    return staticForceIn(data, q, forces);
+  }
+
+  Eigen::VectorXd Solver::staticForceIn(
+    pinocchio::Data & scratch, const Eigen::VectorXd & q, const ForceModel * forces) const
+  {
     if (loops_ != nullptr)
-      return computeStaticForce(model_, data, *loops_, q, forces);
-    return computeStaticForce(model_, data, q, forces);
+      return computeStaticForce(model_, scratch, *loops_, q, forces);
+    return computeStaticForce(model_, scratch, q, forces);
   }
 
   StabilityReport Solver::assess(const Eigen::VectorXd & q, const ForceModel * forces)
   {
+    if (loops_ != nullptr && stops_ != nullptr)
+      return assessStability(model_, data, *loops_, *stops_, q, forces);
     if (loops_ != nullptr)
       return assessStability(model_, data, *loops_, q, forces);
     if (stops_ != nullptr)
@@ -206,6 +223,9 @@ namespace pinsettle
     Result result;
     start(q0, v0, settings, forces, result);
     clock.configure(settings, abort);
+    RunProgress progress;
+    progress.compute_residual = [this]() { return progressResidual(); };
+    double energy = 0.; // of the last step, for the progress
 
     // A run that stops after evaluating the dynamics of a step counts that step.
     Status status = Status::MaxSteps;
@@ -213,11 +233,14 @@ namespace pinsettle
     {
       if (clock.isDue(step_))
       {
-        if (clock.mustStop(status))
+        if (abort)
+          measureProgress(energy, result, progress);
+        if (clock.mustStop(progress, status))
           break;
         reestimateStep();
       }
       const StepEnergies e = evaluateDynamics();
+      energy = e.exact;
       if (guard_.isDiverging(e.exact, e.simplified, data.ddq, peaks_.hasPrevious()))
       {
         if (rollBack(result))
@@ -267,6 +290,39 @@ namespace pinsettle
     return result;
   }
 
+  void Solver::closeLoopsOnStops()
+  {
+    findJointsOnStops(*stops_, q_, on_stops_);
+    const double left = projectOntoLoops(model_, data, *loops_, q_, 1e-13, 100, &on_stops_);
+    if (!(left <= 1e-10))
+    {
+      std::ostringstream msg;
+      msg << "cannot close the loops with the joints moved onto their stops held there (";
+      for (std::size_t k = 0; k < on_stops_.size(); ++k)
+        msg << (k > 0 ? ", " : "") << jointOfCoordinate(model_, on_stops_[k]);
+      msg << "): they stay " << left
+          << " (m or rad) open; give a start inside the limits from which the loops close";
+      throw std::invalid_argument(msg.str());
+    }
+    stepper_->project(data, q_, v_, &on_stops_); // and a velocity they allow
+  }
+
+  void Solver::measureProgress(double energy, const Result & result, RunProgress & progress)
+  {
+    progress.steps = step_;
+    progress.sim_time = time_;
+    progress.kinetic_energy = energy;
+    progress.peaks = result.peaks;
+  }
+
+  double Solver::progressResidual()
+  {
+    // In a Data of its own: the run's scratch carries state between steps.
+    if (!progress_data_)
+      progress_data_ = std::make_unique<pinocchio::Data>(model_);
+    return residualOf(q_, staticForceIn(*progress_data_, q_, forces_));
+  }
+
   void Solver::start(
     const Eigen::VectorXd & q0,
     const Eigen::VectorXd & v0,
@@ -300,15 +356,19 @@ namespace pinsettle
     impacts_ = 0;
     if (stops_ != nullptr)
     {
+      hits_.reserve(stops_->stops().size());
+      on_stops_.reserve(stops_->stops().size());
       clampToStops(*stops_, q_, &result.start_clamped);
       enforceStops(*stops_, q_, v_);
+      if (loops_ != nullptr && !result.start_clamped.empty())
+        closeLoopsOnStops();
     }
 
     peaks_ = PeakDetector(settings.err);
     window_ = StoppingWindow(settings.ds, settings.max_e);
     rest_.start(settings.ds, std::max(10. * settings.max_e, 1e-30), settings.energy);
     trace_.start(settings);
-    runaway_.start(model_.nv, settings.ds);
+    runaway_.start(model_.nv, settings.ds, std::max(10. * settings.max_e, 1e-30));
     step_control_.start(settings, forces);
     if (step_control_.isAutomatic())
       runaway_.addSwitchLoss(step_control_.estimate(data, q_, v_, step_));
@@ -407,9 +467,13 @@ namespace pinsettle
     std::ostringstream msg;
     msg.precision(3);
     msg << "the potential energy falls without bound: " << runaway_.released() << " J released and "
-        << runaway_.drift() << " (rad or m) travelled in " << runaway_.stepsSinceReset(step_)
-        << " steps with kt = 0, both growing at least " << RunawayMonitor::kRunawayRatio
-        << "x per doubling of the run " << RunawayMonitor::kRunawayDoublings << " times in a row";
+        << runaway_.drift() << " (rad or m) travelled by "
+        << jointOfCoordinate(model_, runaway_.furthestCoordinate()) << " in "
+        << runaway_.stepsSinceReset(step_)
+        << " steps with kt = 0, the energy released per doubling of the run and the distance both "
+           "growing at least "
+        << RunawayMonitor::kRunawayRatio << "x, " << RunawayMonitor::kRunawayDoublings
+        << " times in a row";
     result.reason = msg.str();
     return true;
   }
@@ -466,18 +530,27 @@ namespace pinsettle
     if (!q_next_.allFinite() || !v_.allFinite())
       return false;
     q_.swap(q_next_);
-    if (loops_ != nullptr) // back onto the loops, and a velocity they allow
+    if (loops_ != nullptr && stops_ == nullptr) // back onto the loops, and a velocity they allow
       stepper_->project(data, q_, v_);
     if (stops_ != nullptr)
     {
       // A joint past a stop at every step is not motion but chatter (each step crosses the
       // range, and the impacts keep the energy at zero): roll back with the step halved, as
       // for a blow-up.
-      impacts_ = enforceStops(*stops_, q_, v_) ? impacts_ + 1 : 0;
+      hits_.clear(); // traced as impacts
+      impacts_ =
+        enforceStops(*stops_, q_, v_, trace_.isTracing() ? &hits_ : nullptr) ? impacts_ + 1 : 0;
+      for (const pinocchio::JointIndex joint : hits_)
+        trace_.event(step_, time_ + h, EventKind::Impact, joint);
       if (impacts_ >= DivergenceGuard::kBlowUpSteps)
       {
         impacts_ = 0;
         return false;
+      }
+      if (loops_ != nullptr) // back onto the loops with the joints on a stop kept there
+      {
+        findJointsOnStops(*stops_, q_, on_stops_);
+        stepper_->project(data, q_, v_, &on_stops_);
       }
     }
     runaway_.addMotion(dq_);
@@ -511,14 +584,20 @@ namespace pinsettle
     if (loops_ != nullptr)
       result.constraint_error =
         computeLoopError(model_, data, *loops_, result.q).lpNorm<Eigen::Infinity>();
-    if (stops_ != nullptr)
+    if (stops_ != nullptr && loops_ != nullptr)
+      result.stop_contacts =
+        balanceStops(model_, data, *loops_, *stops_, result.q, staticForce(result.q, forces_))
+          .contacts;
+    else if (stops_ != nullptr)
       result.stop_contacts = computeStopContacts(*stops_, result.q, staticForce(result.q, forces_));
     settings_ = nullptr;
     forces_ = nullptr;
   }
 
-  double Solver::residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau) const
+  double Solver::residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau)
   {
+    if (stops_ != nullptr && loops_ != nullptr)
+      return balanceStops(model_, data, *loops_, *stops_, q, tau).residual;
     if (stops_ != nullptr)
       return computeStopResidual(*stops_, q, tau);
     return tau.lpNorm<Eigen::Infinity>();
@@ -570,6 +649,11 @@ namespace pinsettle
         projectOntoLoops(model, data, *loops_, q_next);
       if (stops_ != nullptr)
         clampToStops(*stops_, q_next);
+      if (loops_ != nullptr && stops_ != nullptr)
+      {
+        findJointsOnStops(*stops_, q_next, on_stops_);
+        projectOntoLoops(model, data, *loops_, q_next, 1e-13, 50, &on_stops_);
+      }
       const Eigen::VectorXd tau_next = staticForce(q_next, forces);
       const double residual_next = residualOf(q_next, tau_next);
       if (!(residual_next < residual))

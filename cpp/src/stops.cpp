@@ -7,6 +7,8 @@
 
 #include <pinocchio/algorithm/crba.hpp>
 
+#include <Eigen/QR>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -120,25 +122,31 @@ namespace pinsettle
     return largest;
   }
 
-  bool enforceStops(const JointStops & stops, Eigen::VectorXd & q, Eigen::VectorXd & v)
+  bool enforceStops(
+    const JointStops & stops,
+    Eigen::VectorXd & q,
+    Eigen::VectorXd & v,
+    std::vector<pinocchio::JointIndex> * hits)
   {
     bool hit = false;
     for (const JointStops::Stop & s : stops.stops())
     {
       double & x = q[s.iq];
       double & rate = v[s.iv];
+      const bool past = x < s.lower || x > s.upper;
       if (x <= s.lower)
       {
-        hit = hit || x < s.lower;
         x = s.lower;
         rate = std::max(rate, 0.);
       }
       else if (x >= s.upper)
       {
-        hit = hit || x > s.upper;
         x = s.upper;
         rate = std::min(rate, 0.);
       }
+      if (past && hits != nullptr)
+        hits->push_back(s.joint);
+      hit = hit || past;
     }
     return hit;
   }
@@ -219,8 +227,18 @@ namespace pinsettle
     return report;
   }
 
-  StopHold::StopHold(const JointStops & stops)
+  void findJointsOnStops(
+    const JointStops & stops, const Eigen::VectorXd & q, std::vector<Eigen::Index> & iv)
+  {
+    iv.clear();
+    for (const JointStops::Stop & s : stops.stops())
+      if (q[s.iq] <= s.lower || q[s.iq] >= s.upper)
+        iv.push_back(s.iv);
+  }
+
+  StopHold::StopHold(const JointStops & stops, const LoopConstraints * loops)
   : stops_(stops)
+  , loops_(loops)
   {
   }
 
@@ -253,6 +271,8 @@ namespace pinsettle
 
     const pinocchio::Model & model = stops_.model();
     const Eigen::VectorXd free_acceleration = data.ddq;
+    if (loops_ != nullptr)
+      motions_ = computeLoopMotion(model, data, *loops_, q).basis;
     pinocchio::crba(model, data, q);
     mass_ = data.M.selfadjointView<Eigen::Upper>();
     if (added != nullptr && added->stiff_masses.size() > 0)
@@ -270,14 +290,17 @@ namespace pinsettle
     const std::size_t passes = 2 * resting_.size() + 2;
     for (std::size_t pass = 0; pass < passes; ++pass)
     {
-      solveHeld(held, a);
+      if (loops_ != nullptr)
+        solveHeldOnLoops(held, free_acceleration, a);
+      else
+        solveHeld(held, a);
       bool changed = false;
       for (std::size_t k = 0; k < resting_.size(); ++k)
       {
         const int i = resting_[k].first;
         const double side = resting_[k].second;
-        // The stop's force on the joint is M a - f; it may only push (side * force >= 0).
-        const bool release = held[k] && side * (mass_.row(i).dot(a) - force_[i]) < 0.;
+        // The stop may only push (side * force >= 0).
+        const bool release = held[k] && side * reactions_[static_cast<Eigen::Index>(k)] < 0.;
         const bool hold = !held[k] && side * a[i] < 0.;
         if (release || hold)
         {
@@ -313,12 +336,57 @@ namespace pinsettle
         mass_ff_(r, c) = mass_(free_[r], free_[c]);
     }
     a.setZero();
-    if (n == 0)
+    if (n > 0)
+    {
+      llt_.compute(mass_ff_);
+      llt_.solveInPlace(force_f_);
+      for (Eigen::Index r = 0; r < n; ++r)
+        a[free_[r]] = force_f_[r];
+    }
+    // The stop's force on a held joint is M a - f.
+    reactions_.setZero(static_cast<Eigen::Index>(resting_.size()));
+    for (std::size_t k = 0; k < resting_.size(); ++k)
+      if (held[k])
+      {
+        const int i = resting_[k].first;
+        reactions_[static_cast<Eigen::Index>(k)] = mass_.row(i).dot(a) - force_[i];
+      }
+  }
+
+  void StopHold::solveHeldOnLoops(
+    const std::vector<bool> & held, const Eigen::VectorXd & a_free, Eigen::VectorXd & a)
+  {
+    // Gauss's principle on the closed mechanism: a = a_free + N y, the held joints' rows
+    // G = E N y = -E a_free, y of least N^T M N norm: y = Mr^-1 G^T mu with
+    // (G Mr^-1 G^T) mu = -E a_free; mu are the stops' forces on the held joints.
+    const Eigen::MatrixXd & N = motions_;
+    std::vector<Eigen::Index> rows;
+    for (std::size_t k = 0; k < resting_.size(); ++k)
+      if (held[k])
+        rows.push_back(resting_[k].first);
+    const Eigen::Index h = static_cast<Eigen::Index>(rows.size());
+    reactions_.setZero(static_cast<Eigen::Index>(resting_.size()));
+    a = a_free;
+    if (h == 0 || N.cols() == 0)
       return;
-    llt_.compute(mass_ff_);
-    llt_.solveInPlace(force_f_);
-    for (Eigen::Index r = 0; r < n; ++r)
-      a[free_[r]] = force_f_[r];
+    const Eigen::MatrixXd reduced_mass = N.transpose() * mass_ * N;
+    const Eigen::LLT<Eigen::MatrixXd> llt(reduced_mass);
+    Eigen::MatrixXd G(h, N.cols());
+    Eigen::VectorXd target(h);
+    for (Eigen::Index r = 0; r < h; ++r)
+    {
+      G.row(r) = N.row(rows[static_cast<std::size_t>(r)]);
+      target[r] = -a_free[rows[static_cast<std::size_t>(r)]];
+    }
+    const Eigen::MatrixXd MrG = llt.solve(G.transpose());
+    // Held joints that the loops already tie together make the system singular: least norm.
+    const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(G * MrG);
+    const Eigen::VectorXd mu = cod.solve(target);
+    a.noalias() += N * (MrG * mu);
+    Eigen::Index r = 0;
+    for (std::size_t k = 0; k < resting_.size(); ++k)
+      if (held[k])
+        reactions_[static_cast<Eigen::Index>(k)] = mu[r++];
   }
 
 } // namespace pinsettle

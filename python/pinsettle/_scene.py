@@ -710,7 +710,6 @@ class Scene:
         stops = compiled.stops_for(self.limits if limits is None else as_flag(limits, "limits"))
         if stops is None or not force.size:
             return float(np.max(np.abs(force))) if force.size else 0.0
-        compiled.check_loops(stops)
         violation = np.abs(force)
         qr = q[compiled.q_index]
         for _, iq, iv, lower, upper in _core.joint_stops(compiled.model, stops)["stops"]:
@@ -883,32 +882,6 @@ class _Compiled:
         set_by_name = {lim.joint for _, lim in self._set_stops}
         equal: list[str] = _core.joint_stops(self.model, stops)["equal_limits"]
         return [name for name in equal if name not in set_by_name]
-
-    def check_loops(self, stops: tuple[bool, list[tuple[int, float, float]]] | None) -> None:
-        """Stops and loops together are not supported yet: an error naming the joints.
-
-        Raises:
-            SceneError: the scene has loops and at least one joint stop.
-        """
-        if not self.loops or stops is None:
-            return
-        joints = [name for name, *_ in _core.joint_stops(self.model, stops)["stops"]]
-        if not joints:
-            return
-        from_model = [name for name in joints if name in self._own_stops and stops[0]]
-        set_by_name = sorted(set(joints) - set(from_model))
-        what = []
-        if from_model:
-            what.append(
-                f"the model's limits of {', '.join(from_model)} (turn them off: limits=False, "
-                "or [model] limits = false in a scene file)"
-            )
-        if set_by_name:
-            what.append(f"the stops set on {', '.join(set_by_name)} (set_limit, [[limit]])")
-        raise SceneError(
-            "joint stops on a mechanism with loops are not supported yet: remove "
-            + " and ".join(what)
-        )
 
     def full_q(self, q: np.ndarray) -> np.ndarray:
         out: np.ndarray = self.q_ref.copy()
@@ -1256,6 +1229,4 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
                 "[[loop]]: the loops leave the mechanism no degree of freedom (every joint "
                 "motion would open a loop): it is a structure, with nothing to settle"
             )
-        compiled = scene.compile()
-        compiled.check_loops(compiled.stops)
     return scene

@@ -398,12 +398,35 @@ BOOST_AUTO_TEST_CASE(abort_callback_and_limits)
   pinsettle::Settings settings = tight();
   settings.check_every = 10;
   settings.dt = 1e-3; // 30 steps of 1 ms: still near the start
-  int calls = 0;
+  std::vector<pinsettle::RunProgress> seen;
+  std::vector<double> residuals;
   const pinsettle::Result aborted = solver.solve(
-    Eigen::VectorXd::Constant(1, 1.), settings, nullptr, [&]() { return ++calls == 3; });
+    Eigen::VectorXd::Constant(1, 1.), settings, nullptr, [&](const pinsettle::RunProgress & p) {
+      seen.push_back(p);
+      residuals.push_back(p.residual()); // computed now, at the state of this poll
+      return seen.size() == 3;
+    });
   BOOST_CHECK(aborted.status == pinsettle::Status::Aborted);
   BOOST_CHECK_EQUAL(aborted.steps, 30);
   BOOST_CHECK_GT(std::abs(aborted.q[0]), 0.5); // still swinging: the current state is kept
+
+  // The callback saw the run where it stood: steps, time, the last step's energy and the
+  // residual at the state it stopped in, recomputed here with Pinocchio.
+  BOOST_REQUIRE_EQUAL(seen.size(), 3u);
+  for (std::size_t k = 0; k < seen.size(); ++k)
+  {
+    BOOST_CHECK_EQUAL(seen[k].steps, 10 * std::int64_t(k + 1));
+    BOOST_CHECK_CLOSE(seen[k].sim_time, 1e-3 * static_cast<double>(seen[k].steps), 1e-9);
+    BOOST_CHECK_GT(seen[k].kinetic_energy, 0.);
+    BOOST_CHECK_LE(seen[k].wall_time, aborted.wall_time);
+  }
+  BOOST_CHECK_LT(seen[0].kinetic_energy, seen[2].kinetic_energy); // falling from rest
+  pinocchio::Data data(model);
+  const Eigen::VectorXd g = pinocchio::computeGeneralizedGravity(model, data, aborted.q);
+  BOOST_CHECK_CLOSE(residuals[2], g.lpNorm<Eigen::Infinity>(), 1e-9);
+  BOOST_CHECK(std::isnan(pinsettle::RunProgress().residual())); // no solver behind it
+  const double e_now = pinocchio::computeKineticEnergy(model, data, aborted.q, aborted.v);
+  BOOST_CHECK_CLOSE(seen[2].kinetic_energy, e_now, 10.); // the step before the last one
 
   settings.max_steps = 5;
   BOOST_CHECK(

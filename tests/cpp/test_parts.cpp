@@ -434,20 +434,28 @@ BOOST_AUTO_TEST_CASE(run_clock_stops_on_the_budget_and_on_the_callback)
   BOOST_CHECK(!clock.isDue(7));
   BOOST_CHECK(clock.isDue(16));
   pinsettle::Status status = pinsettle::Status::MaxSteps;
-  BOOST_CHECK(!clock.mustStop(status)); // no budget, no callback
+  pinsettle::RunProgress progress;
+  progress.steps = 16;
+  BOOST_CHECK(!clock.mustStop(progress, status)); // no budget, no callback
+  BOOST_CHECK_GE(progress.wall_time, 0.);         // the clock read for the callback
 
   int calls = 0;
-  const pinsettle::AbortCallback abort = [&calls]() { return ++calls >= 2; };
+  std::int64_t steps_seen = 0;
+  const pinsettle::AbortCallback abort = [&](const pinsettle::RunProgress & p) {
+    steps_seen = p.steps;
+    return ++calls >= 2;
+  };
   clock.configure(settings, abort);
-  BOOST_CHECK(!clock.mustStop(status));
-  BOOST_CHECK(clock.mustStop(status));
+  BOOST_CHECK(!clock.mustStop(progress, status));
+  BOOST_CHECK(clock.mustStop(progress, status));
   BOOST_CHECK(status == pinsettle::Status::Aborted);
+  BOOST_CHECK_EQUAL(steps_seen, 16);
 
   settings.max_time = 1e-3;
   pinsettle::RunClock timed;
   timed.configure(settings, pinsettle::AbortCallback());
   std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  BOOST_CHECK(timed.mustStop(status));
+  BOOST_CHECK(timed.mustStop(progress, status));
   BOOST_CHECK(status == pinsettle::Status::TimeLimit);
   BOOST_CHECK_GE(timed.elapsed(), 5e-3);
 }

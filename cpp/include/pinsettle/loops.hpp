@@ -7,6 +7,7 @@
 
 #include "pinsettle/forces.hpp"
 #include "pinsettle/stability.hpp"
+#include "pinsettle/stops.hpp"
 
 #include <string>
 #include <vector>
@@ -157,6 +158,8 @@ namespace pinsettle
   /// \param[in,out] q The joint configuration (dim model.nq).
   /// \param[in] tolerance Stop once max |e| <= tolerance (m or rad).
   /// \param[in] max_iterations Most Gauss-Newton steps.
+  /// \param[in] pinned Indices in v of 1-DoF joints that must not move (joints on a stop), or
+  ///            nullptr.
   /// \return The largest constraint error left (m or rad).
   ///
   double projectOntoLoops(
@@ -165,7 +168,8 @@ namespace pinsettle
     const LoopConstraints & loops,
     Eigen::VectorXd & q,
     double tolerance = 1e-13,
-    int max_iterations = 50);
+    int max_iterations = 50,
+    const std::vector<Eigen::Index> * pinned = nullptr);
 
   ///
   /// \brief Assemble the loops from a start configuration, or say why it cannot be done.
@@ -211,6 +215,50 @@ namespace pinsettle
     const pinocchio::Model & model,
     pinocchio::Data & data,
     const LoopConstraints & loops,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces = nullptr);
+
+  ///
+  /// \brief Loops and stops together: the stops' share of the net static force of the closed
+  /// mechanism at q.
+  ///
+  struct StopBalance
+  {
+    /// What neither the loops nor the stops balance (dim model.nv, N m or N): P (tau - E^T mu)
+    /// with P the projector of computeStaticForce and mu the reactions below.
+    Eigen::VectorXd unbalanced;
+    /// Every joint on a stop at q, with its reaction (>= 0; 0 when the stop would have to pull).
+    std::vector<StopContact> contacts;
+    /// |unbalanced|_inf: the residual of a rest against stops on a closed mechanism.
+    double residual = 0.;
+  };
+
+  ///
+  /// \brief The stops' reactions that best balance the net static force of the closed mechanism
+  /// (least squares over the motions the loops allow), each pushing only away from its stop: a
+  /// stop that would have to pull is let go and the rest solved again.
+  ///
+  /// \param[in] q The joint configuration (dim model.nq), on the loops and inside the stops.
+  /// \param[in] tau The net static force P tau of computeStaticForce with loops (dim model.nv).
+  ///
+  StopBalance balanceStops(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const JointStops & stops,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau);
+
+  ///
+  /// \brief Stability of a rest of a closed mechanism against stops: the stiffness of
+  /// assessStability with loops restricted further to the motions that keep the joints whose
+  /// stop pushes (reaction above 1e-9 of the largest static force) on it.
+  ///
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const LoopConstraints & loops,
+    const JointStops & stops,
     const Eigen::VectorXd & q,
     const ForceModel * forces = nullptr);
 

@@ -12,14 +12,39 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <vector>
 
 namespace pinsettle
 {
 
-  /// \brief Called every Settings::check_every steps; returning true stops the run with
-  /// Status::Aborted and keeps the current state.
-  typedef std::function<bool()> AbortCallback;
+  /// \brief Where a run stands, as the callback sees it.
+  struct RunProgress
+  {
+    /// Steps taken so far.
+    std::int64_t steps = 0;
+    /// Simulated time (s).
+    double sim_time = 0.;
+    /// Kinetic energy of the last step (J, the real bodies).
+    double kinetic_energy = 0.;
+    /// Damping events so far.
+    std::int64_t peaks = 0;
+    /// Wall time since the run started (s).
+    double wall_time = 0.;
+    /// Computes the residual at the current configuration; set by the solver.
+    std::function<double()> compute_residual;
+
+    /// \brief Residual at the current configuration (N m or N, as Result::residual), computed
+    /// when asked (a static force), NaN without a solver behind it.
+    double residual() const
+    {
+      return compute_residual ? compute_residual() : std::numeric_limits<double>::quiet_NaN();
+    }
+  };
+
+  /// \brief Called every Settings::check_every steps with the run's progress; returning true
+  /// stops the run with Status::Aborted and keeps the current state.
+  typedef std::function<bool(const RunProgress &)> AbortCallback;
 
   ///
   /// \brief The wall clock and the abort callback, polled every Settings::check_every steps.
@@ -41,10 +66,12 @@ namespace pinsettle
 
     ///
     /// \brief Poll the clock, then the callback.
+    /// \param[in,out] progress The run's progress, given to the callback (its wall_time is
+    ///                 set here).
     /// \param[out] status Status::TimeLimit or Status::Aborted when the run must stop.
     /// \return Whether the run must stop.
     ///
-    bool mustStop(Status & status) const;
+    bool mustStop(RunProgress & progress, Status & status) const;
 
     /// \brief Seconds since the clock started.
     double elapsed() const;
@@ -132,21 +159,27 @@ namespace pinsettle
   /// last reset (kinetic energy gained plus energy taken out) and the net motion since then,
   /// sampled at doublings of the run length.
   ///
-  /// When both grow by kRunawayRatio or more over kRunawayDoublings doublings in a row, the
-  /// potential falls without bound along the motion; a mechanism ringing in place stays put.
+  /// When the energy released over each doubling of the run and the net motion both grow by
+  /// kRunawayRatio or more, kRunawayDoublings doublings in a row, the potential falls without
+  /// bound along the motion; a mechanism ringing in place stays put, and one settling in a well
+  /// releases less and less. The release per doubling (not the total) is what sees a runaway in
+  /// part of a mechanism: a free finger sliding off an arm that first released a lot in its
+  /// own well (the total then grows too slowly for long).
   ///
   class RunawayMonitor
   {
   public:
     static constexpr double kRunawayRatio = 1.5;
-    static constexpr int kRunawayDoublings = 10;
+    static constexpr int kRunawayDoublings = 8;
 
     ///
     /// \brief Start a run: sizes the memory of the net motion.
     /// \param[in] nv Tangent dimension (model.nv).
     /// \param[in] first_sample Steps from a reset to the first sample (Settings::ds).
+    /// \param[in] floor Energy (J) a doubling must release to count at all: round-off creep
+    ///            along a neutral direction releases ever more of almost nothing.
     ///
-    void start(Eigen::Index nv, std::int64_t first_sample);
+    void start(Eigen::Index nv, std::int64_t first_sample, double floor = 0.);
 
     /// \brief Start counting again at step, with the kinetic energy e (J) there.
     void reset(std::int64_t step, double e);
@@ -179,8 +212,8 @@ namespace pinsettle
     ///
     /// \brief Take a sample; call when isDue(step).
     /// \param[in] e The kinetic energy now (J, the stiff modes' added inertia included).
-    /// \return Whether both the released energy and the net motion grew kRunawayDoublings times
-    ///         in a row: a runaway.
+    /// \return Whether both the energy released per doubling and the net motion grew
+    ///         kRunawayDoublings times in a row: a runaway.
     ///
     bool sample(double e);
 
@@ -194,6 +227,14 @@ namespace pinsettle
     {
       return drift_sample_;
     }
+    /// \brief The tangent coordinate (index in model.nv) that has moved furthest since the reset.
+    Eigen::Index furthestCoordinate() const
+    {
+      Eigen::Index k = 0;
+      if (drift_.size() > 0)
+        drift_.cwiseAbs().maxCoeff(&k);
+      return k;
+    }
     std::int64_t stepsSinceReset(std::int64_t step) const
     {
       return step - reset_step_;
@@ -202,7 +243,7 @@ namespace pinsettle
   private:
     std::int64_t first_sample_ = 1, reset_step_ = 0, next_sample_ = 1;
     double e_reset_ = 0., removed_ = 0., switch_loss_ = 0., released_sample_ = 0.,
-           drift_sample_ = 0.;
+           increment_sample_ = 0., drift_sample_ = 0., floor_ = 0.;
     int growing_ = 0;
     // Net motion since the reset in tangent coordinates (a continuous joint unwrapped).
     Eigen::VectorXd drift_;
@@ -290,11 +331,17 @@ namespace pinsettle
     void sample(
       std::int64_t step, double time, double e_exact, double e_simple, const Eigen::VectorXd & q);
 
-    /// \brief Record a velocity event (when tracing).
-    void event(std::int64_t step, double time, EventKind kind)
+    /// \brief Record a velocity event (when tracing); joint for an impact.
+    void event(std::int64_t step, double time, EventKind kind, pinocchio::JointIndex joint = 0)
     {
       if (tracing_)
-        events_.push_back(TraceEvent{step, time, kind});
+        events_.push_back(TraceEvent{step, time, kind, joint});
+    }
+
+    /// \brief Whether this run is traced.
+    bool isTracing() const
+    {
+      return tracing_;
     }
 
     /// \brief Hand the trace over to the result.

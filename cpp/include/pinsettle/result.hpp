@@ -61,7 +61,9 @@ namespace pinsettle
     /// Rest on an unstable equilibrium: pushed along the most negative stiffness direction.
     Push,
     /// Divergence guard: back to the last good state with the step halved.
-    Rollback
+    Rollback,
+    /// Joint stop: a joint crossed its stop and was put on it, its velocity into it removed.
+    Impact
   };
 
   /// \brief A velocity change, recorded while tracing (Settings::trace_every > 0).
@@ -72,7 +74,12 @@ namespace pinsettle
     /// Simulated time (s).
     double time;
     EventKind kind;
+    /// The joint that hit its stop (EventKind::Impact), else 0.
+    pinocchio::JointIndex joint = 0;
   };
+
+  /// \brief snake_case name of an event kind: "damping", "push", "rollback", "impact".
+  const char * toString(EventKind kind);
 
   ///
   /// \brief Outcome of a kinetic-damping solve.

@@ -177,6 +177,7 @@ namespace pinsettle
       const ForceModel * forces,
       Result & result);
     void assemble(Result & result);
+    void closeLoopsOnStops();
     void reestimateStep();
     StepEnergies evaluateDynamics();
     void restartStretch();
@@ -187,8 +188,10 @@ namespace pinsettle
     void damp(const StepEnergies & e, Result & result);
     bool integrate();
     double residualAt(const Eigen::VectorXd & q, const ForceModel * forces);
-    double residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau) const;
+    double residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau);
     void finish(Status status, Result & result);
+    void measureProgress(double energy, const Result & result, RunProgress & progress);
+    double progressResidual();
 
     // Newton steps from the converged result.q; keeps them only if the rest stays of the same
     // kind (report) and close.
@@ -196,6 +199,8 @@ namespace pinsettle
 
     // Static force, stiffness report and projections of the closed mechanism (loops or not).
     Eigen::VectorXd staticForce(const Eigen::VectorXd & q, const ForceModel * forces);
+    Eigen::VectorXd staticForceIn(
+      pinocchio::Data & scratch, const Eigen::VectorXd & q, const ForceModel * forces) const;
     StabilityReport assess(const Eigen::VectorXd & q, const ForceModel * forces);
 
     const pinocchio::Model & model_;
@@ -203,6 +208,9 @@ namespace pinsettle
     std::unique_ptr<LoopStepper> stepper_;
     const JointStops * stops_;
     std::unique_ptr<StopHold> hold_;
+    std::unique_ptr<pinocchio::Data> progress_data_; // made on the first progress report
+    std::vector<pinocchio::JointIndex> hits_;        // joints that hit a stop in a step
+    std::vector<Eigen::Index> on_stops_;             // indices in v of joints on a stop
 
     // The run in progress: its inputs and where it is.
     const Settings * settings_ = nullptr;

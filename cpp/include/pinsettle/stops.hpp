@@ -15,6 +15,7 @@
 
 namespace pinsettle
 {
+  class LoopConstraints;
 
   /// \brief Which side of its range a joint rests against.
   enum class StopSide
@@ -126,9 +127,22 @@ namespace pinsettle
   ///
   /// \param[in,out] q The configuration (dim model.nq).
   /// \param[in,out] v The joint velocity (dim model.nv).
+  /// \param[out] hits When given, the joints that were past a stop are appended to it.
   /// \return Whether a joint was past a stop.
   ///
-  bool enforceStops(const JointStops & stops, Eigen::VectorXd & q, Eigen::VectorXd & v);
+  bool enforceStops(
+    const JointStops & stops,
+    Eigen::VectorXd & q,
+    Eigen::VectorXd & v,
+    std::vector<pinocchio::JointIndex> * hits = nullptr);
+
+  ///
+  /// \brief The joints exactly on a stop at q.
+  ///
+  /// \param[out] iv Their indices in v (cleared first).
+  ///
+  void findJointsOnStops(
+    const JointStops & stops, const Eigen::VectorXd & q, std::vector<Eigen::Index> & iv);
 
   ///
   /// \brief The joints resting on a stop at q and the stops' reactions, from the static force.
@@ -192,7 +206,12 @@ namespace pinsettle
   class StopHold
   {
   public:
-    explicit StopHold(const JointStops & stops);
+    ///
+    /// \param[in] loops Loop closures of the mechanism, or nullptr: with loops the held motion is
+    ///            the one of the closed mechanism (a = a_free + N y, N the motions the loops
+    ///            allow, y of least kinetic metric N^T M N, with the held joints' a at zero).
+    ///
+    explicit StopHold(const JointStops & stops, const LoopConstraints * loops = nullptr);
 
     ///
     /// \brief Replace the free acceleration data.ddq by the held one.
@@ -209,10 +228,17 @@ namespace pinsettle
       const TimeScale * added);
 
   private:
-    // The acceleration with the held joints' at zero: M_ff a_f = f_f.
+    // The acceleration with the held joints' at zero, M_ff a_f = f_f, and the stops' forces
+    // (reactions_, one per resting joint, 0 for those not held).
     void solveHeld(const std::vector<bool> & held, Eigen::VectorXd & a);
+    // The same for the closed mechanism, on the motions the loops allow (motions_).
+    void solveHeldOnLoops(
+      const std::vector<bool> & held, const Eigen::VectorXd & a_free, Eigen::VectorXd & a);
 
     const JointStops & stops_;
+    const LoopConstraints * loops_;
+    Eigen::MatrixXd motions_;
+    Eigen::VectorXd reactions_;
     // Joints resting on a stop: (index in v, +1 lower stop / -1 upper stop).
     std::vector<std::pair<int, double>> resting_;
     std::vector<int> free_;

@@ -489,6 +489,19 @@ def test_missing_extra_is_a_clear_message(missing, call, extra):
     assert f"pip install '{extra}'" in out.stdout, out.stderr
 
 
+def test_sweep_layers():
+    """The cases below the cluster below the plan below the command (docs/architecture.md)."""
+    from test_imports import PACKAGE, package_graph
+
+    graph = package_graph(PACKAGE)
+    assert {"_sweep", "_sweep_cluster", "_sweep_cli"}.isdisjoint(graph["_sweep_cases"])
+    assert {"_sweep", "_sweep_cli"}.isdisjoint(graph["_sweep_cluster"])
+    assert "_sweep_cli" not in graph["_sweep"] and "_sweep_cases" in graph["_sweep"]
+    # Nothing below the sweep imports it: solving never loads it for pandas or Dask.
+    for low in ("_checks", "_settings", "_scene", "_solve", "robots", "scenes"):
+        assert not {m for m in graph[low] if m.startswith("_sweep")}, low
+
+
 @pytest.mark.parametrize("name", pinsettle.scene_names())
 def test_scenes_travel_as_data(name):
     # What a Dask worker rebuilds from the scene's data is the same scene: same model, same
@@ -560,6 +573,7 @@ def test_cluster_reruns_the_cases_of_a_worker_that_dies(cluster):
     local = pinsettle.sweep(scene, starts=("random", 40, 5), progress=False)
     # Every case once, each the same as on this machine.
     assert list(remote["case"]) == list(range(40))
+    assert (remote["error"] == "").all(), remote["error"].unique()
     assert_frame_equal(without_times(local), without_times(remote))
     cluster.wait_for_workers(2, timeout=60)  # the nanny starts a new one
 
@@ -612,6 +626,40 @@ def test_cluster_marks_the_cases_dask_gives_up_on():
     local = pinsettle.sweep(bistable(), starts=("random", 12, 1), progress=False)
     local = local.set_index("case").loc[fine["case"]].reset_index()
     assert_frame_equal(without_times(local), without_times(fine.reset_index(drop=True)))
+
+
+def test_cluster_left_without_workers_marks_the_cases_left(monkeypatch):
+    from pinsettle import _sweep_cluster
+
+    monkeypatch.setattr(_sweep_cluster, "NO_WORKER_TIMEOUT", 1.0)
+    spec = distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    )
+    client = distributed.Client(spec, set_as_default=False)
+    gone = []
+
+    def remove_the_workers(done: int, total: int) -> None:
+        if not gone:
+            gone.append(done)
+            spec.scale(0)
+
+    try:
+        df = pinsettle.sweep(
+            pinsettle.load_scene(pinsettle.scene_path("ur5")),
+            starts=("random", 40, 1),
+            client=client,
+            chunk_size=2,
+            progress=remove_the_workers,
+        )
+    finally:
+        client.close()
+        spec.close()
+    assert list(df["case"]) == list(range(40))  # every case: solved, or marked
+    marked = df[df["status"] == "error"]
+    assert len(marked) > 0, marked["error"].unique()
+    reasons = "no worker left on the cluster|the cluster dropped this case"
+    assert marked["error"].str.fullmatch(reasons + r"( \(its task was cancelled there\))?").all()
+    assert (df.drop(marked.index)["status"] == "converged").all()
 
 
 def _silent_port() -> tuple[socket.socket, int]:

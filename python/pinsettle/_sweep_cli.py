@@ -232,20 +232,16 @@ def _print_summary(df: Any, info: dict[str, Any]) -> None:
             print(f"  ... {len(rests) - 10} more")
     else:
         per = [sum(1 for r in rests if tuple(r.get(c) for c in varied) == g) for g in groups]
-        print(
-            f"rests    {min(per)} to {max(per)} distinct for each of the {len(groups)} values "
-            "of the varied keys"
-        )
+        count = f"{min(per)}" if min(per) == max(per) else f"{min(per)} to {max(per)}"
+        print(f"rests    {count} distinct at each of the {len(groups)} values of the varied keys")
     if "jump" in df.columns:
         jumps = info["jumps"]
         text = ", ".join(
             f"case {j['case']} (" + ", ".join(f"{c} = {j[c]:.6g}" for c in j if c != "case") + ")"
             for j in jumps[:10]
         )
-        print(
-            f"jumps    {len(jumps)}"
-            + (f": {text}" if jumps else " (the rest stayed on its branch)")
-        )
+        found = f": {text}" if jumps else " (each rest stayed on its branch)"
+        print(f"jumps    {len(jumps)}{found}")
     if info["out"]:
         print(f"wrote    {info['out']} ({len(df)} rows)")
     elif len(df) <= 30:

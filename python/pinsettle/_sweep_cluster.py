@@ -1,9 +1,11 @@
 """Sweeps on a Dask cluster: the cases go to the workers in chunks, the scene as data.
 
-The scene travels as a pickle of plain data (``_sweep.scene_data``: the ``pinocchio.Model``,
-which pickles, and the element lists), sent once to every worker (``Client.scatter``); a worker
-rebuilds the scene once per sweep and runs its tasks with the same code as the local threads
-(``_sweep.Runner``), so the rows are the same. A worker needs only pinsettle installed.
+The scene travels as a pickle of plain data (``_sweep_cases.scene_data``: the
+``pinocchio.Model``, which pickles, and the element lists), sent to the workers once, as the
+result of a task the sweep's tasks depend on (computed again if the workers holding it die); a
+worker rebuilds the scene once per sweep and runs its tasks with the same code as the local
+threads (``_sweep_cases.Runner``), so the rows are the same. A worker needs only pinsettle
+installed.
 
 Dask re-runs the tasks of a worker that dies elsewhere; a task that killed its workers too
 often (Dask's ``KilledWorker``) or failed otherwise has its cases marked 'error' with the
@@ -31,6 +33,8 @@ CLUSTER_EXTRA = "pip install 'pinsettle[cluster]'"
 #: How long a cluster may be left without any worker before the cases still to run are marked
 #: (Dask would wait for a worker forever).
 NO_WORKER_TIMEOUT = 20.0
+#: How long to wait for a finished task's rows (longer: its worker left with them).
+GATHER_TIMEOUT = 2.0
 
 _ADDRESS = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d+)$")
 
@@ -160,6 +164,11 @@ def _runner(blob: bytes) -> Runner:
         return runner
 
 
+def _scene(blob: bytes) -> bytes:
+    """The scene's data, held by the workers as a task's result."""
+    return blob
+
+
 def remote_run(blob: bytes, task: Task) -> list[tuple[int, dict[str, Any]]]:
     """A task's rows, computed on a worker."""
     return _runner(blob).run(task)
@@ -205,8 +214,10 @@ def run(
     if not tasks:
         return
     blob = _blob(runner)
-    shared = client.scatter(blob, broadcast=True, hash=False)
     token = hashlib.sha256(blob).hexdigest()[:12]
+    # The scene as the result of a task, not scattered data: if every worker holding it dies,
+    # the scheduler computes it again (scattered data would be lost, and the tasks with it).
+    shared = client.submit(_scene, blob, pure=False, key=f"pinsettle-scene-{token}")
     submitted = {
         client.submit(
             remote_run, shared, task, pure=False, key=f"pinsettle-sweep-{token}-{k}"
@@ -221,28 +232,40 @@ def run(
             if stop.count:
                 return
             # Polled (no as_completed: that needs the client to be Dask's default one).
-            ready = [future for future in pending if future.done()]
-            for future in ready:
-                task = pending.pop(future)
-                if future.status == "finished":
-                    collect(future.result())
-                else:
-                    error = future.exception() if future.status == "error" else None
-                    reason = _reason(error) if error is not None else f"task {future.status}"
-                    collect(_failed(runner, task, reason))
-            if ready:
-                continue
+            # 'lost' (its worker died with the result) is not an end: Dask runs it again.
+            ended = ("finished", "error", "cancelled")
+            for future in [f for f in pending if f.done() and f.status in ended]:
+                try:
+                    if future.status == "finished":
+                        rows = future.result(timeout=GATHER_TIMEOUT)
+                    else:
+                        error = (
+                            future.exception(timeout=GATHER_TIMEOUT)
+                            if future.status == "error"
+                            else None
+                        )
+                        reason = (
+                            _reason(error)
+                            if error is not None
+                            else "the cluster dropped this case (its task was cancelled there)"
+                        )
+                        rows = _failed(runner, pending[future], reason)
+                except TimeoutError:  # its worker left with the result: Dask runs it again
+                    continue
+                del pending[future]
+                collect(rows)
             time.sleep(0.02)
-            if time.monotonic() - checked > 1.0:
-                checked = time.monotonic()
-                if client.nthreads():
-                    no_worker_since = None
-                elif no_worker_since is None:
-                    no_worker_since = checked
-                elif checked - no_worker_since > NO_WORKER_TIMEOUT:
-                    for task in pending.values():
-                        collect(_failed(runner, task, "no worker left on the cluster"))
-                    pending.clear()
+            if time.monotonic() - checked < 1.0:
+                continue
+            checked = time.monotonic()
+            if client.nthreads():
+                no_worker_since = None
+            elif no_worker_since is None:
+                no_worker_since = checked
+            elif checked - no_worker_since > NO_WORKER_TIMEOUT:
+                for task in pending.values():
+                    collect(_failed(runner, task, "no worker left on the cluster"))
+                pending.clear()
     finally:
         if pending:
             client.cancel(list(pending))

@@ -445,6 +445,8 @@ def test_resume_must_be_the_same_sweep():
     other = {"spring[0].rest_length": [1.4, 1.7]}
     with pytest.raises(ValueError, match=r"case 1 has spring\[0\].rest_length = 1.6, this sw"):
         pinsettle.sweep(bistable(), other, progress=False, resume=done)
+    with pytest.raises(ValueError, match="case 0 is in the table twice"):
+        pinsettle.sweep(bistable(), vary, progress=False, resume=pd.concat([done, done]))
     with pytest.raises(ValueError, match="no column spring"):
         pinsettle.sweep(bistable(), {"spring[0].stiffness": [1.0]}, progress=False, resume=done)
 

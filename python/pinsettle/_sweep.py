@@ -67,7 +67,6 @@ class Plan:
     keys: list[Key]
     combos: list[tuple[Any, ...]]
     starts: list[np.ndarray]
-    given_starts: bool
     continuation: bool
     columns: dict[str, list[Any]]
     specs: list[Spec]
@@ -105,7 +104,7 @@ def random_starts(scene: Scene, limits: bool | None, n: int, seed: int) -> list[
             lower, upper = bounds.get(name, (-math.inf, math.inf))
             lo = lower if math.isfinite(lower) else -math.pi
             hi = upper if math.isfinite(upper) else math.pi
-            if lo >= hi:  # a single stop beyond +-pi: a turn from it
+            if lo > hi:  # a single stop beyond +-pi: a turn from it
                 lo, hi = (
                     (lower, lower + 2 * math.pi) if math.isfinite(lower) else (hi - 2 * math.pi, hi)
                 )
@@ -250,7 +249,7 @@ def make_plan(
                 row.update(dict(zip(names, values_at, strict=True)))
             for name, value in row.items():
                 columns.setdefault(name, []).append(value)
-    return Plan(keys, combos, start_list, given is not None, bool(continuation), columns, specs)
+    return Plan(keys, combos, start_list, bool(continuation), columns, specs)
 
 
 def make_tasks(
@@ -411,6 +410,11 @@ class Table:
                 f"resume: the table is not of this sweep: it has no column {', '.join(missing)}"
             )
         cases = previous["case"].to_numpy()
+        twice = [
+            int(c) for c, n in zip(*np.unique(cases, return_counts=True), strict=True) if n > 1
+        ]
+        if twice:
+            raise ValueError(f"resume: case {twice[0]} is in the table twice")
         outside = [int(c) for c in cases if not 0 <= c < self.plan.size]
         if outside:
             raise ValueError(
@@ -464,6 +468,7 @@ class ProgressBar:
         self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
         self.started = time.perf_counter()
         self.drawn = 0.0
+        #: Cases done before this run (a resumed sweep): not counted in the rate.
         self.first = 0
 
     def __call__(self, done: int, total: int) -> None:
@@ -474,7 +479,7 @@ class ProgressBar:
             return
         self.drawn = now
         elapsed = max(now - self.started, 1e-9)
-        rate = done / elapsed
+        rate = (done - self.first) / elapsed
         left = (total - done) / rate if rate > 0 else math.inf
         width = 30
         filled = int(width * done / max(total, 1))
@@ -636,6 +641,8 @@ def sweep(
 
     started = time.perf_counter()
     resumed = len(table.rows)
+    if bar is not None:
+        bar.first = resumed
     with Interrupts() as stop:
         if cluster:
             from . import _sweep_cluster

@@ -718,7 +718,7 @@ def test_cli_summary_and_json(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""  # no progress bar off a terminal
     lines = proc.stdout.splitlines()
-    assert lines[0].startswith("bistable_pendulum: 101 of 101 cases; 101 solved in")
+    assert lines[0].startswith("bistable_pendulum: 101 of 101 cases; 101 run in")
     assert lines[1] == "status   converged 101"
     assert lines[2].startswith("rests    2 distinct")
     assert f"wrote    {out} (101 rows)" in lines
@@ -755,7 +755,7 @@ def test_cli_resume_skips_the_cases_done(tmp_path):
     part.to_csv(out, index=False)
     proc = run_cli(*args)
     assert proc.returncode == 0, proc.stderr
-    assert "(16 from the file); 8 solved" in proc.stdout
+    assert "(16 from the file); 8 run" in proc.stdout
     again = _sweep_cli.read_table(out)
     assert_frame_equal(without_times(again), without_times(full))
     kept = again[again["case"] % 3 != 1]["wall_time"].to_numpy()
@@ -805,7 +805,7 @@ def test_cli_ctrl_c_writes_what_is_done_and_resumes(tmp_path):
     # The same command again solves the rest only, and the whole is an uninterrupted sweep.
     resumed = subprocess.run(args, capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr
-    assert f"({n} from the file); {4000 - n} solved" in resumed.stdout
+    assert f"({n} from the file); {4000 - n} run" in resumed.stdout
     whole = pd.read_parquet(out)
     fresh = pinsettle.sweep(
         pinsettle.load_scene(pinsettle.scene_path("bistable_pendulum")),
@@ -871,6 +871,16 @@ def test_cli_scheduler_that_does_not_answer():
     assert proc.returncode == 2
     assert f"scheduler tcp://127.0.0.1:{port} does not answer" in proc.stderr
     assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_cli_reports_the_cases_in_error():
+    proc = run_cli(
+        "bistable_pendulum", "--vary", "spring[0].stiffness=-1,40,-2", "--no-continuation"
+    )
+    assert proc.returncode == 1  # not every case converged
+    assert "status   error 2, converged 1" in proc.stdout
+    assert "error    case 0: spring[0].stiffness: stiffness must be >= 0, got -1.0" in proc.stdout
+    assert "error    case 2: spring[0].stiffness: stiffness must be >= 0, got -2.0" in proc.stdout
 
 
 def test_cli_resume_from_another_sweep_is_refused(tmp_path):

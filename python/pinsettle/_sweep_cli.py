@@ -70,7 +70,7 @@ def add_parser(
     parser.add_argument(
         "--scheduler",
         metavar="ADDRESS",
-        help="a Dask scheduler, tcp://HOST:PORT (pinsettle[cluster])",
+        help="run the cases on the Dask scheduler at tcp://HOST:PORT (pinsettle[cluster])",
     )
     parser.add_argument("--out", metavar="FILE", help="the table: FILE.parquet or FILE.csv")
     parser.add_argument("--json", action="store_true", help="print one JSON object, no bar")
@@ -208,11 +208,16 @@ def _print_summary(df: Any, info: dict[str, Any]) -> None:
     print(
         f"{info['scene']}: {info['done']} of {info['cases']} cases"
         + (f" ({info['resumed']} from the file)" if info["resumed"] else "")
-        + f"; {info['solved']} solved in {info['wall_time_s']:.3g} s {where} "
+        + f"; {info['solved']} run in {info['wall_time_s']:.3g} s {where} "
         f"{info['workers']} worker{'s' if info['workers'] != 1 else ''}"
         + (f", {rate:.4g} cases/s" if rate else "")
     )
     print("status   " + ", ".join(f"{k} {v}" for k, v in info["status_counts"].items()))
+    failed = df[df["error"].fillna("") != ""]
+    for message, cases in list(failed.groupby("error", sort=False)["case"])[:3]:
+        first = int(cases.iloc[0])
+        more = f" and {len(cases) - 1} more" if len(cases) > 1 else ""
+        print(f"error    case {first}{more}: {message}")
     rests = info["distinct_rests"]
     meta = df.attrs["pinsettle"]
     varied = [c for c in df.columns if c in meta["vary"] or c.split("[")[0] in meta["vary"]]
@@ -248,6 +253,8 @@ def _print_summary(df: Any, info: dict[str, Any]) -> None:
         shown = ["case", *varied, "status", *joints[:6], "residual", "stability"]
         if "jump" in df.columns:
             shown.append("jump")
+        if len(failed):
+            shown.append("error")
         print(df[shown].to_string(index=False))
     else:
         print("(the table has more than 30 rows: --out FILE.parquet or FILE.csv keeps it)")

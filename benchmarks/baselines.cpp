@@ -1,6 +1,6 @@
 //
 // The baselines of the benchmark report (benchmarks/report.py), on the same Pinocchio dynamics
-// as pinsettle's solver and timed the same way (std::chrono::steady_clock around the loop):
+// as pinsettle's solver and timed the same way (std::chrono::steady_clock around the run):
 //
 //   viscous  plain viscous damping, what users of physics simulators do to let a robot settle:
 //            a = ABA(q, v, tau_elements(q, v) - c v), the same damper c on every joint,
@@ -10,248 +10,72 @@
 //            same rate c / 2 (where the joint dampers damp light links far faster than heavy ones).
 //   fire     FIRE (Bitzek et al., 2006) with its classic parameters: the power P = F . v of the
 //            static force F = -tau_static(q) is watched; P <= 0 zeroes the velocity, halves the
-//            step and resets the mixing; P > 0 mixes the velocity toward F,
-//            v <- (1 - alpha) v + alpha |v| F / |F|, and after N_min such steps grows the step
-//            (x f_inc, at most dt_max = 10 dt0) and shrinks alpha (x f_alpha). The motion is the
-//            same semi-implicit Euler on ABA; every step also evaluates F (one RNEA).
+//            step and resets the mixing; P > 0 mixes the velocity toward F and after N_min such
+//            steps grows the step (x f_inc, at most dt_max) and shrinks alpha (x f_alpha). The
+//            motion is the same semi-implicit Euler on ABA; every step also evaluates F (one
+//            RNEA).
+//   fire2    FIRE 2.0 (Guenole et al., 2020), written from the paper's description: semi-implicit
+//            Euler with the mixing applied after the velocity update, N_delay 20 steps before the
+//            step may grow, and none of the first N_delay steps shrinks it (initial delay),
+//            alpha_start 0.25, dt_min = 0.02 dt0, at P <= 0 half a step back (q -= dt v / 2)
+//            before the velocity is zeroed, and a stop after 2,000 uphill steps in a row.
 //
-//   baselines SPEC
+// FIRE's velocity mixing, v <- (1 - alpha) v + alpha |v| F / |F|, is taken in joint coordinates
+// (metric euclid: N m mixed with N, rad/s with m/s) or in the mass-matrix metric (metric mass:
+// v <- (1 - alpha) v + alpha |v|_M d / |d|_M with d = M^-1 F, one more ABA at zero velocity, and
+// |v|_M^2 = v^T M v, one kinetic-energy pass).
 //
-// SPEC is a text file written by report.py, one "key values..." per line:
-//   model PATH           the (reduced) pinocchio::Model, saved by Python with saveToBinary
-//   q0 nq x...           start configuration (at rest)
-//   method viscous|mass_damping|fire
-//   dt X                 (initial) time step, s
-//   damping C            viscous coefficient c (N m s/rad or N s/m on every joint; 1/s for
-//                        mass_damping)
-//   target R             stop once max |tau_static(q)| <= R (N m or N)
-//   check_every N        steps between residual checks (viscous; FIRE has F every step)
-//   max_steps N
-//   max_time S           wall-clock budget per run, s
-//   repeats N            timed runs (identical trajectories); no more once they took
-//                        repeat_budget seconds in all
-//   repeat_budget S
-//   samples PATH         where the recorded run writes its samples: float64 rows
-//                        [step, q_0 .. q_nq-1], at most max_samples rows plus the final state
-//   max_samples N
-//   joint_spring JOINT K REST D
-//   point_spring FRAME_A AX AY AZ FRAME_B BX BY BZ K REST_LENGTH D
-//   joint_load JOINT N E_1 .. E_N
-//   point_load FRAME PX PY PZ FX FY FZ TX TY TZ
+// Each baseline gets what the solver gets: the start (never the answer). Its set-up, timed and
+// reported apart (setup_seconds), linearises the mechanism at the start as the solver's first
+// step estimate does: M (crba), K (pinsettle::computeStiffnessMatrix) and the static force, then
+// the explicit stability limit 2 / omega_max (pinsettle::computeTimeScale, no stiff-mode
+// scaling: the baselines have none). The viscous rule c damps the softest mode of that
+// linearisation critically (K phi = lambda M phi, phi M-normalised, the smallest |lambda| above
+// 1e-9 of the largest, omega = sqrt|lambda|): c = 2 omega (mass-proportional) or
+// 2 omega / |phi|^2 (joint dampers), times damping_factor; the viscous step is dt_safety times
+// the stability limit with that damping, 4 / (r + sqrt(r^2 + 4 omega_max^2)), r = c (mass) or
+// c max eig(M^-1) (joint dampers). FIRE's dt_max is dt_max times the limit, dt0 = dt_max / 10.
 //
-// A run that blows up (non-finite values, or a residual 1e6 times the start's) is tried again
-// with half the step, up to 6 times. Prints one JSON object: status (converged, max_steps,
-// time_limit or diverged), steps, the wall time of each timed run, the final residual, q, the
-// step used and the halvings, and for FIRE the step at the end and the velocity resets.
+// A run that blows up (non-finite values, or a residual 1e6 times the start's) or stalls (FIRE:
+// 1,000 velocity resets without the residual falling tenfold; FIRE 2.0 also after 2,000 uphill
+// steps in a row) is tried again with every step halved, up to 6 times.
+//
+//   baselines SPEC          (SPEC: benchmarks/spec.hpp)
+//
+// Prints one JSON object: status (converged, max_steps, time_limit, diverged or stalled),
+// steps, the loop's wall time and the set-up's of each timed run, the final residual, q, the
+// steps and coefficients used, the halvings and why, and FIRE's velocity resets.
 //
 
-#include <pinsettle/pinsettle.hpp>
+#include "spec.hpp"
 
-#include <pinocchio/algorithm/aba.hpp>
-#include <pinocchio/algorithm/joint-configuration.hpp>
-#include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/energy.hpp>
 #include <pinocchio/serialization.hpp>
+
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
-#include <fstream>
-#include <iomanip>
 #include <iostream>
-#include <limits>
-#include <sstream>
-#include <stdexcept>
-#include <string>
-#include <vector>
 
 namespace
 {
   typedef std::chrono::steady_clock Clock;
+  using bench::Spec;
+  using bench::Workspace;
 
-  struct Spec
+  double since(Clock::time_point start)
   {
-    std::string model_path, method, samples_path;
-    Eigen::VectorXd q0;
-    double dt = 0., damping = 0., target = 0., max_time = 60., repeat_budget = 2.;
-    long check_every = 64, max_steps = 1000000, max_samples = 4000;
-    int repeats = 1;
-    std::vector<std::string> elements; // element lines, applied once the model is loaded
-  };
-
-  Spec readSpec(const std::string & path)
-  {
-    std::ifstream in(path);
-    if (!in)
-      throw std::runtime_error("cannot read " + path);
-    Spec spec;
-    std::string line;
-    while (std::getline(in, line))
-    {
-      std::istringstream words(line);
-      std::string key;
-      if (!(words >> key))
-        continue;
-      if (key == "model")
-        words >> spec.model_path;
-      else if (key == "method")
-        words >> spec.method;
-      else if (key == "samples")
-        words >> spec.samples_path;
-      else if (key == "q0")
-      {
-        long n;
-        words >> n;
-        spec.q0.resize(n);
-        for (long k = 0; k < n; ++k)
-          words >> spec.q0[k];
-      }
-      else if (key == "dt")
-        words >> spec.dt;
-      else if (key == "damping")
-        words >> spec.damping;
-      else if (key == "target")
-        words >> spec.target;
-      else if (key == "max_time")
-        words >> spec.max_time;
-      else if (key == "repeat_budget")
-        words >> spec.repeat_budget;
-      else if (key == "check_every")
-        words >> spec.check_every;
-      else if (key == "max_steps")
-        words >> spec.max_steps;
-      else if (key == "max_samples")
-        words >> spec.max_samples;
-      else if (key == "repeats")
-        words >> spec.repeats;
-      else if (
-        key == "joint_spring" || key == "point_spring" || key == "joint_load"
-        || key == "point_load")
-        spec.elements.push_back(line);
-      else
-        throw std::runtime_error("unknown key '" + key + "' in " + path);
-      if (words.fail())
-        throw std::runtime_error("bad line in " + path + ": " + line);
-    }
-    return spec;
-  }
-
-  void addElement(pinsettle::ForceElements & elements, const std::string & line)
-  {
-    std::istringstream words(line);
-    std::string key;
-    words >> key;
-    if (key == "joint_spring")
-    {
-      long joint;
-      double k, rest, d;
-      words >> joint >> k >> rest >> d;
-      elements.addJointSpring(static_cast<pinocchio::JointIndex>(joint), k, rest, d);
-    }
-    else if (key == "point_spring")
-    {
-      long fa, fb;
-      Eigen::Vector3d a, b;
-      double k, rest, d;
-      words >> fa >> a[0] >> a[1] >> a[2] >> fb >> b[0] >> b[1] >> b[2] >> k >> rest >> d;
-      elements.addPointSpring(
-        static_cast<pinocchio::FrameIndex>(fa), a, static_cast<pinocchio::FrameIndex>(fb), b, k,
-        rest, d);
-    }
-    else if (key == "joint_load")
-    {
-      long joint, n;
-      words >> joint >> n;
-      Eigen::VectorXd effort(n);
-      for (long k = 0; k < n; ++k)
-        words >> effort[k];
-      elements.addJointLoad(static_cast<pinocchio::JointIndex>(joint), effort);
-    }
-    else // point_load
-    {
-      long frame;
-      Eigen::Vector3d p, f, t;
-      words >> frame >> p[0] >> p[1] >> p[2] >> f[0] >> f[1] >> f[2] >> t[0] >> t[1] >> t[2];
-      elements.addPointLoad(static_cast<pinocchio::FrameIndex>(frame), p, f, t);
-    }
-    if (words.fail())
-      throw std::runtime_error("bad element line: " + line);
-  }
-
-  // The loops' state and workspace, sized once: nothing is allocated per step.
-  struct Workspace
-  {
-    explicit Workspace(const pinocchio::Model & model)
-    : data(model)
-    , q(model.nq)
-    , q_next(model.nq)
-    , v(model.nv)
-    , dq(model.nv)
-    , tau(model.nv)
-    , force(model.nv)
-    , zero(Eigen::VectorXd::Zero(model.nv))
-    , fext(model.joints.size(), pinocchio::Force::Zero())
-    {
-    }
-    pinocchio::Data data;
-    Eigen::VectorXd q, q_next, v, dq, tau, force, zero;
-    pinsettle::ForceVector fext;
-  };
-
-  // The applied efforts at (q, v) into w.tau (and w.fext when the elements have point forces).
-  void appliedForces(
-    const pinocchio::Model & model,
-    const pinsettle::ForceElements * elements,
-    const Eigen::VectorXd & q,
-    const Eigen::VectorXd & v,
-    Workspace & w)
-  {
-    w.tau.setZero();
-    if (elements == nullptr)
-      return;
-    if (elements->hasExternalForces())
-      for (pinocchio::Force & f : w.fext)
-        f.setZero();
-    elements->computeForces(model, w.data, q, v, w.tau, w.fext);
-  }
-
-  // The net static generalized force tau_static(q) (gravity minus springs and loads, as
-  // pinsettle::computeStaticForce) into w.force, without allocating.
-  void staticForce(
-    const pinocchio::Model & model, const pinsettle::ForceElements * elements, Workspace & w)
-  {
-    appliedForces(model, elements, w.q, w.zero, w);
-    if (elements != nullptr && elements->hasExternalForces())
-      w.force = pinocchio::rnea(model, w.data, w.q, w.zero, w.zero, w.fext);
-    else
-      w.force = pinocchio::computeGeneralizedGravity(model, w.data, w.q);
-    w.force -= w.tau;
-  }
-
-  // Forward dynamics at (w.q, w.v) with the applied efforts in w.tau (and w.fext).
-  void forwardDynamics(
-    const pinocchio::Model & model, const pinsettle::ForceElements * elements, Workspace & w)
-  {
-    if (elements != nullptr && elements->hasExternalForces())
-      pinocchio::aba(model, w.data, w.q, w.v, w.tau, w.fext);
-    else
-      pinocchio::aba(model, w.data, w.q, w.v, w.tau);
-  }
-
-  // Semi-implicit Euler on the configuration manifold; false when a value turned non-finite.
-  bool integrate(const pinocchio::Model & model, double h, Workspace & w)
-  {
-    w.v.noalias() += h * w.data.ddq;
-    w.dq.noalias() = h * w.v;
-    pinocchio::integrate(model, w.q, w.dq, w.q_next);
-    w.q.swap(w.q_next);
-    return w.q.allFinite() && w.v.allFinite();
+    return std::chrono::duration<double>(Clock::now() - start).count();
   }
 
   struct Outcome
   {
     std::string status = "max_steps";
     long steps = 0;
-    double residual = 0., dt = 0., seconds = 0.;
+    double residual = 0., seconds = 0., setup_seconds = 0.;
+    double dt = 0., dt_max = 0., dt_end = 0., damping = 0., omega_rule = 0., limit = 0.;
     long resets = 0;
     Eigen::VectorXd q;
   };
@@ -272,38 +96,131 @@ namespace
 
   // FIRE's classic parameters (Bitzek et al., 2006).
   constexpr int kFireNMin = 5;
-  constexpr double kFireFInc = 1.1, kFireFDec = 0.5, kFireAlphaStart = 0.1, kFireFAlpha = 0.99,
-                   kFireDtMax = 10.;
+  constexpr double kFireFInc = 1.1, kFireFDec = 0.5, kFireAlphaStart = 0.1, kFireFAlpha = 0.99;
+  // FIRE 2.0's (Guenole et al., 2020).
+  constexpr int kFire2NDelay = 20, kFire2MaxUphill = 2000;
+  constexpr double kFire2AlphaStart = 0.25, kFire2DtMinFactor = 0.02;
+  // dt0 = dt_max / kDtMaxOverDt0 (the classic ratio).
+  constexpr double kDtMaxOverDt0 = 10.;
   // A residual this many times the start's, or a non-finite value, is a divergence.
   constexpr double kBlowUp = 1e6;
-  // Step halvings tried on a divergence.
+  // FIRE stalls after this many resets without the residual falling tenfold.
+  constexpr long kStallResets = 1000;
+  // Step halvings tried on a divergence or a stall.
   constexpr int kMaxHalvings = 6;
+
+  // What a baseline takes from the start: its steps and damping (see the top of the file).
+  void setUp(
+    const pinocchio::Model & model,
+    const pinsettle::ForceElements * elements,
+    const Spec & spec,
+    double scale,
+    Workspace & w,
+    Outcome & out)
+  {
+    pinocchio::crba(model, w.data, w.q);
+    Eigen::MatrixXd M = w.data.M;
+    M.triangularView<Eigen::StrictlyLower>() = M.transpose();
+    const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model, w.data, w.q, elements);
+    const Eigen::MatrixXd Ks = 0.5 * (K + K.transpose());
+    bench::staticForce(model, elements, w);
+    const pinsettle::TimeScale ts = pinsettle::computeTimeScale(Ks, M, w.force, nullptr, false);
+    const double omega = ts.omega_max;
+    out.limit = ts.critical_step;
+    if (spec.method == "fire" || spec.method == "fire2")
+    {
+      out.dt_max = scale * spec.dt_max * out.limit;
+      out.dt = out.dt_max / kDtMaxOverDt0;
+      return;
+    }
+    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> modes(Ks, M);
+    const Eigen::VectorXd & lambda = modes.eigenvalues();
+    const double tol = 1e-9 * lambda.cwiseAbs().maxCoeff();
+    Eigen::Index softest = -1;
+    for (Eigen::Index k = 0; k < lambda.size(); ++k)
+      if (
+        std::abs(lambda[k]) > tol
+        && (softest < 0 || std::abs(lambda[k]) < std::abs(lambda[softest])))
+        softest = k;
+    out.omega_rule = softest >= 0 ? std::sqrt(std::abs(lambda[softest])) : omega;
+    double rate;
+    if (spec.method == "mass_damping")
+    {
+      out.damping = spec.damping_factor * 2. * out.omega_rule;
+      rate = out.damping;
+    }
+    else
+    {
+      const double phi2 = softest >= 0 ? modes.eigenvectors().col(softest).squaredNorm() : 1.;
+      out.damping = spec.damping_factor * 2. * out.omega_rule / phi2;
+      rate = out.damping
+             / Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(M, Eigen::EigenvaluesOnly)
+                 .eigenvalues()
+                 .minCoeff();
+    }
+    out.dt = scale * spec.dt_safety * 4. / (rate + std::sqrt(rate * rate + 4. * omega * omega));
+    out.dt_max = out.dt;
+  }
+
+  // FIRE's mixing: v <- (1 - alpha) v + alpha |v| F / |F| (w.force holds tau_static = -F), in
+  // joint coordinates or in the mass-matrix metric. Needs w.tau, w.fext at (q, 0), as
+  // bench::staticForce leaves them.
+  void mix(
+    const pinocchio::Model & model,
+    const pinsettle::ForceElements * elements,
+    bool mass_metric,
+    double alpha,
+    Workspace & w)
+  {
+    if (!mass_metric)
+    {
+      const double force_norm = w.force.norm();
+      if (force_norm > 0.)
+        w.v = (1. - alpha) * w.v - (alpha * w.v.norm() / force_norm) * w.force;
+      return;
+    }
+    // d = M^-1 F = ABA(q, 0, applied): M^-1 (applied - gravity).
+    bench::forwardDynamics(model, elements, w.q, w.zero, w);
+    const double d_norm = std::sqrt(std::max(-w.data.ddq.dot(w.force), 0.)); // |d|_M = sqrt(d.F)
+    const double v_norm =
+      std::sqrt(2. * pinocchio::computeKineticEnergy(model, w.data, w.q, w.v)); // |v|_M
+    if (d_norm > 0.)
+      w.v = (1. - alpha) * w.v + (alpha * v_norm / d_norm) * w.data.ddq;
+  }
 
   Outcome run(
     const pinocchio::Model & model,
     const pinsettle::ForceElements * elements,
     const Spec & spec,
+    double scale,
     Recorder & recorder)
   {
     Workspace w(model);
     w.q = spec.q0;
     w.v.setZero();
-    const bool fire = spec.method == "fire", viscous = spec.method == "viscous",
-               mass_damping = spec.method == "mass_damping";
-    double dt = spec.dt, alpha = kFireAlphaStart;
-    const double dt_max = kFireDtMax * spec.dt;
-    int positive = 0;
     Outcome out;
-    staticForce(model, elements, w);
+    const Clock::time_point setup_start = Clock::now();
+    setUp(model, elements, spec, scale, w, out);
+    out.setup_seconds = since(setup_start);
+
+    const bool fire = spec.method == "fire", fire2 = spec.method == "fire2",
+               viscous = spec.method == "viscous", mass_damping = spec.method == "mass_damping",
+               mass_metric = spec.metric == "mass";
+    double dt = out.dt, alpha = fire2 ? kFire2AlphaStart : kFireAlphaStart;
+    const double dt_min = kFire2DtMinFactor * out.dt;
+    int positive = 0, uphill = 0;
+    long stall_resets = 0;
+    bench::staticForce(model, elements, w);
     const double start_residual = w.force.lpNorm<Eigen::Infinity>();
+    double progress = start_residual; // FIRE's stall test: resets since a tenfold fall
     const Clock::time_point start = Clock::now();
     long step = 0;
     for (; step < spec.max_steps; ++step)
     {
       recorder.record(step, w.q);
-      if (fire || step % spec.check_every == 0)
+      if (fire || fire2 || step % spec.check_every == 0)
       {
-        staticForce(model, elements, w);
+        bench::staticForce(model, elements, w);
         const double residual = w.force.lpNorm<Eigen::Infinity>();
         if (!(residual <= kBlowUp * start_residual)) // also catches NaN
         {
@@ -315,79 +232,89 @@ namespace
           out.status = "converged";
           break;
         }
-        if (
-          step % 1024 == 0
-          && std::chrono::duration<double>(Clock::now() - start).count() > spec.max_time)
+        if (residual <= 0.1 * progress)
+        {
+          progress = residual;
+          stall_resets = 0;
+        }
+        if (step % 1024 == 0 && since(start) > spec.max_time)
         {
           out.status = "time_limit";
           break;
         }
       }
-      if (fire)
+      if (fire || fire2)
       {
         // w.force is tau_static; the force driving the mechanism toward rest is its opposite.
         const double power = -w.force.dot(w.v);
         if (power > 0.)
         {
-          const double force_norm = w.force.norm();
-          if (force_norm > 0.)
-            w.v = (1. - alpha) * w.v - (alpha * w.v.norm() / force_norm) * w.force;
-          if (positive > kFireNMin)
+          uphill = 0;
+          ++positive;
+          if (positive > (fire2 ? kFire2NDelay : kFireNMin))
           {
-            dt = std::min(dt * kFireFInc, dt_max);
+            dt = std::min(dt * kFireFInc, out.dt_max);
             alpha *= kFireFAlpha;
           }
-          ++positive;
+          if (fire) // classic FIRE mixes before the step; FIRE 2.0 after the velocity update
+            mix(model, elements, mass_metric, alpha, w);
         }
         else
         {
-          w.v.setZero();
-          dt *= kFireFDec;
-          alpha = kFireAlphaStart;
-          positive = 0;
           ++out.resets;
+          positive = 0;
+          if (++stall_resets >= kStallResets || (fire2 && ++uphill > kFire2MaxUphill))
+          {
+            out.status = "stalled";
+            break;
+          }
+          if (fire)
+          {
+            dt *= kFireFDec;
+            alpha = kFireAlphaStart;
+          }
+          else
+          {
+            if (step >= kFire2NDelay) // the initial delay: no shrinking in the first steps
+            {
+              if (dt * kFireFDec >= dt_min)
+                dt *= kFireFDec;
+              alpha = kFire2AlphaStart;
+            }
+            bench::moveBy(model, -0.5 * dt, w); // half a step back
+          }
+          w.v.setZero();
         }
       }
-      appliedForces(model, elements, w.q, w.v, w);
+      bench::appliedForces(model, elements, w.q, w.v, w);
       if (viscous)
-        w.tau.noalias() -= spec.damping * w.v;
-      forwardDynamics(model, elements, w);
+        w.tau.noalias() -= out.damping * w.v;
+      bench::forwardDynamics(model, elements, w.q, w.v, w);
       if (mass_damping)
-        w.data.ddq.noalias() -= spec.damping * w.v;
-      if (!integrate(model, dt, w))
+        w.data.ddq.noalias() -= out.damping * w.v;
+      w.v.noalias() += dt * w.data.ddq;
+      if (fire2 && w.v.squaredNorm() > 0.)
+      {
+        // The mixing's F is the step's (w.force, from the check above); its metric needs the
+        // applied efforts at zero velocity.
+        if (mass_metric)
+          bench::appliedForces(model, elements, w.q, w.zero, w);
+        mix(model, elements, mass_metric, alpha, w);
+      }
+      if (!bench::moveBy(model, dt, w))
       {
         out.status = "diverged";
         ++step;
         break;
       }
     }
-    out.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    out.seconds = since(start);
     out.steps = step;
-    out.dt = dt;
+    out.dt_end = dt;
     out.q = w.q;
-    staticForce(model, elements, w);
+    bench::staticForce(model, elements, w);
     out.residual = w.force.lpNorm<Eigen::Infinity>();
     return out;
-  }
-
-  // A number as JSON (as Python's json module reads it: NaN and Infinity spelled out).
-  std::string number(double x)
-  {
-    if (std::isnan(x))
-      return "NaN";
-    if (std::isinf(x))
-      return x > 0 ? "Infinity" : "-Infinity";
-    std::ostringstream os;
-    os << std::setprecision(17) << x;
-    return os.str();
-  }
-
-  void printVector(std::ostream & os, const Eigen::VectorXd & x)
-  {
-    os << "[";
-    for (Eigen::Index k = 0; k < x.size(); ++k)
-      os << (k ? ", " : "") << number(x[k]);
-    os << "]";
   }
 } // namespace
 
@@ -400,35 +327,41 @@ int main(int argc, char ** argv)
   }
   try
   {
-    const Spec spec = readSpec(argv[1]);
+    const Spec spec = bench::readSpec(argv[1]);
     pinocchio::Model model;
     model.loadFromBinary(spec.model_path);
     if (spec.q0.size() != model.nq)
       throw std::runtime_error("q0 does not match the model's nq");
-    if (spec.method != "viscous" && spec.method != "mass_damping" && spec.method != "fire")
+    if (
+      spec.method != "viscous" && spec.method != "mass_damping" && spec.method != "fire"
+      && spec.method != "fire2")
       throw std::runtime_error(
-        "method must be viscous, mass_damping or fire, got '" + spec.method + "'");
+        "method must be viscous, mass_damping, fire or fire2, got '" + spec.method + "'");
     pinsettle::ForceElements elements(model);
     for (const std::string & line : spec.elements)
-      addElement(elements, line);
+      bench::addElement(elements, line);
     const pinsettle::ForceElements * forces = elements.empty() ? nullptr : &elements;
 
-    // A run that blows up is tried again with half the step, up to kMaxHalvings times.
-    Spec used = spec;
+    // A run that blows up or stalls is tried again with every step halved.
+    double scale = 1.;
     Recorder none;
-    Outcome out = run(model, forces, used, none);
+    Outcome out = run(model, forces, spec, scale, none);
     int halvings = 0;
-    for (; out.status == "diverged" && halvings < kMaxHalvings; ++halvings)
+    std::vector<std::string> reasons;
+    for (; (out.status == "diverged" || out.status == "stalled") && halvings < kMaxHalvings;
+         ++halvings)
     {
-      used.dt *= 0.5;
-      out = run(model, forces, used, none);
+      reasons.push_back(out.status);
+      scale *= 0.5;
+      out = run(model, forces, spec, scale, none);
     }
-    std::vector<double> seconds{out.seconds};
+    std::vector<double> seconds{out.seconds}, setup{out.setup_seconds};
     double spent = out.seconds;
     for (int r = 1; r < spec.repeats && spent < spec.repeat_budget; ++r)
     {
-      out = run(model, forces, used, none);
+      out = run(model, forces, spec, scale, none);
       seconds.push_back(out.seconds);
+      setup.push_back(out.setup_seconds);
       spent += out.seconds;
     }
     if (!spec.samples_path.empty())
@@ -436,7 +369,7 @@ int main(int argc, char ** argv)
       // The same run again, recording: its trajectory is the one timed above.
       Recorder recorder;
       recorder.every = std::max<long>(1, (out.steps + spec.max_samples - 1) / spec.max_samples);
-      const Outcome recorded = run(model, forces, used, recorder);
+      const Outcome recorded = run(model, forces, spec, scale, recorder);
       // The final state, unless it is the last sample already (a run that stops on the
       // residual check stops right after recording).
       const std::size_t row = static_cast<std::size_t>(model.nq) + 1;
@@ -455,14 +388,22 @@ int main(int argc, char ** argv)
         throw std::runtime_error("the recorded run took another path than the timed runs");
     }
 
-    std::cout << "{\"method\": \"" << spec.method << "\", \"status\": \"" << out.status
-              << "\", \"steps\": " << out.steps << ", \"wall_times\": ";
-    printVector(std::cout, Eigen::Map<const Eigen::VectorXd>(seconds.data(), seconds.size()));
-    std::cout << ", \"residual\": " << number(out.residual) << ", \"dt\": " << number(used.dt)
-              << ", \"dt_end\": " << number(out.dt) << ", \"halvings\": " << halvings
-              << ", \"resets\": " << out.resets << ", \"q\": ";
-    printVector(std::cout, out.q);
-    std::cout << "}\n";
+    std::cout << "{\"method\": \"" << spec.method << "\", \"metric\": \"" << spec.metric
+              << "\", \"status\": \"" << out.status << "\", \"steps\": " << out.steps
+              << ", \"wall_times\": " << bench::jsonVector(seconds)
+              << ", \"setup_times\": " << bench::jsonVector(setup)
+              << ", \"residual\": " << bench::number(out.residual)
+              << ", \"dt\": " << bench::number(out.dt)
+              << ", \"dt_max\": " << bench::number(out.dt_max)
+              << ", \"dt_end\": " << bench::number(out.dt_end)
+              << ", \"limit\": " << bench::number(out.limit)
+              << ", \"damping\": " << bench::number(out.damping)
+              << ", \"omega_rule\": " << bench::number(out.omega_rule)
+              << ", \"halvings\": " << halvings << ", \"retries\": [";
+    for (std::size_t k = 0; k < reasons.size(); ++k)
+      std::cout << (k ? ", " : "") << "\"" << reasons[k] << "\"";
+    std::cout << "], \"resets\": " << out.resets << ", \"q\": " << bench::jsonVector(out.q)
+              << "}\n";
   }
   catch (const std::exception & e)
   {

@@ -2,32 +2,45 @@
 
 ``python benchmarks/report.py`` regenerates docs/benchmarks.md and its figures under
 docs/benchmarks/ (a progress bar on stderr) and the speed section of README.md (between its
-``bench:summary`` markers); ``--quick`` makes a tiny run into build/bench-quick instead.
+``bench:summary`` markers); ``--quick`` makes a tiny run into build/bench-quick instead, and
+``--sections gallery,cost`` measures only those sections and replaces only their parts of the
+report (each part sits between ``report:NAME`` markers; any other delimited part of the file,
+such as a section another tool writes, is kept as it is). The sections:
 
-For each scene of the benchmark set it measures how the error falls with the steps taken and
-with wall time, for kinetic damping (both energy measures as the peak detector's signal) and
-for baselines on the same Pinocchio dynamics: plain viscous damping and FIRE (C++,
-benchmarks/baselines.cpp, built here with CMake against the installed package) and Newton's
-method from the same start (the baselines on trees only: they run unconstrained ABA, which
-cannot hold a closed loop). Then the sweeps of the settings (kt, err, ds, max_e, backtracking,
-fixed against automatic dt), the cost of one step against a bare ``pinocchio::aba`` +
-``integrate`` step (benchmarks/step_cost.cpp; with closed loops against a bare
-``pinocchio::constraintDynamics`` + ``integrate`` step, benchmarks/loop_step_cost.cpp) and the
-scaling with chain length.
+- ``scenes``: for each scene of the benchmark set, how the error falls with the steps taken and
+  with wall time, for kinetic damping (both energy measures as the peak detector's signal) and
+  for baselines on the same Pinocchio dynamics: viscous damping (joint dampers and
+  mass-proportional), FIRE and FIRE 2.0 (C++, benchmarks/baselines.cpp, built here with CMake
+  against the installed package), each at its rule setting and at its best over a sweep of its
+  own parameters, and Newton's method from the same start (the baselines on trees only: they
+  run unconstrained ABA, which cannot hold a closed loop). Then the sweeps of KD's settings (kt,
+  err, ds, max_e, backtracking, fixed against automatic dt).
+- ``cost``: the cost of one step against a bare ``pinocchio::aba`` + ``integrate`` step
+  (benchmarks/step_cost.cpp: force elements, joint stops; with closed loops against a bare
+  ``pinocchio::constraintDynamics`` + ``integrate`` step, benchmarks/loop_step_cost.cpp).
+- ``overhead``: where a solve's time goes (benchmarks/kd_profile.cpp): set-up, step estimates,
+  stability assessments, polish.
+- ``scaling``: chains of 5 to 1,000 links.
+- ``gallery``: every robot of example-robot-data, root fixed, with the default settings, side by
+  side with MuJoCo's damped settle of the same URDF (``pip install ".[bench]"``), and the
+  floating-base robots falling.
 
 The error of a configuration q is measured two ways:
 
 - distance: ``max |q - q*|`` over the free joints (rad or m; revolute angles compared modulo
   2 pi), q* the exact equilibrium the run comes to rest at (see ``landing``);
-- residual: ``max |tau_static(q)|`` (``Scene.static_force``) divided by the scene's force scale,
-  ``max |tau_static(q0)|`` at the start.
+- residual: ``max |tau_static(q)|`` divided by the scene's force scale, ``max |tau_static(q0)|``
+  at the start, with the static force of the independent physics (benchmarks/independent.py:
+  tests/scene_reference.py's, nothing of pinsettle's).
+
+The scenes are solved without joint stops (``limits = false``): the baselines have none, and the
+comparison is of the methods on the same mechanics. Stops are measured in the ``cost`` and
+``gallery`` sections.
 
 Scenes with closed loops (``[[loop]]``) are measured on the closed mechanism: their start is
-moved onto the loops first (``Scene.assemble``, as the solver does), the static force is the one
-projected onto the motions the loops allow (what ``Scene.static_force`` returns for them), Newton
-steps are taken in the reduced coordinates of ``pinsettle.assess_stability`` (``basis``) and
-every step is moved back onto the loops, and the KD runs' final loop error is measured here with
-Pinocchio's frame placements.
+moved onto the loops first, the static force is the one projected onto the motions the loops
+allow, Newton steps are taken in those motions and every step is moved back onto the loops, and
+the KD runs' final loop error is measured here with Pinocchio's frame placements.
 
 Every number in the report is computed by this script; nothing is typed in by hand.
 """
@@ -40,6 +53,7 @@ import math
 import os
 import platform
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -56,15 +70,19 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "robots"))
 sys.path.insert(0, str(HERE))
+import gallery  # noqa: E402  (benchmarks/gallery.py: the robots and MuJoCo)
 import report_writer  # noqa: E402  (benchmarks/report_writer.py: figures and markdown)
 import stress  # noqa: E402  (benchmarks/stress.py: the heavy-and-light model)
+from independent import CachedReference  # noqa: E402  (benchmarks/independent.py)
 from make_chain import chain_urdf  # noqa: E402  (robots/make_chain.py)
 from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants and records)
+    APART,
     BASELINE_LABELS,
     BASELINE_MAX_STEPS,
     BASELINE_MAX_TIME,
-    BASELINE_SIDE_TIME,
+    BASELINE_RULES,
     BASELINE_TARGET,
+    BASELINES,
     CHAIN_LENGTHS,
     CURVE_SAMPLES,
     DEEP_MAX_E,
@@ -72,36 +90,51 @@ from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants a
     DT_SWEEP_SECONDS,
     MAX_STEPS,
     REPEAT_BUDGET,
+    RESIDUAL_LEVELS,
+    SECTIONS,
+    SWEEP_MAX_TIME,
     BenchScene,
     Config,
     Curve,
-    Damping,
     Landing,
     Reference,
     Results,
     Run,
     SceneData,
+    SweepPoint,
+    setting_label,
 )
 from scene_statics import Statics  # noqa: E402  (benchmarks/scene_statics.py)
+
+LEVEL = RESIDUAL_LEVELS[-1]
 
 # --- scenes ---------------------------------------------------------------------------------
 
 
 def _library(name: str) -> BenchScene:
+    """A scene of robots/, without joint stops (the baselines have none)."""
     path = ROOT / "robots" / f"{name}.toml"
     scene = pinsettle.load_scene(path)
-    return BenchScene(name, scene, scene.description)
+    scene.limits = False
+    reference = CachedReference.from_toml(path)
+    reference.limits = False
+    return BenchScene(name, scene, scene.description, reference)
 
 
 def chain_scene(links: int) -> BenchScene:
     """The chain of robots/make_chain.py (0.1 m, 0.1 kg links) released horizontal."""
-    model = pinocchio.buildModelFromXML(chain_urdf(links))
-    scene = pinsettle.Scene(model, name=f"chain{links}")
+    scene = pinsettle.Scene(
+        pinocchio.buildModelFromXML(chain_urdf(links)), name=f"chain{links}", limits=False
+    )
     scene.set_start(joint1=math.pi / 2)
+    reference = CachedReference(
+        pinocchio.buildModelFromXML(chain_urdf(links)), start={"joint1": math.pi / 2}, limits=False
+    )
     return BenchScene(
         f"chain{links}",
         scene,
         f"{links}-link chain (robots/make_chain.py) released horizontal",
+        reference,
     )
 
 
@@ -110,15 +143,23 @@ STIFFNESS = 1e7  # N/m, the stiff-spring scene
 
 def stiff_scene() -> BenchScene:
     """benchmarks/stress.py's 10 kg pendulum carrying a 10 g slider, on a 1e7 N/m spring."""
-    model = stress.heavy_and_light(pinocchio.JointModelPZ())
-    scene = pinsettle.Scene(model, name="stiff_spring")
+    scene = pinsettle.Scene(
+        stress.heavy_and_light(pinocchio.JointModelPZ()), name="stiff_spring", limits=False
+    )
     scene.add_joint_spring("light", stiffness=STIFFNESS)
     scene.set_start(j0=0.8)
+    reference = CachedReference(
+        stress.heavy_and_light(pinocchio.JointModelPZ()),
+        joint_springs=[("light", STIFFNESS, 0.0)],
+        start={"j0": 0.8},
+        limits=False,
+    )
     return BenchScene(
         "stiff_spring",
         scene,
         f"10 kg, 1 m pendulum carrying a 10 g slider on a {STIFFNESS:.0e} N/m joint spring "
         "(benchmarks/stress.py's heavy_and_light), released at 0.8 rad",
+        reference,
     )
 
 
@@ -138,8 +179,8 @@ SCENE_NAMES = (
 
 
 def make_scene(name: str) -> BenchScene:
-    if name == "chain100":
-        return chain_scene(100)
+    if name.startswith("chain") and name[5:].isdigit() and name != "chain20":
+        return chain_scene(int(name[5:]))
     if name == "stiff_spring":
         return stiff_scene()
     return _library(name)
@@ -151,11 +192,10 @@ def make_scene(name: str) -> BenchScene:
 def newton(
     statics: Statics, q: np.ndarray, iterations: int = 30, tolerance: float = 1e-16
 ) -> tuple[np.ndarray, list[float], int]:
-    """Newton's method on the static force from q with the stiffness matrix of
-    ``pinsettle.assess_stability`` (least squares with a rank cut, so neutral directions are
-    left alone; with loops in the reduced coordinates, each step moved back onto the loops:
-    ``Statics.newton_step``), full steps, until the residual stops falling or is <= tolerance
-    (relative: round-off).
+    """Newton's method on the independent static force from q, with its finite-difference
+    stiffness (``Statics.newton_step``: least squares with a rank cut, so neutral directions are
+    left alone; with loops along the motions they allow, each step moved back onto the loops),
+    full steps, until the residual stops falling or is <= tolerance (relative: round-off).
     Returns the last pose, the relative residual after each iteration (the start first) and the
     iterations taken."""
     residuals = [statics.residual(q)]
@@ -163,8 +203,7 @@ def newton(
     for _ in range(iterations):
         if not residuals[-1] > tolerance:
             break
-        dq = statics.newton_step(q)
-        trial = statics.step(q, dq)
+        trial = statics.step(q, statics.newton_step(q))
         r = statics.residual(trial) if np.all(np.isfinite(trial)) else math.inf
         if not np.all(np.isfinite(trial)) or not r < residuals[-1]:
             break
@@ -178,20 +217,18 @@ def newton_from_start(
     statics: Statics, q: np.ndarray, line_search: bool, iterations: int = 50
 ) -> tuple[np.ndarray, list[float], list[float], list[np.ndarray]]:
     """Newton's method as a user runs it from the start, with the stiffness matrix of
-    ``pinsettle.assess_stability`` as Jacobian (least squares with a rank cut 1e-10; with loops
-    the reduced Newton of ``Statics.newton_step``, the start and every step moved onto the
-    loops): full steps,
-    or with ``line_search`` halved until |tau_static|_2 falls (Armijo, 1e-4), until the residual
-    is <= 1e-14 of the force scale, a step fails or 50 iterations. Returns the end pose, the
-    relative residual and the elapsed wall time (s) at the start and after each iteration, and
-    the poses."""
+    ``pinsettle.assess_stability`` as Jacobian (``Statics.solver_newton_step``; with loops the
+    reduced Newton, every step moved back onto the loops): full steps, or with ``line_search``
+    halved until |tau_static|_2 falls (Armijo, 1e-4), until the residual is <= 1e-14 of the
+    force scale, a step fails or 50 iterations. Returns the end pose, the relative residual and
+    the elapsed wall time (s) at the start and after each iteration, and the poses."""
     start = time.perf_counter()
     residuals, times, poses = [statics.residual(q)], [0.0], [q]
     for _ in range(iterations):
         if not residuals[-1] > 1e-14:
             break
         f = statics.force(q)
-        dq = statics.newton_step(q, f)
+        dq = statics.solver_newton_step(q, f)
         a, norm = 1.0, np.linalg.norm(f)
         trial = statics.step(q, dq)
         while line_search and not (
@@ -211,35 +248,23 @@ def newton_from_start(
     return q, residuals, times, poses
 
 
-def fd_newton_step(statics: Statics, q: np.ndarray, h: float = 1e-6) -> float:
-    """Size (max norm, rad or m) of one Newton step from q with a central-difference Jacobian
-    of the static force: nothing of pinsettle's stiffness code. Tiny at a root. With loops the
-    differences are taken along the basis B of the motions they allow (each side moved back
-    onto the loops) and the step solves B^T J y = -B^T f, dq = B y."""
-    B = statics.basis(q)
-    J = np.empty((statics.model.nv, B.shape[1]))
-    for i in range(B.shape[1]):
-        e = h * B[:, i]
-        J[:, i] = (statics.force(statics.step(q, e)) - statics.force(statics.step(q, -e))) / (2 * h)
-    step = B @ np.linalg.lstsq(B.T @ J, -(B.T @ statics.force(q)), rcond=1e-8)[0]
-    return float(np.max(np.abs(step)))
-
-
 def reference(statics: Statics) -> Reference:
+    """q*: kinetic damping with polish and a tiny max_e, refined by Newton on the independent
+    physics, its verdict from that physics' stiffness, checked by one more Newton step."""
     r = pinsettle.solve(statics.scene, polish=True, max_e=DEEP_MAX_E, max_steps=MAX_STEPS)
-    if not r.converged or r.stability not in ("stable", "neutral"):
-        raise RuntimeError(f"{statics.scene.name}: no stable reference ({r.status}, {r.stability})")
+    if not r.converged:
+        raise RuntimeError(f"{statics.scene.name}: no reference ({r.status})")
     q, _, _ = newton(statics, r.q)
-    report = statics.stiffness(q)
-    if report.verdict not in ("stable", "neutral"):
-        raise RuntimeError(f"{statics.scene.name}: the reference is {report.verdict}")
+    verdict, neutral, min_eig = statics.verdict(q)
+    if verdict not in ("stable", "neutral"):
+        raise RuntimeError(f"{statics.scene.name}: the reference is {verdict}")
     return Reference(
         q,
         statics.residual(q),
-        report.verdict,
-        report.neutral_directions,
-        report.min_eigenvalue,
-        fd_newton_step(statics, q),
+        verdict,
+        neutral,
+        min_eig,
+        float(np.max(np.abs(statics.newton_step(q)))),
         r.steps,
         r.wall_time / r.steps,
         statics.loop_error(q),
@@ -252,7 +277,7 @@ def landing(statics: Statics, ref: Reference, q_final: np.ndarray) -> Landing:
     q, _, _ = newton(statics, q_final)
     if not statics.residual(q) <= 1e-12:
         return Landing(None, "-", math.nan)
-    return Landing(q, statics.stiffness(q).verdict, statics.distance(ref.q, q))
+    return Landing(q, statics.verdict(q)[0], statics.distance(ref.q, q))
 
 
 # --- runs and their curves --------------------------------------------------------------------
@@ -263,8 +288,16 @@ def curve_of(statics: Statics, target: np.ndarray, steps: np.ndarray, rows: np.n
     return Curve(np.asarray(steps, dtype=float), residual, statics.distances(target, rows))
 
 
-def _target(statics: Statics, ref: Reference, land: Landing) -> np.ndarray:
+def _target(ref: Reference, land: Landing) -> np.ndarray:
     return land.q if land.q is not None else ref.q
+
+
+def timed_solves(scene: pinsettle.Scene, settings: dict, repeats: int) -> list:
+    """Up to ``repeats`` solves (no more once they took REPEAT_BUDGET in all)."""
+    timed = [pinsettle.solve(scene, **settings)]
+    while len(timed) < repeats and sum(r.wall_time for r in timed) < REPEAT_BUDGET:
+        timed.append(pinsettle.solve(scene, **settings))
+    return timed
 
 
 def run_kd(
@@ -274,18 +307,18 @@ def run_kd(
     repeats: int,
     curve: bool = True,
     label: str = "",
+    setup: float = 0.0,
 ) -> Run:
     """Kinetic damping: up to ``repeats`` timed solves (wall_time is measured inside the C++
-    loop; no more once they took REPEAT_BUDGET in all), and with ``curve`` one more with a trace
-    of every step's configuration (the same trajectory: the solver is deterministic, checked).
-    At most the scene's step budget."""
+    loop), and with ``curve`` one more with a trace of every step's configuration (the same
+    trajectory: the solver is deterministic, checked). At most the scene's step budget.
+    ``setup``: the solver's set-up on the scene (s, benchmarks/kd_profile), charged in full to
+    the time to a level."""
     settings = {"max_steps": ref.step_budget, **settings}
-    timed = [pinsettle.solve(statics.scene, **settings)]
-    while len(timed) < repeats and sum(r.wall_time for r in timed) < REPEAT_BUDGET:
-        timed.append(pinsettle.solve(statics.scene, **settings))
+    timed = timed_solves(statics.scene, settings, repeats)
     result = timed[-1]
     land = landing(statics, ref, result.q)
-    target = _target(statics, ref, land)
+    target = _target(ref, land)
     c, damping, along = None, [], math.nan
     if curve:
         traced = pinsettle.solve(
@@ -306,7 +339,7 @@ def run_kd(
         damping = [
             step for step, kind in zip(t.event_step, t.event_kind, strict=True) if kind == "damping"
         ]
-    energy = settings.get("energy", "exact")
+    energy = settings.get("energy", pinsettle.Settings().energy)
     return Run(
         statics.scene.name,
         "kd",
@@ -323,8 +356,10 @@ def run_kd(
         curve=c,
         extra={
             "dt": result.dt,
+            "dt_estimates": result.dt_estimates,
             "dt_reductions": result.dt_reductions,
             "scaled_modes": result.scaled_modes,
+            "polish_iterations": result.polish_iterations,
             "damping_steps": np.array(damping),  # steps of the damping events (traced run)
             # Largest loop error (m) of the final q, measured here (Statics.loop_error) and by
             # the solver (Result.constraint_error), and over the traced run's samples.
@@ -332,6 +367,7 @@ def run_kd(
             "solver_constraint_error": result.constraint_error,
             "constraint_error_along": along,
         },
+        setup=min(setup, min(r.wall_time for r in timed)),
     )
 
 
@@ -339,8 +375,8 @@ def run_kd(
 
 
 def build_programs(build_dir: Path, log: Callable[[str], None]) -> Path:
-    """Configure and build benchmarks/ (step_cost, loop_step_cost, baselines) against the
-    installed package."""
+    """Configure and build benchmarks/ (step_cost, loop_step_cost, baselines, kd_profile)
+    against the installed package."""
     cmake = shutil.which("cmake", path=str(Path(sys.executable).parent)) or shutil.which("cmake")
     if cmake is None:
         raise RuntimeError("cmake is not installed (pip install cmake ninja)")
@@ -350,6 +386,8 @@ def build_programs(build_dir: Path, log: Callable[[str], None]) -> Path:
     build_dir.mkdir(parents=True, exist_ok=True)
     if not (build_dir / "CMakeCache.txt").exists():
         log("configuring the C++ benchmarks")
+        # The real path: next to an installed package's cmake folder sits Pinocchio's prefix.
+        cmake_dir = Path(pinsettle.get_cmake_dir()).resolve()
         subprocess.run(
             [
                 cmake,
@@ -359,13 +397,23 @@ def build_programs(build_dir: Path, log: Callable[[str], None]) -> Path:
                 str(build_dir),
                 *generator,
                 "-DCMAKE_BUILD_TYPE=Release",
-                f"-DCMAKE_PREFIX_PATH={pinsettle.get_cmake_dir()}",
+                f"-DCMAKE_PREFIX_PATH={cmake_dir}",
             ],
             check=True,
             capture_output=True,
             text=True,
         )
-    log("building the C++ benchmarks (about a minute the first time)")
+    # The installed headers keep their own dates, so a changed library would not make the
+    # objects compiled against the old headers stale: rebuild them all when the library changed.
+    library = next(Path(pinsettle.get_cmake_dir()).resolve().parents[1].glob("libpinsettle.*"))
+    stamp = build_dir / "pinsettle-library.stamp"
+    seen = f"{library.stat().st_mtime_ns} {library.stat().st_size}"
+    if stamp.exists() and stamp.read_text() != seen:
+        log("the installed pinsettle library changed: rebuilding the C++ benchmarks")
+        subprocess.run(
+            [cmake, "--build", str(build_dir), "--target", "clean"], check=True, capture_output=True
+        )
+    log("building the C++ benchmarks (a few minutes the first time)")
     proc = subprocess.run(
         [cmake, "--build", str(build_dir), "--parallel", str(os.cpu_count() or 2)],
         capture_output=True,
@@ -373,6 +421,7 @@ def build_programs(build_dir: Path, log: Callable[[str], None]) -> Path:
     )
     if proc.returncode != 0:
         raise RuntimeError(f"building benchmarks/ failed:\n{proc.stdout}\n{proc.stderr}")
+    stamp.write_text(seen)
     return build_dir
 
 
@@ -394,113 +443,166 @@ def _spec_lines(statics: Statics) -> list[str]:
     return lines
 
 
-def baseline_dt(statics: Statics, ref: Reference, rate: Callable[[np.ndarray], float]) -> float:
-    """dt_safety times the stability limit of semi-implicit Euler with a damping rate,
-    4 / (rate + sqrt(rate^2 + 4 omega_max^2)) (2 / omega_max undamped), the worse of the start
-    and q*; omega_max without stiff-mode scaling (the baselines have none)."""
-    steps = []
-    for q in (statics.q0, ref.q):
-        omega = statics.time_scale(q)["omega_unscaled"]
-        r = rate(q)
-        steps.append(4.0 / (r + math.sqrt(r * r + 4.0 * omega * omega)))
-    return DT_SAFETY * min(steps)
-
-
-def slowest_mode(statics: Statics, ref: Reference) -> tuple[float, np.ndarray]:
-    """Frequency (rad/s) and M-normalised shape of the slowest mode of the mechanism linearised
-    at q* (generalized eigenproblem K phi = omega^2 M phi; neutral directions skipped)."""
-    from scipy.linalg import eigh
-
-    report = statics.stiffness(ref.q)
-    K = report.stiffness_matrix
-    M = statics.mass_matrix(ref.q)
-    w2, phi = eigh(0.5 * (K + K.T), M)
-    k = int(np.flatnonzero(w2 > report.tolerance / np.max(np.diag(M)))[0])
-    return math.sqrt(w2[k]), phi[:, k]
-
-
-def damping_rule(statics: Statics, ref: Reference) -> Damping:
-    omega, phi = slowest_mode(statics, ref)
-    return Damping(omega, 2.0 * omega / float(phi @ phi), 2.0 * omega)
-
-
-def damping_rate(statics: Statics, method: str, c: float) -> Callable[[np.ndarray], float]:
-    """The fastest decay rate the damping gives (1/s): c times the largest eigenvalue of M^-1
-    for joint dampers, c for mass-proportional damping, 0 for FIRE."""
-    if method == "viscous":
-        return lambda q: (
-            c * float(np.max(np.linalg.eigvalsh(np.linalg.inv(statics.mass_matrix(q)))))
+def write_spec(statics: Statics, work: Path, tag: str, lines: Sequence[str]) -> Path:
+    """The spec file of benchmarks/spec.hpp for the scene: its model (saved once), its start,
+    its elements and the given lines."""
+    name = statics.scene.name
+    model_path = work / f"{name}.model.bin"
+    if not model_path.exists():
+        statics.model.saveToBinary(str(model_path))
+    q0 = statics.q0[statics.compiled.q_index]
+    spec = work / f"{name}.{tag}.spec"
+    spec.write_text(
+        "\n".join(
+            [
+                f"model {model_path}",
+                f"q0 {q0.size} " + " ".join(repr(float(x)) for x in q0),
+                *lines,
+                *_spec_lines(statics),
+            ]
         )
-    if method == "mass_damping":
-        return lambda q: c
-    return lambda q: 0.0
+        + "\n"
+    )
+    return spec
+
+
+def run_program(program: Path, spec: Path) -> dict:
+    proc = subprocess.run([str(program), str(spec)], capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{program.name} {spec} failed: {proc.stderr}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _settings_lines(family: str, settings: dict) -> list[str]:
+    return [f"method {family}", *(f"{key} {value}" for key, value in settings.items())]
+
+
+def _tag(family: str, settings: dict) -> str:
+    return family + "".join(f".{k}{v}" for k, v in settings.items())
 
 
 def run_baseline(
     program: Path,
     statics: Statics,
     ref: Reference,
-    method: str,
+    family: str,
+    settings: dict,
     repeats: int,
     work: Path,
-    damping: float = 0.0,
-    label: str = "",
-    curve: bool = True,
-    max_time: float = BASELINE_MAX_TIME,
+    label: str,
 ) -> Run:
-    """Viscous damping or FIRE in C++ (benchmarks/baselines.cpp), with the step of
-    ``baseline_dt`` (halved by the program when a run blows up: ``extra['halvings']``)."""
-    dt = baseline_dt(statics, ref, damping_rate(statics, method, damping))
-    model_path = work / f"{statics.scene.name}.model.bin"
-    if not model_path.exists():
-        statics.model.saveToBinary(str(model_path))
-    q0 = statics.q0[statics.compiled.q_index]
-    samples = work / f"{statics.scene.name}.{method}.samples"
-    lines = [
-        f"model {model_path}",
-        f"q0 {q0.size} " + " ".join(repr(float(x)) for x in q0),
-        f"method {method}",
-        f"dt {dt!r}",
-        f"damping {damping!r}",
-        f"target {BASELINE_TARGET * statics.force_scale!r}",
-        "check_every 64",
-        f"max_steps {BASELINE_MAX_STEPS}",
-        f"max_time {max_time}",
-        f"repeats {repeats}",
-        f"repeat_budget {REPEAT_BUDGET}",
-        f"max_samples {CURVE_SAMPLES}",
-        *([f"samples {samples}"] if curve else []),
-        *_spec_lines(statics),
-    ]
-    spec = work / f"{statics.scene.name}.{method}.spec"
-    spec.write_text("\n".join(lines) + "\n")
-    proc = subprocess.run([str(program), str(spec)], capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise RuntimeError(f"baselines {spec} failed: {proc.stderr}")
-    out = json.loads(proc.stdout)
+    """A baseline in C++ (benchmarks/baselines.cpp) down to BASELINE_TARGET, timed, then again
+    recording its curve. Its set-up (the step and damping from the start) is timed by the
+    program and charged to the time to a level."""
+    tag = _tag(family, settings)
+    samples = work / f"{statics.scene.name}.{tag}.samples"
+    spec = write_spec(
+        statics,
+        work,
+        tag,
+        [
+            *_settings_lines(family, settings),
+            f"target {BASELINE_TARGET * statics.force_scale!r}",
+            "check_every 16",
+            f"max_steps {BASELINE_MAX_STEPS}",
+            f"max_time {BASELINE_MAX_TIME}",
+            f"repeats {repeats}",
+            f"repeat_budget {REPEAT_BUDGET}",
+            f"max_samples {CURVE_SAMPLES}",
+            f"samples {samples}",
+        ],
+    )
+    out = run_program(program, spec)
     q_final = statics.compiled.full_q(np.array(out["q"]))
     land = landing(statics, ref, q_final)
-    target = _target(statics, ref, land)
-    c = None
-    if curve:
-        data = np.fromfile(samples, dtype=np.float64).reshape(-1, statics.model.nq + 1)
-        rows = np.array([statics.compiled.full_q(row) for row in data[:, 1:]])
-        c = curve_of(statics, target, data[:, 0], rows)
+    target = _target(ref, land)
+    data = np.fromfile(samples, dtype=np.float64).reshape(-1, statics.model.nq + 1)
+    rows = np.array([statics.compiled.full_q(row) for row in data[:, 1:]])
+    setup = statistics.median(out["setup_times"])
     return Run(
         statics.scene.name,
-        method,
-        label or BASELINE_LABELS[method],
-        {"dt": out["dt"], "damping": damping},
+        family,
+        label,
+        dict(settings),
         out["status"],
         int(out["steps"]),
-        list(out["wall_times"]),
+        [s + loop for s, loop in zip(out["setup_times"], out["wall_times"], strict=True)],
         statics.residual(q_final),
         statics.distance(target, q_final),
         land.stability,
         land,
-        curve=c,
-        extra={"dt_end": out["dt_end"], "resets": out["resets"], "halvings": out["halvings"]},
+        curve=curve_of(statics, target, data[:, 0], rows),
+        extra={
+            key: out[key]
+            for key in ("dt", "dt_max", "dt_end", "limit", "damping", "omega_rule", "resets")
+        }
+        | {"halvings": out["halvings"], "retries": out["retries"]},
+        setup=setup,
     )
+
+
+def sweep_point(
+    program: Path, statics: Statics, family: str, settings: dict, work: Path, repeats: int
+) -> SweepPoint:
+    """A baseline with the given settings, stopped at the residual LEVEL (time to it: its
+    set-up and loop, median of the repeats)."""
+    spec = write_spec(
+        statics,
+        work,
+        "sweep." + _tag(family, settings),
+        [
+            *_settings_lines(family, settings),
+            f"target {LEVEL * statics.force_scale!r}",
+            "check_every 16",
+            f"max_steps {BASELINE_MAX_STEPS}",
+            f"max_time {SWEEP_MAX_TIME}",
+            f"repeats {repeats}",
+            f"repeat_budget {REPEAT_BUDGET / 2}",
+        ],
+    )
+    out = run_program(program, spec)
+    totals = [s + loop for s, loop in zip(out["setup_times"], out["wall_times"], strict=True)]
+    return SweepPoint(
+        dict(settings),
+        out["status"],
+        int(out["steps"]),
+        statistics.median(totals),
+        statistics.median(out["setup_times"]),
+        out["halvings"],
+        out["retries"],
+        out["resets"],
+        out["dt"],
+    )
+
+
+def run_kd_profile(
+    program: Path,
+    statics: Statics,
+    work: Path,
+    repeats: int,
+    polish: bool,
+    max_time: float = 60.0,
+) -> dict:
+    """benchmarks/kd_profile on the scene: the default solve's set-up, estimates, assessments
+    (and with ``polish`` the polished solve), medians of the repeats in ``median``."""
+    spec = write_spec(
+        statics,
+        work,
+        "profile",
+        [
+            "method kd",
+            f"polish {int(polish)}",
+            f"repeats {repeats}",
+            f"repeat_budget {REPEAT_BUDGET}",
+            f"max_time {max_time}",
+        ],
+    )
+    out = run_program(program, spec)
+    keys = ["wall", "setup", "estimates", "assessments", "bare_step"]
+    if polish:
+        keys += ["polish_wall", "polish_assessments", "polish_stiffness"]
+    out["median"] = {key: statistics.median(out[key]) for key in keys}
+    return out
 
 
 def run_newton(statics: Statics, ref: Reference, line_search: bool) -> Run:
@@ -508,8 +610,7 @@ def run_newton(statics: Statics, ref: Reference, line_search: bool) -> Run:
     q, residuals, times, poses = newton_from_start(statics, statics.q0.copy(), line_search)
     finite = bool(np.all(np.isfinite(q)))
     root = finite and residuals[-1] <= 1e-10
-    report = statics.stiffness(q) if root else None
-    stability = report.verdict if report is not None else "-"
+    verdict, _, min_eig = statics.verdict(q) if root else ("-", 0, math.nan)
     distance = statics.distance(ref.q, q) if finite else math.nan
     dist = np.array([statics.distance(ref.q, p) for p in poses])
     return Run(
@@ -522,33 +623,33 @@ def run_newton(statics: Statics, ref: Reference, line_search: bool) -> Run:
         [times[-1]],
         residuals[-1],
         distance,
-        stability,
-        Landing(q if root else None, stability, distance),
+        verdict,
+        Landing(q if root else None, verdict, distance),
         curve=Curve(np.arange(len(residuals), dtype=float), np.array(residuals), dist),
         extra={
             "times": times,
-            "min_eigenvalue": report.min_eigenvalue if report else math.nan,
+            "min_eigenvalue": min_eig,
             "largest_angle": float(np.max(np.abs(q))) if finite else math.inf,
             "constraint_error": statics.loop_error(q),  # 0 for a tree
         },
     )
 
 
-def run_step_cost(program: Path, urdf: Path, steps: int, repeats: int) -> dict:
-    proc = subprocess.run(
-        [str(program), str(urdf), str(steps), str(repeats), "--json"],
-        capture_output=True,
-        text=True,
-    )
+def run_step_cost(
+    program: Path, urdf: Path, steps: int, repeats: int, only: str | None = None
+) -> dict:
+    args = [str(program), str(urdf), str(steps), str(repeats), "--json"]
+    if only:
+        args += ["--only", only]
+    proc = subprocess.run(args, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"step_cost {urdf} failed: {proc.stderr}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def run_loop_step_cost(program: Path, statics: Statics, steps: int, repeats: int) -> dict:
+def run_loop_step_cost(program: Path, scene: pinsettle.Scene, steps: int, repeats: int) -> dict:
     """benchmarks/loop_step_cost on a scene with loops: its URDF, its loops by frame name and
     its start (the program moves it onto the loops as the solver does); gravity alone."""
-    scene = statics.scene
     if scene.locked or scene.urdf is None:  # the program builds the whole URDF's model
         raise RuntimeError(f"loop_step_cost: {scene.name} needs a URDF and no locked joints")
     args = [str(program), str(scene.urdf), str(steps), str(repeats), "--json"]
@@ -561,6 +662,12 @@ def run_loop_step_cost(program: Path, statics: Statics, steps: int, repeats: int
     if proc.returncode != 0 or proc.stderr.strip():
         raise RuntimeError(f"loop_step_cost {scene.name} failed: {proc.stderr}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def cost_urdf(name: str) -> Path:
+    """A model of the step cost by name: a robot of example-robot-data or robots/NAME.urdf."""
+    local = ROOT / "robots" / f"{name}.urdf"
+    return local if local.exists() else pinsettle.robot_urdf(name)
 
 
 # --- the plan ---------------------------------------------------------------------------------
@@ -604,27 +711,36 @@ QUICK = Config(
     errs=(1e-12, 1e-4),
     dss=(30, 100),
     max_es=(1e-12, 1e-16),
-    damping_factors=(),
+    safeties=(0.2, 0.8),
+    damping_factors=(1.0,),
+    fire_dt_maxes=(1.0, 2.0),
     step_cost_steps=2000,
     step_cost_repeats=3,
+    cost_models=("ur5", "pendulum"),
+    overhead_scenes=("pendulum",),
+    scaling_max_time=10.0,
+    deep_chain_max=10,
+    robots=("ur5", "double_pendulum", "finger_edu", "solo12"),
+    mujoco_max_sim=60.0,
+    gallery_repeats=1,
 )
 
+Task = tuple[str, Callable[[], None]]
 
-def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
-    """The tasks, as (label, callable) pairs, run in order under the progress bar."""
-    tasks: list[tuple[str, Callable[[], None]]] = []
+
+def scene_tasks(config: Config, results: Results, programs: Path, work: Path) -> list[Task]:
+    """The scenes section: references, KD, the baselines and their sweeps, Newton, KD's
+    sweeps."""
+    tasks: list[Task] = []
     baselines = programs / "baselines"
-    step_cost = programs / "step_cost"
-    loop_step_cost = programs / "loop_step_cost"
     reps, sreps = config.repeats, config.sweep_repeats
-
     benches = {name: make_scene(name) for name in config.scenes}  # built once
     for name in config.scenes:
 
         def setup(name=name):
             bench = benches[name]
-            statics = Statics(bench.scene)
-            results.scenes[name] = SceneData(
+            statics = Statics(bench.scene, bench.reference)
+            d = SceneData(
                 bench,
                 statics,
                 reference(statics),
@@ -634,53 +750,82 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
                 len(bench.scene.loops),
                 statics.mobility,
             )
+            d.apart = name in APART
+            if not d.loops:  # the solver's set-up, charged to KD's time to a level
+                d.profile = run_kd_profile(programs / "kd_profile", statics, work, reps, False)
+            results.scenes[name] = d
 
-        tasks.append((f"{name}: reference equilibrium", setup))
+        tasks.append((f"{name}: reference equilibrium, the solver's set-up", setup))
 
         def main_runs(name=name):
             d = results.scenes[name]
             s, ref = d.statics, d.ref
+            setup = d.profile["median"]["setup"] if d.profile else 0.0
             for energy in ("exact", "simplified"):
                 d.runs[f"kd_{energy}"] = run_kd(
-                    s, ref, {"energy": energy, "max_e": DEEP_MAX_E}, reps
+                    s, ref, {"energy": energy, "max_e": DEEP_MAX_E}, reps, setup=setup
                 )
+            # The default settings, nothing changed: where they stop (goal 2 of issue 20).
+            d.runs["kd_default"] = run_kd(
+                s, ref, {}, reps, curve=False, label="KD defaults", setup=setup
+            )
 
-        tasks.append((f"{name}: kinetic damping, both energy measures", main_runs))
+        tasks.append((f"{name}: kinetic damping, both energy measures, defaults", main_runs))
 
-        def baseline_runs(name=name):
+        def newton_runs(name=name):
             d = results.scenes[name]
-            s, ref = d.statics, d.ref
-            if d.loops:
-                # The C++ baselines run unconstrained ABA: they cannot hold a loop. Newton (the
-                # reduced one, steps moved back onto the loops) can.
-                d.runs["newton"] = run_newton(s, ref, line_search=False)
-                d.runs["newton_ls"] = run_newton(s, ref, line_search=True)
-                return
-            d.damping = damping_rule(s, ref)
-            for method, c in (("viscous", d.damping.joint), ("mass_damping", d.damping.mass)):
-                d.runs[method] = run_baseline(baselines, s, ref, method, reps, work, damping=c)
-                for factor in config.damping_factors:
-                    d.damping_sweep[(method, factor)] = run_baseline(
-                        baselines,
-                        s,
-                        ref,
-                        method,
-                        1,
-                        work,
-                        damping=factor * c,
-                        curve=False,
-                        max_time=BASELINE_SIDE_TIME,
-                    )
-            d.runs["fire"] = run_baseline(baselines, s, ref, "fire", reps, work)
-            d.runs["newton"] = run_newton(s, ref, line_search=False)
-            d.runs["newton_ls"] = run_newton(s, ref, line_search=True)
+            d.runs["newton"] = run_newton(d.statics, d.ref, line_search=False)
+            d.runs["newton_ls"] = run_newton(d.statics, d.ref, line_search=True)
 
-        tasks.append((f"{name}: viscous damping, FIRE (trees only), Newton", baseline_runs))
+        tasks.append((f"{name}: Newton from the start", newton_runs))
+
+        if not benches[name].scene.loops:  # the C++ baselines run unconstrained ABA
+            for family in BASELINES:
+
+                def baseline_runs(name=name, family=family):
+                    d = results.scenes[name]
+                    s, ref = d.statics, d.ref
+                    rule = BASELINE_RULES[family]
+                    label = BASELINE_LABELS[family]
+                    d.runs[f"{family}_rule"] = run_baseline(
+                        baselines, s, ref, family, rule, reps, work, f"{label}, rule"
+                    )
+                    points = [
+                        sweep_point(baselines, s, family, settings, work, sreps)
+                        for settings in config.sweep(family)
+                    ]
+                    d.baseline_sweep[family] = points
+                    done = [p for p in points if p.time_to is not None]
+                    best = min(done, key=lambda p: p.seconds, default=None)
+                    if best is None or best.settings == rule:
+                        d.runs[f"{family}_best"] = d.runs[f"{family}_rule"]
+                    else:
+                        d.runs[f"{family}_best"] = run_baseline(
+                            baselines,
+                            s,
+                            ref,
+                            family,
+                            best.settings,
+                            reps,
+                            work,
+                            f"{label}, best ({setting_label(family, best.settings)})",
+                        )
+
+                tasks.append(
+                    (f"{name}: {BASELINE_LABELS[family]}, its rule and its sweep", baseline_runs)
+                )
 
         def sweep_kt(name=name):
             d = results.scenes[name]
+            setup = d.profile["median"]["setup"] if d.profile else 0.0
             d.sweeps["kt"] = [
-                run_kd(d.statics, d.ref, {"energy": e, "kt": kt, "max_e": DEEP_MAX_E}, sreps)
+                run_kd(
+                    d.statics,
+                    d.ref,
+                    {"energy": e, "kt": kt, "max_e": DEEP_MAX_E},
+                    sreps,
+                    setup=setup,
+                )
                 for e in ("exact", "simplified")
                 for kt in config.kts
             ]
@@ -703,9 +848,10 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
         def sweep_other(name=name):
             d = results.scenes[name]
             s, ref = d.statics, d.ref
+            setup = d.profile["median"]["setup"] if d.profile else 0.0
             deep = {"max_e": DEEP_MAX_E}
             d.sweeps["backtrack"] = [
-                run_kd(s, ref, {**deep, "energy": e, "backtrack": b}, sreps)
+                run_kd(s, ref, {**deep, "energy": e, "backtrack": b}, sreps, setup=setup)
                 for e in ("exact", "simplified")
                 for b in (False, True)
             ]
@@ -716,63 +862,173 @@ def plan(config: Config, results: Results, programs: Path, work: Path) -> list:
                 "max_steps": max(ref.step_budget, int(DT_SWEEP_SECONDS / ref.seconds_per_step)),
             }
             d.sweeps["dt"] = [
-                run_kd(s, ref, budget, sreps, label="auto"),
+                run_kd(s, ref, budget, sreps, label="auto", setup=setup),
                 run_kd(
-                    s, ref, {**budget, "scale_stiff_modes": False}, sreps, label="auto, unscaled"
+                    s,
+                    ref,
+                    {**budget, "scale_stiff_modes": False},
+                    sreps,
+                    label="auto, unscaled",
+                    setup=setup,
                 ),
                 run_kd(s, ref, {**budget, "dt": start_dt}, sreps, label="fixed, start"),
                 run_kd(s, ref, {**budget, "dt": start_dt / 4}, sreps, label="fixed, start / 4"),
             ]
 
         tasks.append((f"{name}: backtracking, fixed against automatic dt", sweep_other))
+    return tasks
 
-    # The cost of one step against bare aba + integrate.
-    cost_models = [
-        ("ur5", pinsettle.robot_urdf("ur5")),
-        ("pendulum", ROOT / "robots/pendulum.urdf"),
-    ]
-    if len(config.scenes) > 1:
-        cost_models.append(("chain20", ROOT / "robots/chain20.urdf"))
-    for name, urdf in cost_models:
 
-        def cost(name=name, urdf=urdf):
+def cost_tasks(config: Config, results: Results, programs: Path) -> list[Task]:
+    """The cost of one step: step_cost (elements, stops) and loop_step_cost."""
+    tasks: list[Task] = []
+    for name in config.cost_models:
+
+        def cost(name=name):
             results.step_cost[name] = run_step_cost(
-                step_cost, urdf, config.step_cost_steps, config.step_cost_repeats
+                programs / "step_cost",
+                cost_urdf(name),
+                config.step_cost_steps,
+                config.step_cost_repeats,
             )
 
         tasks.append((f"step cost: {name}", cost))
-    for name in (n for n in config.scenes if benches[n].scene.loops):
+    for name in config.scenes:
+        if not _library_has_loops(name):
+            continue
 
         def loop_cost(name=name):
             results.loop_step_cost[name] = run_loop_step_cost(
-                loop_step_cost,
-                results.scenes[name].statics,
+                programs / "loop_step_cost",
+                make_scene(name).scene,
                 config.step_cost_steps,
                 config.step_cost_repeats,
             )
 
         tasks.append((f"step cost: {name} (closed loops)", loop_cost))
+    return tasks
 
-    # Scaling with chain length.
+
+def _library_has_loops(name: str) -> bool:
+    path = ROOT / "robots" / f"{name}.toml"
+    return path.exists() and bool(pinsettle.load_scene(path).loops)
+
+
+def overhead_tasks(config: Config, results: Results, programs: Path, work: Path) -> list[Task]:
+    tasks: list[Task] = []
+    for name in config.overhead_scenes:
+
+        def overhead(name=name):
+            bench = make_scene(name)
+            statics = Statics(bench.scene, bench.reference)
+            results.overhead[name] = run_kd_profile(
+                programs / "kd_profile", statics, work, max(config.repeats, 3), True
+            ) | {"nv": statics.model.nv}
+
+        tasks.append((f"overhead: {name}", overhead))
+    return tasks
+
+
+def scaling_tasks(config: Config, results: Results, programs: Path, work: Path) -> list[Task]:
+    """Chains of config.chain_lengths: the default solve profiled (benchmarks/kd_profile, within
+    config.scaling_max_time), the bare step, and up to config.deep_chain_max links a run to
+    round-off and the whole step cost."""
+    tasks: list[Task] = []
     for n in config.chain_lengths:
 
         def scale(n=n):
             bench = chain_scene(n)
-            statics = Statics(bench.scene)
-            ref = reference(statics)
-            runs = [run_kd(statics, ref, {}, config.sweep_repeats, curve=False)]
-            runs.append(
-                run_kd(statics, ref, {"max_e": DEEP_MAX_E}, config.sweep_repeats, label="deep")
+            statics = Statics(bench.scene, bench.reference)
+            q_star = pinocchio.neutral(statics.full)  # hanging straight down, checked below
+            residual = statics.residual(q_star)
+            verdict = statics.verdict(q_star)[0]
+            if not (residual <= 1e-14 and verdict == "stable"):
+                raise RuntimeError(f"chain{n}: straight down is not a stable rest ({verdict})")
+            long_chain = n > config.deep_chain_max
+            profile = run_kd_profile(
+                programs / "kd_profile",
+                statics,
+                work,
+                1 if long_chain else config.sweep_repeats,
+                False,
+                max_time=config.scaling_max_time,
             )
+            q_final = statics.compiled.full_q(np.array(profile["q"]))
+            row = {
+                "n": n,
+                "profile": profile,
+                "residual": statics.residual(q_final),
+                "distance": statics.distance(q_star, q_final),
+            }
+            if not long_chain:
+                ref = Reference(q_star, residual, verdict, 0, math.nan, 0.0, profile["steps"], 0.0)
+                row["deep"] = run_kd(
+                    statics,
+                    ref,
+                    {"max_e": DEEP_MAX_E, "max_time": config.scaling_max_time},
+                    1,
+                    label="deep",
+                    setup=profile["median"]["setup"],
+                )
             path = work / f"chain{n}.urdf"
             path.write_text(chain_urdf(n))
-            # Enough steps that the solver's set-up (the first step estimate, the final
-            # stability check: O(nv^3)) weighs little against them.
-            steps = max(config.step_cost_steps // 4, config.step_cost_steps * 5 // n)
-            cost = run_step_cost(step_cost, path, steps, 3)
-            results.scaling.append({"n": n, "runs": runs, "cost": cost})
+            steps = max(200, min(config.step_cost_steps, config.step_cost_steps * 20 // n))
+            row["cost"] = run_step_cost(
+                programs / "step_cost",
+                path,
+                steps,
+                3,
+                only="bare" if long_chain else "bare,exact",
+            )
+            results.scaling.append(row)
 
         tasks.append((f"scaling: chain of {n}", scale))
+    return tasks
+
+
+def gallery_tasks(config: Config, results: Results) -> list[Task]:
+    tasks: list[Task] = []
+    names = list(config.robots) if config.robots is not None else pinsettle.robot_names()
+    results.mujoco = gallery.mujoco_info()
+
+    for name in names:
+
+        def robot(name=name):
+            results.gallery.append(
+                gallery.measure_robot(
+                    name,
+                    repeats=config.gallery_repeats,
+                    mujoco_max_sim=config.mujoco_max_sim,
+                )
+            )
+
+        tasks.append((f"gallery: {name}", robot))
+    for name in names:
+        if not gallery.is_floating(name):
+            continue
+
+        def falling(name=name):
+            results.floating.append(gallery.measure_floating(name, config.gallery_repeats))
+
+        tasks.append((f"gallery: {name} with a floating base", falling))
+    return tasks
+
+
+def plan(
+    config: Config, results: Results, programs: Path, work: Path, sections: Sequence[str]
+) -> list[tuple[str, str, Callable[[], None]]]:
+    """The tasks, as (section, label, callable), run in order under the progress bar."""
+    tasks: list[tuple[str, str, Callable[[], None]]] = []
+    makers = {
+        "scenes": lambda: scene_tasks(config, results, programs, work),
+        "cost": lambda: cost_tasks(config, results, programs),
+        "overhead": lambda: overhead_tasks(config, results, programs, work),
+        "scaling": lambda: scaling_tasks(config, results, programs, work),
+        "gallery": lambda: gallery_tasks(config, results),
+    }
+    for section in SECTIONS:
+        if section in sections:
+            tasks += [(section, label, task) for label, task in makers[section]()]
     return tasks
 
 
@@ -810,33 +1066,53 @@ def generate(
     build_dir: Path,
     quiet: bool = False,
     update_readme: bool = False,
+    sections: Sequence[str] = SECTIONS,
 ) -> Results:
-    """Run everything and write output/benchmarks.md and output/benchmarks/*.png; with
-    ``update_readme``, also the README's speed section (between its bench:summary markers)."""
+    """Measure the given sections and write their parts of output/benchmarks.md (the others
+    kept) and their figures in output/benchmarks/; with ``update_readme`` and every section, also
+    the README's speed section (between its bench:summary markers)."""
 
     def log(msg: str) -> None:
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    results = Results(config, machine=machine())
+    results = Results(config, machine=machine(), sections=tuple(sections))
     programs = build_programs(build_dir, log)
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pinsettle-bench-") as tmp:
-        tasks = plan(config, results, programs, Path(tmp))
+        tasks = plan(config, results, programs, Path(tmp), sections)
         progress = Progress(len(tasks), stream=open(os.devnull, "w") if quiet else sys.stderr)
-        for label, task in tasks:
+        for section, label, task in tasks:
             progress.show(label)
+            began = time.perf_counter()
             task()
+            results.section_seconds[section] = (
+                results.section_seconds.get(section, 0.0) + time.perf_counter() - began
+            )
             progress.advance()
         progress.show("writing the report")
         progress.close()
     results.machine["load_end"] = os.getloadavg()
     results.seconds = time.perf_counter() - start
     report_writer.write(results, output)
-    if update_readme and report_writer.update_readme(results, ROOT / "README.md"):
+    if (
+        update_readme
+        and set(sections) == set(SECTIONS)
+        and report_writer.update_readme(results, ROOT / "README.md")
+    ):
         log("updated the speed section of README.md")
     log(f"wrote {output / 'benchmarks.md'} and {output / 'benchmarks'}/")
     return results
+
+
+def parse_sections(text: str) -> tuple[str, ...]:
+    names = tuple(s.strip() for s in text.split(",") if s.strip())
+    unknown = [s for s in names if s not in SECTIONS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"--sections takes a comma-separated list of {', '.join(SECTIONS)}; got {text!r}"
+        )
+    return names
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -844,7 +1120,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="a tiny run (one scene, few repeats) into build/bench-quick unless --output is given",
+        help="a tiny run (few scenes, robots and repeats) into build/bench-quick unless "
+        "--output is given",
+    )
+    parser.add_argument(
+        "--sections",
+        type=parse_sections,
+        default=SECTIONS,
+        help=f"measure only these sections (comma-separated: {', '.join(SECTIONS)}) and replace "
+        "only their parts of the report",
     )
     parser.add_argument(
         "--output", type=Path, help="folder of benchmarks.md and benchmarks/ (default: docs)"
@@ -865,7 +1149,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     output = args.output or (ROOT / "build" / "bench-quick" if args.quick else ROOT / "docs")
     # The README quotes the committed report: only a full run into docs/ rewrites its numbers.
     readme = not args.quick and output.resolve() == (ROOT / "docs").resolve()
-    generate(config, output, args.build_dir, update_readme=readme and not args.no_readme)
+    generate(
+        config,
+        output,
+        args.build_dir,
+        update_readme=readme and not args.no_readme,
+        sections=args.sections,
+    )
     return 0
 
 

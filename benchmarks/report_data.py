@@ -13,8 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pinsettle
+from independent import CachedReference
 from scene_statics import Statics
 
+#: The report's sections (``report.py --sections``), in the report's order.
+SECTIONS = ("scenes", "cost", "overhead", "scaling", "gallery")
 #: Residual levels of the summary, relative to the scene's force scale.
 RESIDUAL_LEVELS = (1e-6, 1e-10)
 #: Distance levels (rad or m) of the energy-measure comparison.
@@ -23,7 +26,13 @@ KTS = (0.0, 0.25, 0.5, 0.75, 0.9)
 ERRS = (0.0, 1e-12, 1e-8, 1e-4, 1e-2)
 DSS = (10, 30, 100, 300, 1000)
 MAX_ES = (1e-8, 1e-12, 1e-16, 1e-20, 1e-24)
-CHAIN_LENGTHS = (5, 10, 20, 50, 100, 200)
+#: Chain lengths of the scaling section, and the longest that also gets a run to round-off
+#: (its curve) and the whole step-cost table.
+CHAIN_LENGTHS = (5, 10, 20, 50, 100, 200, 400, 1000)
+DEEP_CHAIN_MAX = 200
+#: Wall-clock budget of one solve of the scaling section (s): the 1,000-link chain is not run
+#: to its end.
+SCALING_MAX_TIME = 90.0
 #: The bound of the stopping rule in the runs whose curves are plotted: far below every level,
 #: so that the curve shows how the error falls, down to round-off.
 DEEP_MAX_E = 1e-26
@@ -46,9 +55,55 @@ BASELINE_MAX_TIME = 5.0
 BASELINE_SIDE_TIME = 2.0
 #: Timed repeats stop once they took this long in all (s): long runs are timed fewer times.
 REPEAT_BUDGET = 2.0
-#: Viscous damping coefficients tried besides the rule's c, as multiples of it.
-DAMPING_FACTORS = (0.25, 4.0)
 DT_SAFETY = pinsettle.Settings().dt_safety
+
+# --- the baselines: their rules and the sweeps of their own parameters ----------------------
+
+#: The four baselines, by the key of their runs.
+BASELINE_LABELS = {
+    "viscous": "viscous (joint dampers)",
+    "mass_damping": "viscous (mass-proportional)",
+    "fire": "FIRE",
+    "fire2": "FIRE 2.0",
+}
+BASELINES = tuple(BASELINE_LABELS)
+#: Each baseline's rule setting: the viscous ones at KD's own step safety and the c that damps
+#: the softest mode at the start critically; FIRE and FIRE 2.0 with dt_max twice the stability
+#: limit (dt0 = dt_max / 10, the classic ratio), mixing in joint coordinates.
+BASELINE_RULES = {
+    "viscous": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
+    "mass_damping": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
+    "fire": {"dt_max": 2.0, "metric": "euclid"},
+    "fire2": {"dt_max": 2.0, "metric": "euclid"},
+}
+#: The sweeps: step safety and c (as a multiple of the rule's) of the viscous baselines; FIRE's
+#: dt_max (a multiple of the stability limit) and the metric of its velocity mixing.
+VISCOUS_SAFETIES = (0.2, 0.5, 0.8, 0.9)
+DAMPING_FACTORS = (0.25, 1.0, 4.0)
+FIRE_DT_MAXES = (0.5, 1.0, 1.5, 2.0)
+FIRE_METRICS = ("euclid", "mass")
+#: Budget of one sweep run (s); it stops at the residual LEVEL.
+SWEEP_MAX_TIME = 2.0
+#: Scenes reported apart from the baselines' comparison: a test of KD's stiff-mode scaling,
+#: which the baselines do not have.
+APART = ("stiff_spring",)
+
+# --- the robot gallery and MuJoCo ------------------------------------------------------------
+
+#: MuJoCo's damped settle as its users run it: joint damping (N m s/rad or N s/m on every
+#: degree of freedom) and time step (s).
+MUJOCO_DAMPING = 1.0
+MUJOCO_TIMESTEP = 1e-3
+#: MuJoCo has settled once max |qvel| <= MUJOCO_QVEL and max |qacc| <= MUJOCO_QACC at every
+#: check (every MUJOCO_CHUNK steps) for MUJOCO_QUIET seconds of simulated time in a row.
+MUJOCO_QVEL = 1e-4
+MUJOCO_QACC = 1e-3
+MUJOCO_QUIET = 0.5
+MUJOCO_CHUNK = 10
+#: Simulated-time budget of MuJoCo's settle (s).
+MUJOCO_MAX_SIM = 600.0
+#: KD's budget on a gallery robot (s of wall clock).
+GALLERY_MAX_TIME = 60.0
 
 
 # --- the records of the measurements ----------------------------------------------------------
@@ -59,14 +114,16 @@ class BenchScene:
     name: str
     scene: pinsettle.Scene
     description: str
+    reference: CachedReference  # the same scene written independently (tests/scene_reference)
     urdf: Path | None = None  # for step_cost, when the model is a URDF of its own
 
 
 @dataclass
 class Reference:
     """The exact equilibrium q* of a scene: kinetic damping with polish=True and a tiny max_e,
-    Newton-refined to round-off, checked stable (or neutral) and checked by an independent
-    finite-difference Newton step."""
+    refined to round-off by Newton's method on the independent physics
+    (benchmarks/independent.py), its stability from the eigenvalues of that physics'
+    finite-difference stiffness, and checked by one more such Newton step."""
 
     q: np.ndarray
     residual: float  # relative
@@ -134,6 +191,9 @@ class Run:
     peaks: int = 0
     curve: Curve | None = None
     extra: dict = field(default_factory=dict)
+    #: Set-up (s, median) before the first step, part of ``seconds``: charged in full to the
+    #: time to a level (0: unknown, spread over the steps).
+    setup: float = 0.0
 
     @property
     def time(self) -> float:
@@ -141,11 +201,12 @@ class Run:
 
     @property
     def per_step(self) -> float:
-        return self.time / self.steps if self.steps else math.nan
+        """Time per step (s) after the set-up: (time - setup) / steps."""
+        return (self.time - self.setup) / self.steps if self.steps else math.nan
 
     def reach(self, quantity: str, level: float) -> tuple[float, float] | None:
-        """(steps, seconds) from which the residual or distance stays <= level; seconds map
-        steps by the run's measured time per step."""
+        """(steps, seconds) from which the residual or distance stays <= level; seconds are
+        the set-up plus the steps at the run's measured time per step."""
         if self.curve is None:
             return None
         values = getattr(self.curve, quantity)
@@ -153,24 +214,32 @@ class Run:
         if k is None:
             return None
         steps = float(self.curve.steps[k])
-        return steps, steps * self.per_step
+        return steps, self.setup + steps * self.per_step
 
 
 @dataclass
-class Damping:
-    """The two viscous baselines' coefficients: joint dampers c (every joint) and the
-    mass-proportional rate c, both damping the slowest mode critically."""
+class SweepPoint:
+    """One baseline run of a sweep, stopped at the residual LEVEL (or its budget)."""
 
-    omega: float  # slowest mode (rad/s)
-    joint: float  # N m s/rad (or N s/m): 2 omega / |phi|^2
-    mass: float  # 1/s: 2 omega
+    settings: dict
+    status: str
+    steps: int
+    seconds: float  # set-up and loop, median of the repeats (s)
+    setup: float  # s
+    halvings: int
+    retries: list[str]
+    resets: int
+    dt: float  # the (initial) step used (s)
+
+    @property
+    def time_to(self) -> float | None:
+        return self.seconds if self.status == "converged" else None
 
 
-BASELINE_LABELS = {
-    "viscous": "viscous (joint dampers)",
-    "mass_damping": "viscous (mass-proportional)",
-    "fire": "FIRE",
-}
+def setting_label(family: str, settings: dict) -> str:
+    if family in ("fire", "fire2"):
+        return f"dt_max {settings['dt_max']:g} x limit, {settings['metric']}"
+    return f"safety {settings['dt_safety']:g}, {settings['damping_factor']:g} c"
 
 
 @dataclass
@@ -183,9 +252,34 @@ class Config:
     errs: Sequence[float] = ERRS
     dss: Sequence[int] = DSS
     max_es: Sequence[float] = MAX_ES
+    safeties: Sequence[float] = VISCOUS_SAFETIES
     damping_factors: Sequence[float] = DAMPING_FACTORS
+    fire_dt_maxes: Sequence[float] = FIRE_DT_MAXES
+    fire_metrics: Sequence[str] = FIRE_METRICS
     step_cost_steps: int = 20000
     step_cost_repeats: int = 11
+    #: Models of the step cost (robots of example-robot-data or robots/*.urdf by name).
+    cost_models: Sequence[str] = ("ur5", "panda", "pendulum", "chain20")
+    #: Scenes of the overhead split (goal 4 of issue 20).
+    overhead_scenes: Sequence[str] = ("ur5", "chain20", "chain100")
+    scaling_max_time: float = SCALING_MAX_TIME
+    deep_chain_max: int = DEEP_CHAIN_MAX
+    #: Robots of the gallery (None: every robot pinsettle lists).
+    robots: Sequence[str] | None = None
+    mujoco_max_sim: float = MUJOCO_MAX_SIM
+    gallery_repeats: int = 3
+
+    def sweep(self, family: str) -> list[dict]:
+        """The settings a baseline is run with besides its rule (the rule included)."""
+        if family in ("fire", "fire2"):
+            return [
+                {"dt_max": m, "metric": g} for g in self.fire_metrics for m in self.fire_dt_maxes
+            ]
+        return [
+            {"dt_safety": s, "damping_factor": f}
+            for f in self.damping_factors
+            for s in self.safeties
+        ]
 
 
 @dataclass
@@ -199,10 +293,12 @@ class SceneData:
     loops: int = 0  # loop closures
     mobility: int = 0  # degrees of freedom (nv less the independent loop equations)
     runs: dict[str, Run] = field(default_factory=dict)  # main runs by key
-    damping: Damping | None = None
-    # The viscous baselines with other coefficients: (method, factor of the rule's c) -> run.
-    damping_sweep: dict[tuple[str, float], Run] = field(default_factory=dict)
+    # The baselines' sweeps of their own parameters: family -> runs to the residual LEVEL.
+    baseline_sweep: dict[str, list[SweepPoint]] = field(default_factory=dict)
     sweeps: dict[str, list[Run]] = field(default_factory=dict)
+    # benchmarks/kd_profile on the scene (trees): the solver's set-up and overheads.
+    profile: dict | None = None
+    apart: bool = False  # reported apart from the baselines' comparison (APART)
 
 
 @dataclass
@@ -213,5 +309,13 @@ class Results:
     # benchmarks/loop_step_cost per scene with loops.
     loop_step_cost: dict[str, dict] = field(default_factory=dict)
     scaling: list[dict] = field(default_factory=list)
+    # benchmarks/kd_profile on the overhead scenes (goal 4 of issue 20).
+    overhead: dict[str, dict] = field(default_factory=dict)
+    # The robot gallery: one record per robot, root fixed; and the floating-base robots.
+    gallery: list[dict] = field(default_factory=list)
+    floating: list[dict] = field(default_factory=list)
+    mujoco: dict = field(default_factory=dict)  # version, or why it is not there
     machine: dict = field(default_factory=dict)
     seconds: float = 0.0
+    sections: Sequence[str] = ()  # the sections measured in this run
+    section_seconds: dict[str, float] = field(default_factory=dict)

@@ -7,6 +7,7 @@ stated next to them.
 from __future__ import annotations
 
 import math
+import re
 import statistics
 import textwrap
 from collections.abc import Sequence
@@ -19,6 +20,8 @@ import report_data as D
 #: Values below this are drawn at it on the log axes (exact zeros happen at round-off).
 FLOOR = 1e-17
 LEVEL = D.RESIDUAL_LEVELS[-1]  # the level the conclusions compare at
+#: The solver's default settings, which the texts quote (they may change).
+DEFAULTS = pinsettle.Settings()
 
 
 # --- formatting ---------------------------------------------------------------------------------
@@ -49,6 +52,10 @@ def fmt_steps(steps: float | None) -> str:
     return "-" if steps is None else f"{int(steps):,}"
 
 
+def plural(n: int, word: str) -> str:
+    return f"{n:,} {word}" + ("" if n == 1 else "s")
+
+
 def fmt_e(x: float) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.1e}"
 
@@ -65,10 +72,9 @@ def reach_cell(run: D.Run, quantity: str, level: float, spread: bool = True) -> 
     steps, _ = hit
     if run.method == "newton":
         return f"{int(steps)} it.", fmt_time(run.extra["times"][int(steps)]) + " (Python)"
-    per_step = [s / run.steps for s in run.seconds]
-    return fmt_steps(steps), fmt_spread(per_step, steps) if spread else fmt_time(
-        steps * run.per_step
-    )
+    # The set-up in full, then the steps at each repeat's time per step after it.
+    times = [run.setup + steps * (s - run.setup) / run.steps for s in run.seconds]
+    return fmt_steps(steps), fmt_spread(times) if spread else fmt_time(hit[1])
 
 
 def outcome_time(run: D.Run) -> str:
@@ -115,7 +121,7 @@ def steps_to(run: D.Run, level: float = LEVEL) -> float | None:
     return None if hit is None else hit[0]
 
 
-BASELINES = ("viscous", "mass_damping", "fire")
+BASELINES = D.BASELINES
 
 
 def loop_scenes(results: D.Results) -> list[str]:
@@ -163,11 +169,16 @@ def loop_cost_ratio(results: D.Results, name: str, key: str = "exact") -> float:
 # --- figures -----------------------------------------------------------------------------------
 
 STYLE = {
-    "kd_exact": dict(color="C0", ls="-", label="KD, exact energy"),
+    "kd_exact": dict(color="C0", ls="-", lw=2, label="KD, exact energy"),
     "kd_simplified": dict(color="C0", ls="--", label="KD, simplified energy"),
-    "viscous": dict(color="C1", ls="-", label="viscous, joint dampers"),
-    "mass_damping": dict(color="C2", ls="-", label="viscous, mass-proportional"),
-    "fire": dict(color="C3", ls="-", label="FIRE"),
+    "viscous_rule": dict(color="C1", ls="-", label="viscous, joint dampers (rule)"),
+    "viscous_best": dict(color="C1", ls="--", label="viscous, joint dampers (best)"),
+    "mass_damping_rule": dict(color="C2", ls="-", label="viscous, mass-proportional (rule)"),
+    "mass_damping_best": dict(color="C2", ls="--", label="viscous, mass-proportional (best)"),
+    "fire_rule": dict(color="C3", ls="-", label="FIRE (rule)"),
+    "fire_best": dict(color="C3", ls="--", label="FIRE (best)"),
+    "fire2_rule": dict(color="C6", ls="-", label="FIRE 2.0 (rule)"),
+    "fire2_best": dict(color="C6", ls="--", label="FIRE 2.0 (best)"),
     "newton": dict(color="C4", ls=":", marker="o", ms=3, label="Newton (Python)"),
     "newton_ls": dict(color="C5", ls=":", marker="s", ms=3, label="Newton + line search (Python)"),
 }
@@ -179,10 +190,12 @@ def scene_figure(d: D.SceneData, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharey="row")
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8), sharey="row")
     for key, run in d.runs.items():
-        if run.curve is None:
+        if run.curve is None or key not in STYLE:
             continue
+        if key.endswith("_best") and run is d.runs.get(key[: -len("_best")] + "_rule"):
+            continue  # the rule was the best: drawn once
         c = run.curve
         style = STYLE[key]
         for row, quantity in enumerate(("distance", "residual")):
@@ -192,7 +205,7 @@ def scene_figure(d: D.SceneData, path: Path) -> None:
                 axes[row, 0].plot(t[1:], y[1:], **style)
                 continue
             keep = c.steps > 0
-            axes[row, 0].plot(c.steps[keep] * run.per_step, y[keep], **style)
+            axes[row, 0].plot(run.setup + c.steps[keep] * run.per_step, y[keep], **style)
             axes[row, 1].plot(c.steps[keep], y[keep], **style)
     for ax in axes.flat:
         ax.set_xscale("log")
@@ -205,7 +218,7 @@ def scene_figure(d: D.SceneData, path: Path) -> None:
     axes[1, 0].set_ylim(FLOOR / 2, 1e2)
     axes[0, 0].set_ylabel("distance max|q - q*| (rad or m)")
     axes[1, 0].set_ylabel("residual / force scale")
-    axes[1, 0].set_xlabel("wall time (s): steps x measured time per step")
+    axes[1, 0].set_xlabel("wall time (s): set-up + steps x measured time per step")
     axes[1, 1].set_xlabel(
         "steps (constrained-dynamics evaluations)" if d.loops else "steps (ABA evaluations)"
     )
@@ -217,7 +230,7 @@ def scene_figure(d: D.SceneData, path: Path) -> None:
     if d.loops:
         title += f"\n(closed loops, mobility {d.mobility}: the baselines run on trees only)"
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    fig.tight_layout(rect=(0, 0.09, 1, 1))
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
@@ -303,34 +316,40 @@ def scaling_figure(results: D.Results, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     rows = results.scaling
-    n = [row["n"] for row in rows]
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
-    bare = [statistics.median(row["cost"]["ns_per_step"]["bare"]) * 1e-9 for row in rows]
-    kd = [statistics.median(row["cost"]["ns_per_step"]["exact"]) * 1e-9 for row in rows]
-    real = [row["runs"][0].per_step for row in rows]
-    a.plot(n, bare, marker="o", label="bare aba + integrate (step_cost)")
-    a.plot(n, kd, marker="s", label="KD step (step_cost)")
-    a.plot(n, real, marker="^", label="KD, whole solve / steps")
-    a.set_xlabel("chain length (joints)")
+    n = np.array([row["n"] for row in rows], dtype=float)
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(14, 4.5))
+    per_step = [row["profile"]["median"]["wall"] / max(row["profile"]["steps"], 1) for row in rows]
+    bare = [row["profile"]["median"]["bare_step"] for row in rows]
+    a.plot(n, per_step, marker="^", label="KD, whole solve / steps")
+    a.plot(n, bare, marker="o", label="bare aba + integrate")
+    a.plot(n, bare[0] * n / n[0], color="grey", ls=":", label="O(n) from the first")
     a.set_ylabel("time per step (s)")
-    a.set_xscale("log")
-    a.set_yscale("log")
-    a.grid(True, alpha=0.3)
     a.legend(fontsize=8)
-    b.plot(n, [row["runs"][0].steps for row in rows], marker="o", label="converged (defaults)")
-    b.plot(
-        n,
-        [steps_to(row["runs"][1]) or np.nan for row in rows],
-        marker="s",
-        label=f"to residual {LEVEL:g} (max_e = {D.DEEP_MAX_E:g})",
-    )
-    b.set_xlabel("chain length (joints)")
+    done = [row["profile"]["status"] == "converged" for row in rows]
+    b.plot(n, [row["profile"]["steps"] for row in rows], marker="o", label="steps (defaults)")
+    for k, ok in enumerate(done):
+        if not ok:
+            status, steps = rows[k]["profile"]["status"], rows[k]["profile"]["steps"]
+            b.annotate(status, (n[k], steps), fontsize=7)
     b.set_ylabel("steps")
-    b.set_xscale("log")
-    b.set_yscale("log")
-    b.grid(True, alpha=0.3)
     b.legend(fontsize=8)
-    fig.suptitle("Chains of robots/make_chain.py (0.1 m, 0.1 kg links) released horizontal")
+    times = [row["profile"]["median"]["wall"] for row in rows]
+    c.plot(n, times, marker="s", label="solve time (defaults)")
+    c.plot(n, times[0] * (n / n[0]) ** 2, color="grey", ls=":", label="n^2 from the first")
+    for k, ok in enumerate(done):
+        if not ok:
+            c.annotate(rows[k]["profile"]["status"], (n[k], times[k]), fontsize=7)
+    c.set_ylabel("wall time (s)")
+    c.legend(fontsize=8)
+    for ax in (a, b, c):
+        ax.set_xlabel("chain length (joints)")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.grid(True, alpha=0.3)
+    fig.suptitle(
+        "Chains of robots/make_chain.py (0.1 m, 0.1 kg links) released horizontal, default "
+        f"settings (max_time {results.config.scaling_max_time:g} s)"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -348,95 +367,121 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]], right: Sequence[
 
 def header(results: D.Results) -> str:
     m = results.machine
-    load = (
-        f"1-minute load average {m['load_start'][0]:.2f} before the run and "
-        f"{m['load_end'][0]:.2f} at its end (its own process, single-threaded, included)"
-    )
     return f"""# Benchmarks: error against run time
 
-Generated by `python benchmarks/report.py` on {m["date"]}: {m["cpu"]}, {m["cores"]} cores,
-Python {m["python"]}, Pinocchio {m["pinocchio"]}, pinsettle {m["pinsettle"]}; {load}. The
-measurements took {results.seconds:.0f} s. Do not edit by hand: every number below is measured
-by that command.
+Generated by `python benchmarks/report.py` (every part; about {fmt_minutes(results)} on this
+machine), or part by part with `--sections {",".join(D.SECTIONS)}` (comma-separated; each part
+below is replaced alone and says when it was measured; `--quick` makes a tiny run elsewhere).
+Machine: {m["cpu"]}, {m["cores"]} cores, Python {m["python"]}, Pinocchio {m["pinocchio"]},
+pinsettle {m["pinsettle"]}. **The machine was shared with other jobs while measuring**:
+absolute times are noisy, so methods are compared by ratios within one run and by medians of
+repeats. Do not edit by hand: every number below is measured by that command.
 
 """
 
 
 def summary_rules(results: D.Results) -> str:
     names = ", ".join(f"`{n}`" for n in loop_scenes(results)) or "none here"
-    return f"""## How it is measured
+    s = pinsettle.Settings()
+    return f"""### How it is measured
+
+**Mechanics.** The scenes are solved without joint stops (`limits = false`): the baselines have
+none, so that every method solves the same problem. Stops are measured in the step cost and the
+robot gallery below.
 
 **Error.** For a configuration q, the *distance* `max |q - q*|` over the free joints (rad or m;
-revolute angles compared modulo 2 pi) and the *residual* `max |tau_static(q)|`
-(`Scene.static_force`: gravity minus springs and loads) divided by the scene's *force scale*,
-`max |tau_static(q0)|` at the start. q* is the exact equilibrium the run comes to rest at: its
-final pose refined by Newton's method to round-off (the stiffness matrix of
-`pinsettle.assess_stability`, least squares so that neutral directions are left alone). For a
-scene with isolated equilibria that is the scene's reference equilibrium (the tables say how far
-from it each run landed); the UR5 and the Panda rest on a family of equilibria (a base turning
-about the vertical, wrist turns), and each run is measured against the member it comes to.
-The reference q* of a scene is kinetic damping with `polish=True` and `max_e = {D.DEEP_MAX_E:g}`,
-Newton-refined, checked stable or neutral, and checked independently by one Newton step with a
-central-difference Jacobian of the static force (`check step` below: the size of that step).
+revolute angles compared modulo 2 pi) and the *residual* `max |tau_static(q)|` (gravity minus
+springs and loads) divided by the scene's *force scale*, `max |tau_static(q0)|` at the start.
+The static force, the stiffness and its verdict are the **independent physics** of
+`benchmarks/independent.py`: the test reference `tests/scene_reference.py` (forces from
+Pinocchio's generalized gravity, frames and Jacobians), the stiffness by central differences of
+that force, the verdict from its eigenvalues; nothing of pinsettle's static force, stiffness or
+verdict. q* is the exact equilibrium the run comes to rest at: its final pose refined by Newton's
+method on that physics to round-off (least squares, so that neutral directions are left alone).
+For a scene with isolated equilibria that is the scene's reference equilibrium (the tables say
+how far from it each run landed); the UR5 and the Panda rest on a family of equilibria (a base
+turning about the vertical, wrist turns), and each run is measured against the member it comes
+to. The reference q* of a scene is kinetic damping with `polish=True` and
+`max_e = {D.DEEP_MAX_E:g}`, refined the same way, checked stable or neutral by the independent
+stiffness, and checked by one more independent Newton step (`check step` below: its size).
 
-**Curves and time.** Kinetic damping (KD) runs with the default settings (kt = 0.5,
-`dt = "auto"`, `err`, `ds`) but `max_e = {D.DEEP_MAX_E:g}`, so that the run goes on down to
-round-off and the curve shows how the error falls; the stopping rule's own trade-off is the
-`max_e` sweep below. The curve comes from a run with `trace_every = 1` and
-`trace_configurations = True` (at most {D.CURVE_SAMPLES} samples: the trace halves its samples
-when full); its trajectory is checked identical to the timed runs', which trace nothing. **Steps
-are mapped to wall time by the run's measured time per step** (`wall_time / steps` of the timed
-runs, the median of up to 5 repeats, fewer for runs over {D.REPEAT_BUDGET:g} s; the spread
-quoted is min-max over the repeats). KD's time per step is the whole solve's: its set-up (the
-first estimate of the automatic step), the step estimates along the way and the final stability
-check are in it; the baselines' loops have no set-up. "Time to a level" is the time from which
-the error stays below it to the end of the run (a swing through q* does not count). Every KD run
-on a scene is limited to {D.STEP_BUDGET_FACTOR} times the steps of the run that found the
-scene's reference (at least {D.STEP_BUDGET_MIN:,}; the dt sweep's runs to at least
+**Curves and time.** Kinetic damping (KD) runs with the default settings (kt = {s.kt:g},
+`dt = "auto"`, `err`, `ds`, `polish = {s.polish}`) but `max_e = {D.DEEP_MAX_E:g}`, so that the run
+goes on down to round-off and the curve shows how the error falls (up to where the default run
+stops, its trajectory is the same); the default run itself is in its own table. The curve comes
+from a run with `trace_every = 1` and `trace_configurations = True` (at most
+{D.CURVE_SAMPLES} samples: the trace halves its samples when full); its trajectory is checked
+identical to the timed runs', which trace nothing. **Time to a level is the set-up plus the steps
+to it at the run's measured time per step**, for every method alike: KD's set-up (its checks and
+first step estimate, from the call of `solve` to the end of that estimate) is measured by
+`benchmarks/kd_profile.cpp` on the same scene and charged in full, the rest of the solve's
+`wall_time` (medians of up to {results.config.repeats} repeats, fewer for runs over
+{D.REPEAT_BUDGET:g} s) is spread over its steps (the estimates along the way and the final
+stability check included); each baseline's set-up (its step and damping from the start) is timed
+by the baseline program and charged in full too. "Time to a level" is the time from which the
+error stays below it to the end of the run (a swing through q* does not count). Every KD run on
+a scene is limited to {D.STEP_BUDGET_FACTOR} times the steps of the run that found the scene's
+reference (at least {D.STEP_BUDGET_MIN:,}; the dt sweep's runs to at least
 {D.DT_SWEEP_SECONDS:g} s): a setting that keeps it from converging ends there, `max_steps`.
 
 **Baselines**, on the same Pinocchio dynamics, C++ (`benchmarks/baselines.cpp`, built against
-the installed package: `pinocchio::aba`, `pinsettle::ForceElements`, the static force as
-`pinsettle::computeStaticForce` computes it, timed inside the loop like the solver's
-`wall_time`), semi-implicit Euler, until the residual is below {D.BASELINE_TARGET:g} of the force
-scale (checked every 64 steps; FIRE has it every step) or {D.BASELINE_MAX_STEPS:,} steps or
-{D.BASELINE_MAX_TIME:g} s:
+the installed package: `pinocchio::aba`, `pinsettle::ForceElements`, timed inside the program
+like the solver's `wall_time`), semi-implicit Euler. **Each gets what KD gets: the start, never
+q\\*.** Its set-up linearises the mechanism at the start as KD's first step estimate does (M,
+K = `pinsettle::computeStiffnessMatrix`, the static force; the explicit stability limit
+`2 / omega_max` of `pinsettle::computeTimeScale` without stiff-mode scaling, which they do not
+have):
 
 - *viscous, joint dampers*: `a = ABA(q, v, tau - c v)`, the same c on every joint: what users of
-  physics simulators do to let a robot settle. c damps the slowest mode of the mechanism
-  linearised at q* critically: with `K phi = omega^2 M phi` (phi M-normalised, neutral
-  directions skipped) its modal damping is `c |phi|^2`, so `c = 2 omega / |phi|^2`.
+  physics simulators do to let a robot settle. Rule: c damps the softest mode of the start's
+  linearisation critically (`K phi = lambda M phi`, phi M-normalised, the smallest `|lambda|`
+  above 1e-9 of the largest, `omega = sqrt|lambda|`): `c = 2 omega / |phi|^2`.
 - *viscous, mass-proportional*: `a = ABA(q, v, tau) - c v` (damping `c M v`), dynamic
-  relaxation's classic form: every mode decays at the rate c / 2; `c = 2 omega` damps the slowest
-  critically.
-- *FIRE* (Bitzek et al., 2006) with its classic parameters: N_min 5, f_inc 1.1, f_dec 0.5,
-  alpha_start 0.1, f_alpha 0.99, dt_max 10 dt0 (with dt0 below, {10 * D.DT_SAFETY:g} times the
-  stability limit: FIRE counts on its resets there); power `P = F . v` with `F = -tau_static(q)`
-  (one extra RNEA per step), velocity mixing `v <- (1 - alpha) v + alpha |v| F / |F|` in joint
-  coordinates.
-- Their step: dt_safety ({D.DT_SAFETY:g}, the solver's default) times the stability limit of
-  semi-implicit Euler with the damping, `4 / (r + sqrt(r^2 + 4 omega_max^2))`, r the fastest decay
-  rate the damping gives (c times the largest eigenvalue of M^-1 for joint dampers, c for
-  mass-proportional damping, 0 for FIRE, whose dt0 it is), the worse of the start and q*, without
-  stiff-mode scaling (they have none). A run that blows up is started again with half the step.
-  Other coefficients than the rule's are tried in the baselines section.
+  relaxation's classic form: every mode decays at the rate c / 2. Rule: `c = 2 omega`.
+- Their step: a safety factor (rule: {D.DT_SAFETY:g}, KD's default `dt_safety`) times the
+  stability limit of semi-implicit Euler with the damping, `4 / (r + sqrt(r^2 + 4
+  omega_max^2))`, r = c max eig(M^-1) (joint dampers) or c (mass-proportional).
+- *FIRE* (Bitzek et al., 2006), classic parameters (N_min 5, f_inc 1.1, f_dec 0.5, alpha_start
+  0.1, f_alpha 0.99), power `P = F . v` with `F = -tau_static(q)` (one extra RNEA per step).
+  Rule: dt_max twice the stability limit, dt0 = dt_max / 10, mixing
+  `v <- (1 - alpha) v + alpha |v| F / |F|` in joint coordinates.
+- *FIRE 2.0* (Guénolé et al., 2020, written from the paper's description): semi-implicit Euler
+  with the mixing after the velocity update, N_delay 20 steps before the step grows and none of
+  the first 20 steps shrinks it, alpha_start 0.25, dt_min = 0.02 dt0, half a step back
+  (`q -= dt v / 2`) at P <= 0 before the velocity is zeroed, a stop after 2,000 uphill steps in a
+  row. Rule as for FIRE.
+- FIRE's mixing in the **mass-matrix metric** (sweep): `v <- (1 - alpha) v + alpha |v|_M d /
+  |d|_M`, `d = M^-1 F` (one more ABA at zero velocity), `|v|_M^2 = v^T M v`.
+- **Their sweeps**: the viscous ones over step safety {fmt_list(results.config.safeties)} and c
+  times {fmt_list(results.config.damping_factors)} the rule's; FIRE and FIRE 2.0 over dt_max
+  {fmt_list(results.config.fire_dt_maxes)} times the stability limit, each in both metrics. A
+  sweep run stops at a residual of {LEVEL:g} of the force scale (checked every 16 steps; FIRE has
+  it every step) or after {D.SWEEP_MAX_TIME:g} s; *best* is the setting with the shortest time to
+  that level on the scene (an oracle choice per scene, which favours the baselines), run again
+  with its curve. The rule and the best run until the residual is below {D.BASELINE_TARGET:g} of
+  the force scale or {D.BASELINE_MAX_STEPS:,} steps or {D.BASELINE_MAX_TIME:g} s.
+- A run that blows up (a non-finite value or a residual 1e6 times the start's) or stalls (FIRE:
+  1,000 velocity resets without the residual falling tenfold; FIRE 2.0 also its 2,000 uphill
+  steps in a row) is started again with every step halved, up to 6 times.
+- `stiff_spring` (a 1e7 N/m spring next to a 10 kg pendulum) is a test of KD's stiff-mode
+  scaling, which the baselines do not have: it is reported apart, out of the comparison's
+  medians.
 - *Newton* from the same start, in Python (its wall time is **not** comparable with the C++
   loops'; it is quoted per iteration for orientation): the stiffness matrix of
   `pinsettle.assess_stability` as Jacobian, least squares (rank cut 1e-10), full steps;
   *Newton + line search* halves a step until `|tau_static|_2` falls. At most 50 iterations; where
-  it lands is judged with `pinsettle.assess_stability`.
+  it lands is judged with the independent stiffness.
 
-**Closed loops** (scenes with `[[loop]]`: {names}). The solver runs
-Pinocchio's constrained dynamics and keeps the pose on the loops; the report measures the closed
-mechanism the same way. Its start is the scene's start moved onto the loops (`Scene.assemble`,
-as the solver does first), and the force scale is taken there. The residual is the static force
-projected onto the motions the loops allow (`Scene.static_force`: zero at an equilibrium of the
-closed mechanism; the loops' reactions take the rest). Newton's step, for the references, the
-landings and Newton from the start, is the reduced one, `dq = B lstsq(K_r, -B^T f)` with K_r and
-its basis B from `pinsettle.assess_stability`, followed by moving the pose back onto the loops;
-the check step differentiates the projected force along B. The distance is `max |q - q*|` over
-the free joints as for a tree. The final constraint error of every KD run (the largest loop
-error, m) is measured here from Pinocchio's frame placements and compared with the solver's
+**Closed loops** (scenes with `[[loop]]`: {names}). The solver runs Pinocchio's constrained
+dynamics and keeps the pose on the loops; the report measures the closed mechanism the same way,
+with its own projections (Gauss-Newton on the loop errors of the independent reference). Its
+start is the scene's start moved onto the loops, and the force scale is taken there. The residual
+is the static force projected onto the motions the loops allow (the null space of the loops'
+Jacobian: zero at an equilibrium of the closed mechanism; the loops' reactions take the rest).
+Newton's step, for the references and the landings, is the reduced one, differenced along those
+motions, each side moved back onto the loops. The distance is `max |q - q*|` over the free joints
+as for a tree. The final constraint error of every KD run (the largest loop error, m) is measured
+here from Pinocchio's frame placements and compared with the solver's
 `Result.constraint_error`. The C++ baselines run unconstrained ABA and cannot close a loop: the
 baselines run on trees only.
 
@@ -461,7 +506,7 @@ def scenes_table(results: D.Results) -> str:
                 fmt_e(ref.fd_step),
             ]
         )
-    return "## Scenes\n\n" + table(
+    return "### Scenes\n\n" + table(
         [
             "scene",
             "what",
@@ -481,9 +526,7 @@ def scenes_table(results: D.Results) -> str:
 METHOD_ORDER = (
     "kd_exact",
     "kd_simplified",
-    "viscous",
-    "mass_damping",
-    "fire",
+    *(f"{f}_{kind}" for f in D.BASELINES for kind in ("rule", "best")),
     "newton",
     "newton_ls",
 )
@@ -496,6 +539,8 @@ def summary_table(results: D.Results) -> str:
             if key not in d.runs:
                 continue
             run = d.runs[key]
+            if key.endswith("_best") and run is d.runs.get(key[: -len("_best")] + "_rule"):
+                continue  # the rule was the best
             cells = [f"`{name}`" if key == "kd_exact" else "", run.label]
             for level in D.RESIDUAL_LEVELS:
                 cells += list(reach_cell(run, "residual", level))
@@ -513,14 +558,14 @@ def summary_table(results: D.Results) -> str:
             rows.append(cells)
     lv = [f"{x:g}" for x in D.RESIDUAL_LEVELS]
     return (
-        "## Summary\n\n"
+        "### Summary\n\n"
         "Steps and wall time from which the relative residual stays below "
         f"{lv[0]} and {lv[1]} (median over the repeats, min-max in brackets); the run's end: "
         "status, distance from its rest q*, residual, and where it rests (the stability of q*). "
         "KD runs use `max_e = "
-        f"{D.DEEP_MAX_E:g}` here (see above); Newton's times are Python's. For the scenes with "
-        "closed loops, the final constraint error (largest loop error, m) and the reduced "
-        "Newton; "
+        f"{D.DEEP_MAX_E:g}` here (see above); a baseline's best row is left out when its rule "
+        "was its best; Newton's times are Python's. For the scenes with closed loops, the final "
+        "constraint error (largest loop error, m) and the reduced Newton; "
         + (trees_only(results) or "the baselines run on trees only")
         + ".\n\n"
         + table(
@@ -606,7 +651,7 @@ def best_kt(score: dict[float, list[float]]) -> float:
 
 def conclusions(results: D.Results) -> str:
     scenes = results.scenes
-    out = ["## In short\n"]
+    out = ["### In short\n"]
     # Energy measure: steps (deterministic) over every scene and kt pair, and the cost per step.
     t = energy_tally(results, results.config.kts)
     g, c = t["geomean"], cost_ratio(results)
@@ -645,44 +690,22 @@ def conclusions(results: D.Results) -> str:
             f"fewest, geometric mean over the {len(scenes)} scenes: "
             + "; ".join(parts)
             + f". Best: **kt = {chosen:g}**"
-            + (" (the default)." if chosen == 0.5 else " (the default is 0.5).")
+            + (
+                " (the default)."
+                if chosen == DEFAULTS.kt
+                else f" (the default is {DEFAULTS.kt:g})."
+            )
         )
-    # Baselines, by time (their steps cost differently).
-    for key in BASELINES:
-        ratios, faster, slower, never = [], [], [], []
-        for name, d in scenes.items():
-            if key not in d.runs:
-                continue
-            tk, tb = time_to(d.runs["kd_exact"]), time_to(d.runs[key])
-            if tb is None or tk is None:
-                never.append(name)
-                continue
-            ratios.append(tb / tk)
-            (faster if tk < tb else slower).append(name)
-        label = D.BASELINE_LABELS[key]
-        text = f"- **{label}** against KD (exact energy), time to a residual of {LEVEL:g}: "
-        if ratios:
-            text += (
-                f"KD sooner on {len(faster)} scenes, later on {len(slower)}"
-                + (f" ({', '.join(slower)})" if slower else "")
-                + f"; {label} took {statistics.median(ratios):.2g} times KD's time (median; "
-                f"from {min(ratios):.2g} to {max(ratios):.2g})"
-            )
-        if never:
-            text += ("; " if ratios else "") + f"not reached on {', '.join(never)}"
-        if key != "fire":
-            factors = results.config.damping_factors
-            text += (
-                " (its c comes from the slowest mode at the answer q*, which a user would not "
-                "have"
-                + (
-                    f"; {' and '.join(f'{x:g}' for x in factors)} times c are in the baselines "
-                    "section)"
-                    if factors
-                    else ")"
-                )
-            )
-        out.append(text + ".")
+    # The baselines, by time (their steps cost differently): at their rule and at their best.
+    names = compared(results)
+    for family in BASELINES if names else ():
+        best = {n: ratio_to_kd(scenes[n], f"{family}_best") for n in names}
+        rule = {n: ratio_to_kd(scenes[n], f"{family}_rule") for n in names}
+        out.append(
+            f"- **{D.BASELINE_LABELS[family]}** (same dynamics, C++, the start only), its time to "
+            f"a residual of {LEVEL:g} over KD's with the default settings: at its rule "
+            f"{median_with_failures(rule)}; at its best {median_with_failures(best)}."
+        )
     if loop_scenes(results):
         out.append(f"- The {trees_only(results)} (see Closed loops below).")
     for key in ("newton", "newton_ls"):
@@ -862,7 +885,7 @@ def closed_loops_section(results: D.Results) -> str:
                 ]
             )
     return (
-        "## Closed loops\n\n"
+        "### Closed loops\n\n"
         "The scenes with `[[loop]]`: loop closures and mobility (degrees of freedom), how far "
         "the start moved to close the loops (rad or m), and for kinetic damping "
         f"(`max_e = {D.DEEP_MAX_E:g}`) the steps and time to a residual of {LEVEL:g}, the final "
@@ -955,7 +978,7 @@ def loop_cost_table(results: D.Results) -> str:
 
 def figures_section(results: D.Results, figures: str) -> str:
     parts = [
-        "## Error against wall time and against steps\n\n"
+        "### Error against wall time and against steps\n\n"
         "One figure per scene: distance (top) and relative residual (bottom) against wall time "
         "(left: steps times the run's measured time per step; Newton: Python's elapsed time per "
         "iteration) and against steps (right: ABA evaluations; constrained-dynamics evaluations on "
@@ -972,7 +995,7 @@ def energy_section(results: D.Results) -> str:
     for name, d in results.scenes.items():
         e, s = d.runs["kd_exact"], d.runs["kd_simplified"]
         cells = [f"`{name}`"]
-        cells.append(f"{e.per_step * 1e9:.0f} / {s.per_step * 1e9:.0f}")
+        cells.append(f"{e.time / e.steps * 1e9:.0f} / {s.time / s.steps * 1e9:.0f}")
         cells.append(f"{peaks_to(e)} / {peaks_to(s)}")
         for level in D.DISTANCE_LEVELS:
             a, b = e.reach("distance", level), s.reach("distance", level)
@@ -988,9 +1011,10 @@ def energy_section(results: D.Results) -> str:
     head += [f"steps to residual {x:g}" for x in D.RESIDUAL_LEVELS]
     head += [f"time to residual {LEVEL:g}"]
     text = (
-        "## Exact against simplified energy\n\n"
+        "### Exact against simplified energy\n\n"
         "The peak detector's signal: the exact kinetic energy `sum 1/2 m v^2 + 1/2 w^T I w` (J) "
-        "against the simplified `sum v^2 + w^2`. Each cell is exact / simplified, kt = 0.5, "
+        "against the simplified `sum v^2 + w^2`. Each cell is exact / simplified, kt = "
+        f"{DEFAULTS.kt:g} (the default), "
         f"`max_e = {D.DEEP_MAX_E:g}` (in each measure's own unit; the levels are reached long "
         "before either stops). Time per step is the whole solve's `wall_time / steps` (median of "
         "the repeats), estimates of the automatic step and stability checks included.\n\n"
@@ -1035,7 +1059,7 @@ def kt_section(results: D.Results, figures: str) -> str:
             cells.append(f"{outcome_time(e)} / {outcome_time(s)}")
         rows.append(cells)
     return (
-        "## kt\n\n"
+        "### kt\n\n"
         f"Time to a residual of {LEVEL:g} (exact / simplified energy; `max_e = "
         f"{D.DEEP_MAX_E:g}`, other settings default; median of the repeats):\n\n"
         + table(
@@ -1047,9 +1071,11 @@ def kt_section(results: D.Results, figures: str) -> str:
 
 def stopping_section(results: D.Results, figures: str) -> str:
     text = (
-        "## The stopping rule: err, ds, max_e\n\n"
-        "Each setting varied alone, the others at their defaults (kt = 0.5, exact energy, "
-        "`max_e = 1e-12`, `ds = 100`, `err = 1e-12`). Each cell: final distance from the rest "
+        "### The stopping rule: err, ds, max_e\n\n"
+        f"Each setting varied alone, the others at their defaults (kt = {DEFAULTS.kt:g}, "
+        f"{DEFAULTS.energy} energy, `max_e = {DEFAULTS.max_e:g}`, `ds = {DEFAULTS.ds}`, "
+        f"`err = {DEFAULTS.err:g}`, `polish = {DEFAULTS.polish}`). Each cell: final distance "
+        "from the rest "
         "the run ends near (rad or m), steps, time (median of the repeats); the status when not "
         "converged.\n\n"
     )
@@ -1092,7 +1118,7 @@ def backtrack_section(results: D.Results) -> str:
                 cells += [fmt_steps(steps_to(r)), fmt_time(time_to(r)), f"{r.peaks:,}"]
             rows.append(cells)
     return (
-        "## Peak backtracking\n\n"
+        "### Peak backtracking\n\n"
         "`backtrack = True` moves the configuration back to the parabola-interpolated peak "
         f"before damping. Steps and time to a residual of {LEVEL:g}, and the peaks (damping "
         f"events) of the whole run (`max_e = {D.DEEP_MAX_E:g}`):\n\n"
@@ -1124,8 +1150,8 @@ def dt_section(results: D.Results) -> str:
             cells.append(outcome_steps_time(r) + (f", {halvings} halvings" if halvings else ""))
         rows.append(cells)
     return (
-        "## Fixed against automatic dt\n\n"
-        f"Steps and time to a residual of {LEVEL:g} (exact energy, kt = 0.5, "
+        "### Fixed against automatic dt\n\n"
+        f"Steps and time to a residual of {LEVEL:g} (exact energy, kt = {DEFAULTS.kt:g}, "
         f"`max_e = {D.DEEP_MAX_E:g}`): `auto` (the default: re-estimated as the mechanism moves, "
         "stiff modes slowed), `auto, unscaled` (`scale_stiff_modes = False`), `fixed, start` "
         "(`dt` fixed at the automatic step's first estimate, stiff modes slowed: the step "
@@ -1137,73 +1163,498 @@ def dt_section(results: D.Results) -> str:
 
 
 def baselines_section(results: D.Results) -> str:
+    return comparison_section(results) + newton_section(results)
+
+
+COST_ROWS = (
+    ("bare", "bare aba + integrate"),
+    ("exact", "KD step, exact energy"),
+    ("simplified", "KD step, simplified energy"),
+    ("no_elements", "a scene without elements"),
+    ("joint_springs", "a joint spring on every joint"),
+    ("point_spring", "one point spring"),
+    ("stops", "the model's joint stops"),
+)
+
+
+def cost_section(results: D.Results) -> str:
+    names = list(results.step_cost)
+    rows = []
+    for key, label in COST_ROWS:
+        cells = [label]
+        for name in names:
+            c = results.step_cost[name]["ns_per_step"]
+            if not c.get(key):
+                cells.append("-")
+                continue
+            t = [x * 1e-9 for x in c[key]]
+            ratio = cost_median(results, name, key) / cost_median(results, name, "bare")
+            cells.append(fmt_spread(t) + ("" if key == "bare" else f", **{ratio:.2f}**"))
+        rows.append(cells)
+    rows.append(
+        ["stops / no stops"]
+        + [
+            f"**{stops_ratio(results, n):.2f}** "
+            f"({plural(results.step_cost[n]['stop_count'], 'stop')}, "
+            f"{results.step_cost[n]['stop_contacts']} resting at the end)"
+            for n in names
+        ]
+    )
+    info = ", ".join(
+        f"{n} (nv = {results.step_cost[n]['nv']}, {results.step_cost[n]['steps']:,} steps, "
+        f"{len(results.step_cost[n]['ns_per_step']['bare'])} repeats)"
+        for n in names
+    )
+    limit = [
+        f"{n} {stops_ratio(results, n):.2f}" for n in ("ur5", "panda") if n in results.step_cost
+    ]
+    verdict = ""
+    if limit:
+        worst = max(stops_ratio(results, n) for n in ("ur5", "panda") if n in results.step_cost)
+        verdict = (
+            f"\n\n**Joint stops** (issue 18: a step with stops at most 1.1 times today's step on "
+            f"the UR5 and the Panda): {', '.join(limit)}: "
+            + ("met." if worst <= 1.1 else "**not met**.")
+            + " The run with stops starts as the others and comes to rest against some of them "
+            "(the joints resting at the end in the last row); the run without stops passes "
+            "through them."
+        )
+    return (
+        "`benchmarks/step_cost.cpp`, in the same run: time per step of a bare `pinocchio::aba` + "
+        "`pinocchio::integrate` step against the solver's step on the same model (ABA, both "
+        "energy measures, peak detection, stopping rule, integration, the automatic step's "
+        "re-estimates), repeats interleaved, median (min-max) and in bold the ratio of the "
+        "medians to the bare step; the last row is the step with the model's position limits as "
+        "joint stops (`JointStops`) over the same step without them. Every run starts at rest "
+        "0.3 rad from neutral in every joint; the solver runs with kt = 0.99 and `max_e = 0`, so "
+        "that it damps at every peak but never stops and its velocity never reaches subnormal "
+        f"numbers (see the file's header). Models: {info}."
+        + verdict
+        + "\n\n"
+        + table(["", *names], rows, right=tuple(range(1, len(names) + 1)))
+        + "\n"
+        + loop_cost_table(results)
+    )
+
+
+def pair_slope(a: dict, b: dict) -> float:
+    """The exponent of the solve time between two chain lengths."""
+    return slope([a["n"], b["n"]], [a["profile"]["median"]["wall"], b["profile"]["median"]["wall"]])
+
+
+def scaling_section(results: D.Results, figures: str) -> str:
+    rows = []
+    for row in results.scaling:
+        p = row["profile"]
+        m = p["median"]
+        wall, steps = m["wall"], max(p["steps"], 1)
+        deep = row.get("deep")
+        rows.append(
+            [
+                str(row["n"]),
+                f"{p['status']}",
+                f"{p['steps']:,}",
+                fmt_time(wall),
+                fmt_time(wall / steps),
+                fmt_time(m["bare_step"]),
+                f"{wall / steps / m['bare_step']:.2f}",
+                f"{fmt_time(m['setup'])} ({m['setup'] / wall:.0%})",
+                f"{p['estimate_count']}: {m['estimates'] / wall:.0%}",
+                f"{p['assessment_count']}: {m['assessments'] / wall:.0%}",
+                fmt_e(row["residual"]),
+                fmt_steps(steps_to(deep)) if deep else "-",
+                fmt_time(time_to(deep)) if deep else "-",
+            ]
+        )
+    done = [r for r in results.scaling if r["profile"]["status"] == "converged"]
+    fits = ""
+    if len(done) >= 2:
+        n = [r["n"] for r in done]
+        wall = [r["profile"]["median"]["wall"] for r in done]
+        steps = [r["profile"]["steps"] for r in done]
+        per = [w / s for w, s in zip(wall, steps, strict=True)]
+        bare = [r["profile"]["median"]["bare_step"] for r in done]
+        fits = (
+            f"Least-squares fits (log-log) over the converged lengths ({n[0]} to {n[-1]}): steps "
+            f"grow as n^{slope(n, steps):.2f}, time per step as n^{slope(n, per):.2f} (the bare "
+            f"step as n^{slope(n, bare):.2f}: ABA is O(n)), time as n^{slope(n, wall):.2f}. "
+        )
+        pairs = [(a, b) for a, b in zip(done, done[1:], strict=False) if b["n"] >= 2 * a["n"]]
+        local = [f"{a['n']} to {b['n']}: n^{pair_slope(a, b):.2f}" for a, b in pairs]
+        if local:
+            fits += "Between neighbours, time grows as " + ", ".join(local) + ". "
+        verdict = slope(n, wall) <= 2.0 and all(pair_slope(a, b) <= 2.0 for a, b in pairs)
+        unfinished = [r["n"] for r in results.scaling if r["profile"]["status"] != "converged"]
+        fits += (
+            "**Goal 5 of issue 20** (time no faster than n^2 over 5 to 1,000 links, a step O(n)): "
+            + ("met over the converged lengths" if verdict else "**not met**")
+            + (
+                f"; not converged within {results.config.scaling_max_time:g} s: "
+                + ", ".join(f"{n} links" for n in unfinished)
+                + " (**not met** there)"
+                if unfinished
+                else ""
+            )
+            + ".\n\n"
+        )
+    return (
+        "Chains of `robots/make_chain.py` (0.1 m, 0.1 kg links) released horizontal, default "
+        f"settings within `max_time = {results.config.scaling_max_time:g}` s, profiled by "
+        "`benchmarks/kd_profile.cpp` (one run past "
+        f"{results.config.deep_chain_max} links, else the median of up to "
+        f"{results.config.sweep_repeats}): status, steps, wall time, time per step, a bare "
+        "`aba` + `integrate` step and the ratio, the set-up, the step estimates and stability "
+        "assessments (count: share of the time), the final residual (relative, independent "
+        f"physics); up to {results.config.deep_chain_max} links also the steps and time to a "
+        f"residual of {LEVEL:g} (`max_e = {D.DEEP_MAX_E:g}`).\n\n"
+        + table(
+            [
+                "links",
+                "status",
+                "steps",
+                "time",
+                "per step",
+                "bare step",
+                "ratio",
+                "set-up",
+                "estimates",
+                "assessments",
+                "final residual",
+                f"steps to {LEVEL:g}",
+                f"time to {LEVEL:g}",
+            ],
+            rows,
+            right=(0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12),
+        )
+        + "\n"
+        + fits
+        + f"![scaling]({figures}/scaling.png)\n\n"
+    )
+
+
+def write(results: D.Results, output: Path) -> None:
+    """The parts measured in this run into output/benchmarks.md (the others kept) and their
+    figures into output/benchmarks/; figures no part refers to any more are removed."""
+    figures = "benchmarks"
+    fig_dir = output / figures
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    new = parts(results, fig_dir, figures)
+    new["header"] = header(results)
+    path = output / "benchmarks.md"
+    existing = path.read_text(encoding="utf-8") if path.exists() else ""
+    text = merge(existing, new)
+    path.write_text(text, encoding="utf-8")
+    for png in fig_dir.glob("*.png"):
+        if f"({figures}/{png.name})" not in text:
+            png.unlink()
+
+
+# --- the README's summary ----------------------------------------------------------------------
+
+
+def kd_key() -> str:
+    """The main KD run: the default energy measure (its other settings are the defaults but
+    max_e, see How it is measured)."""
+    return f"kd_{pinsettle.Settings().energy}"
+
+
+def compared(results: D.Results) -> list[str]:
+    """The scenes of the baselines' comparison: trees, not reported apart."""
+    return [n for n, d in results.scenes.items() if d.baseline_sweep and not d.apart]
+
+
+def apart_scenes(results: D.Results) -> list[str]:
+    return [n for n, d in results.scenes.items() if d.baseline_sweep and d.apart]
+
+
+def ratio_to_kd(d: D.SceneData, key: str) -> float | None:
+    """A baseline's time to the level over KD's (defaults); None when either did not get
+    there."""
+    tb, tk = time_to(d.runs[key]), time_to(d.runs[kd_key()])
+    return None if tb is None or tk is None else tb / tk
+
+
+def median_with_failures(values: dict[str, float | None]) -> str:
+    """'median x over n scenes; k not reached (names)'."""
+    ok = [v for v in values.values() if v is not None]
+    failed = [n for n, v in values.items() if v is None]
+    scenes = "scene" if len(ok) == 1 else "scenes"
+    text = f"{statistics.median(ok):.2g} over {len(ok)} {scenes}" if ok else "no scene reached"
+    if ok and len(ok) > 1:
+        text += f" ({min(ok):.2g} to {max(ok):.2g})"
+    return text + (f"; **{len(failed)} not reached** ({', '.join(failed)})" if failed else "")
+
+
+def gallery_figure(results: D.Results, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = results.gallery
+    fig, ax = plt.subplots(figsize=(11, 4.8))
+    x = np.arange(len(rows))
+    kd = [statistics.median(r["seconds"]) for r in rows]
+    mj = [
+        statistics.median(r["mujoco"]["seconds"])
+        if r["mujoco"].get("status") == "settled"
+        else np.nan
+        for r in rows
+    ]
+    ax.bar(x - 0.2, kd, width=0.4, label="pinsettle, default settings", color="C0")
+    ax.bar(
+        x + 0.2,
+        mj,
+        width=0.4,
+        label="MuJoCo, damped settle (missing: not loaded or not settled)",
+        color="C1",
+    )
+    ax.set_xticks(x, [r["name"] for r in rows], rotation=60, ha="right", fontsize=8)
+    ax.set_yscale("log")
+    ax.set_ylabel("wall time (s)")
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("The robot gallery: root fixed, released from neutral")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def fmt_minutes(results: D.Results) -> str:
+    if set(results.sections) == set(D.SECTIONS):
+        return f"{results.seconds / 60:.1f} minutes"
+    return "the sum of the parts' times below"
+
+
+def stamp(results: D.Results, section: str) -> str:
+    """The line that opens a part: when and how long it was measured, and the machine's load."""
+    m = results.machine
+    return (
+        f"*Measured on {m['date']} (`--sections {section}`: "
+        f"{results.section_seconds.get(section, 0.0):.0f} s); 1-minute load average "
+        f"{m['load_start'][0]:.2f} before the run and {m['load_end'][0]:.2f} at its end, its "
+        "own single-threaded process included.*\n\n"
+    )
+
+
+def fmt_list(values: Sequence[float]) -> str:
+    return ", ".join(f"{v:g}" for v in values)
+
+
+def defaults_section(results: D.Results) -> str:
+    """Where the default settings stop (goal 2 of issue 20)."""
+    s = pinsettle.Settings()
     rows = []
     for name, d in results.scenes.items():
-        if d.damping is None:  # closed loops: no baselines
+        run = d.runs.get("kd_default")
+        if run is None:
             continue
-        damping = d.damping
-        v, m, f = d.runs["viscous"], d.runs["mass_damping"], d.runs["fire"]
         rows.append(
             [
                 f"`{name}`",
-                f"{damping.omega:.3g}",
-                f"{damping.joint:.3g}",
-                f"{v.settings['dt']:.3g}"
-                + (f" ({v.extra['halvings']} halvings)" if v.extra["halvings"] else ""),
-                f"{damping.mass:.3g}",
-                f"{m.settings['dt']:.3g}"
-                + (f" ({m.extra['halvings']} halvings)" if m.extra["halvings"] else ""),
-                f"{f.settings['dt']:.3g}"
-                + (f" ({f.extra['halvings']} halvings)" if f.extra["halvings"] else ""),
-                f"{f.extra['resets']:,}",
+                run.status,
+                f"{run.steps:,}",
+                fmt_spread(run.seconds),
+                fmt_e(run.residual),
+                "yes" if run.residual <= LEVEL else "**no**",
+                str(run.extra.get("polish_iterations", 0)),
+                landed(run),
             ]
         )
-    text = (
-        "## Baselines\n\n"
-        "The coefficients and steps of the rules above: the slowest mode's frequency omega "
-        "(rad/s), the joint dampers' c (N m s/rad) and their step (s), the mass-proportional c "
-        "(1/s) and its step, FIRE's dt0 and its velocity resets (P <= 0)."
-        + (f" The {trees_only(results)}." if loop_scenes(results) else "")
-        + "\n\n"
+    return (
+        "### The default settings\n\n"
+        f"`pinsettle.solve(scene)` with nothing changed (kt = {s.kt:g}, `max_e = {s.max_e:g}`, "
+        f"`polish = {s.polish}`, `energy = {s.energy}`): status, steps, wall time (median, "
+        "min-max), the final residual relative to the force scale (independent physics), whether "
+        f"it is at most {LEVEL:g} (goal 2 of issue 20), the polish's Newton iterations and where "
+        "it rests.\n\n"
         + table(
             [
                 "scene",
-                "omega",
-                "joint c",
-                "joint dt",
-                "mass c",
-                "mass dt",
-                "FIRE dt0",
-                "FIRE resets",
+                "status",
+                "steps",
+                "time",
+                "final residual",
+                f"<= {LEVEL:g}",
+                "polish iterations",
+                "rests",
             ],
             rows,
-            right=tuple(range(1, 8)),
+            right=(2, 3, 4, 6),
         )
+        + "\n"
     )
-    if any(d.damping_sweep for d in results.scenes.values()):
-        factors = results.config.damping_factors
+
+
+def comparison_section(results: D.Results) -> str:
+    """The baselines at their rule and at their best against KD's defaults, per scene."""
+    names = compared(results)
+    if not names:
+        return ""
+    head = ["scene", f"KD (defaults): time to {LEVEL:g}"]
+    for family in BASELINES:
+        head += [f"{D.BASELINE_LABELS[family]}: rule", "best"]
+    rows = []
+    for name in names:
+        d = results.scenes[name]
+        cells = [f"`{name}`", outcome_time(d.runs[kd_key()])]
+        for family in BASELINES:
+            for kind in ("rule", "best"):
+                run = d.runs[f"{family}_{kind}"]
+                r = ratio_to_kd(d, f"{family}_{kind}")
+                t = time_to(run)
+                cells.append(
+                    f"**{r:.2g}** ({fmt_time(t)})"
+                    if r is not None
+                    else f"not reached ({run.status})"
+                    if t is None
+                    else f"({fmt_time(t)})"
+                )
+        rows.append(cells)
+    lines = []
+    for family in BASELINES:
+        rule = {n: ratio_to_kd(results.scenes[n], f"{family}_rule") for n in names}
+        best = {n: ratio_to_kd(results.scenes[n], f"{family}_best") for n in names}
+        sooner = [n for n, r in best.items() if r is not None and r < 1]
+        lines.append(
+            f"- **{D.BASELINE_LABELS[family]}**, its time over KD's: at its rule "
+            f"{median_with_failures(rule)}; at its best {median_with_failures(best)}"
+            + (
+                f". Faster than KD at its best on {len(sooner)} of {len(names)}: "
+                + ", ".join(sooner)
+                if sooner
+                else ". KD is faster on every scene it reached"
+            )
+            + "."
+        )
+    return (
+        "### Baselines at their rule and at their best\n\n"
+        f"Time to a residual of {LEVEL:g} of each baseline over KD's with the default settings, "
+        "per scene (in bold; below 1: the baseline is faster; its time in brackets), at its rule "
+        "setting and at its best over its sweep (settings in the next table). Tree scenes"
+        + (
+            f", `{'`, `'.join(apart_scenes(results))}` apart (below)"
+            if apart_scenes(results)
+            else ""
+        )
+        + ".\n\n"
+        + table(head, rows, right=tuple(range(1, len(head))))
+        + "\n"
+        + "\n".join(lines)
+        + "\n\n"
+        + settings_table(results)
+        + sweep_tables(results)
+        + apart_section(results)
+    )
+
+
+def settings_table(results: D.Results) -> str:
+    rows = []
+    for name, d in results.scenes.items():
+        if not d.baseline_sweep:
+            continue
+        for family in BASELINES:
+            rule, best = d.runs[f"{family}_rule"], d.runs[f"{family}_best"]
+            e = rule.extra
+            fire = family in ("fire", "fire2")
+            coeffs = (
+                f"dt0 {e['dt']:.3g}, dt_max {e['dt_max']:.3g}"
+                if fire
+                else f"dt {e['dt']:.3g}, c {e['damping']:.3g} (omega {e['omega_rule']:.3g})"
+            )
+            retried = f"{e['halvings']} ({', '.join(e['retries'])})" if e["halvings"] else "0"
+            best_label = (
+                "the rule"
+                if best is rule
+                else D.setting_label(family, best.settings)
+                if time_to(best) is not None or best.status == "converged"
+                else "-"
+            )
+            rows.append(
+                [
+                    f"`{name}`" if family == BASELINES[0] else "",
+                    D.BASELINE_LABELS[family],
+                    f"{e['limit']:.3g}",
+                    coeffs,
+                    f"{e['resets']:,}" if fire else "-",
+                    retried,
+                    best_label,
+                ]
+            )
+    return (
+        "The rule runs: the explicit stability limit at the start (s), their steps and "
+        "coefficients (s; N m s/rad or 1/s; omega of the softest mode at the start, rad/s), "
+        "FIRE's velocity resets, the retries with the steps halved (and why), and the setting "
+        "that was best on the scene:\n\n"
+        + table(
+            ["scene", "baseline", "limit", "rule: steps and c", "resets", "retries", "best"],
+            rows,
+            right=(2, 4, 5),
+        )
+        + "\n"
+    )
+
+
+def sweep_tables(results: D.Results) -> str:
+    text = (
+        f"Each baseline's sweep: time to a residual of {LEVEL:g} (set-up and loop, median of "
+        f"{results.config.sweep_repeats} repeats) or why not (`max_steps`, `time_limit` after "
+        f"{D.SWEEP_MAX_TIME:g} s, `diverged`, `stalled`, after the retries); "
+        "`h` counts the retries with every step halved; the rule's cell in bold.\n\n"
+    )
+    for family in BASELINES:
+        settings = results.config.sweep(family)
         rows = []
         for name, d in results.scenes.items():
-            if d.damping is None:
+            points = d.baseline_sweep.get(family)
+            if not points:
                 continue
-            for method in ("viscous", "mass_damping"):
-                main = d.runs[method]
-                cells = [f"`{name}`" if method == "viscous" else "", D.BASELINE_LABELS[method]]
-                for factor in (*factors[:1], 1.0, *factors[1:]):
-                    r = main if factor == 1.0 else d.damping_sweep[(method, factor)]
-                    status = "" if r.status == "converged" else f" **{r.status}**"
-                    cells.append(f"{r.steps:,}, {fmt_time(r.time)}{status}")
-                rows.append(cells)
+            cells = [f"`{name}`"]
+            for p in points:
+                cell = fmt_time(p.time_to) if p.time_to is not None else p.status
+                if p.halvings:
+                    cell += f", {p.halvings} h"
+                if p.settings == D.BASELINE_RULES[family]:
+                    cell = f"**{cell}**"
+                cells.append(cell)
+            rows.append(cells)
         text += (
-            f"\nThe damping coefficient against the rule's c: steps and time to the baselines' "
-            f"target (residual {D.BASELINE_TARGET:g} of the force scale), or the status when "
-            f"the run stopped first (budget {D.BASELINE_SIDE_TIME:g} s off the rule):\n\n"
+            f"**{D.BASELINE_LABELS[family]}**\n\n"
             + table(
-                ["scene", "method", *[f"{x:g} c" for x in (*factors[:1], 1.0, *factors[1:])]],
+                ["scene", *[D.setting_label(family, s) for s in settings]],
                 rows,
-                right=(2, 3, 4),
+                right=tuple(range(1, len(settings) + 1)),
             )
+            + "\n"
         )
+    return text
+
+
+def apart_section(results: D.Results) -> str:
+    parts = []
+    for name in apart_scenes(results):
+        d = results.scenes[name]
+        dt = {r.label: r for r in d.sweeps.get("dt", [])}
+        cells = [f"KD (defaults): {outcome_steps_time(d.runs[kd_key()])}"]
+        if "auto, unscaled" in dt:
+            cells.append(
+                f"KD without stiff-mode scaling: {outcome_steps_time(dt['auto, unscaled'])}"
+            )
+        for family in BASELINES:
+            for kind in ("rule", "best"):
+                run = d.runs[f"{family}_{kind}"]
+                if kind == "best" and run is d.runs[f"{family}_rule"]:
+                    continue
+                cells.append(f"{run.label}: {outcome_steps_time(run)}")
+        parts.append(
+            f"**`{name}`, apart** (a test of KD's stiff-mode scaling; "
+            f"{d.runs[kd_key()].extra.get('scaled_modes', 0)} mode(s) slowed): steps and time "
+            f"to a residual of {LEVEL:g}: " + "; ".join(cells) + ".\n"
+        )
+    return "\n".join(parts) + ("\n" if parts else "")
+
+
+def newton_section(results: D.Results) -> str:
     rows = []
     for name, d in results.scenes.items():
         for key in ("newton", "newton_ls"):
@@ -1221,12 +1672,14 @@ def baselines_section(results: D.Results) -> str:
                     fmt_time(r.time),
                 ]
             )
-    text += (
-        "\nNewton from the start: iterations, the residual it ends with, where it lands (a root: "
-        "its stability and smallest stiffness eigenvalue, its distance from the reference q*), "
-        "the largest entry of q in absolute value (rad or m: a step off to 1e15 rad means the "
-        "stiffness matrix was near singular at the start) and Python's wall time. On the scenes "
-        "with closed loops it is the reduced Newton, each step moved back onto the loops.\n\n"
+    return (
+        "### Newton from the start\n\n"
+        "Iterations, the residual it ends with, where it lands (a root: its stability and "
+        "smallest stiffness eigenvalue by the independent physics, its distance from the "
+        "reference q*), the largest entry of q in absolute value (rad or m: a step off to 1e15 "
+        "rad means the stiffness matrix was near singular at the start) and Python's wall time. "
+        "On the scenes with closed loops it is the reduced Newton, each step moved back onto the "
+        "loops.\n\n"
         + table(
             [
                 "scene",
@@ -1242,141 +1695,456 @@ def baselines_section(results: D.Results) -> str:
             rows,
             right=(2, 3, 5, 6, 7, 8),
         )
-    )
-    return text + "\n"
-
-
-COST_ROWS = (
-    ("bare", "bare aba + integrate"),
-    ("exact", "KD step, exact energy"),
-    ("simplified", "KD step, simplified energy"),
-    ("no_elements", "a scene without elements"),
-    ("joint_springs", "a joint spring on every joint"),
-    ("point_spring", "one point spring"),
-)
-
-
-def cost_section(results: D.Results) -> str:
-    names = list(results.step_cost)
-    rows = []
-    for key, label in COST_ROWS:
-        cells = [label]
-        for name in names:
-            c = results.step_cost[name]["ns_per_step"]
-            t = [x * 1e-9 for x in c[key]]
-            ratio = statistics.median(c[key]) / statistics.median(c["bare"])
-            cells.append(fmt_spread(t) + ("" if key == "bare" else f", **{ratio:.2f}**"))
-        rows.append(cells)
-    info = ", ".join(
-        f"{n} (nv = {results.step_cost[n]['nv']}, {results.step_cost[n]['steps']:,} steps, "
-        f"{len(results.step_cost[n]['ns_per_step']['bare'])} repeats)"
-        for n in names
-    )
-    return (
-        "## Cost of one step\n\n"
-        "`benchmarks/step_cost.cpp`, in the same run: time per step of a bare `pinocchio::aba` + "
-        "`pinocchio::integrate` step against the solver's step on the same model (ABA, both "
-        "energy measures, peak detection, stopping rule, integration, the automatic step's "
-        "re-estimates), repeats interleaved, median (min-max) and in bold the ratio of the "
-        "medians to the bare step. Every run starts at rest 0.3 rad from neutral in every joint; "
-        "the solver runs with kt = 0.99 and `max_e = 0`, so that it damps at every peak but "
-        "never stops and its velocity never reaches subnormal numbers (see the file's header). "
-        f"Models: {info}."
-        + (
-            " Trees only: the cost of a step with closed loops, against a bare "
-            "`pinocchio::constraintDynamics` step, is in the Closed loops section."
-            if loop_scenes(results)
-            else ""
-        )
-        + "\n\n"
-        + table(["", *names], rows, right=tuple(range(1, len(names) + 1)))
         + "\n"
     )
 
 
-def scaling_section(results: D.Results, figures: str) -> str:
+def cost_median(results: D.Results, name: str, key: str) -> float:
+    c = results.step_cost[name]["ns_per_step"]
+    return statistics.median(c[key]) if c.get(key) else math.nan
+
+
+def stops_ratio(results: D.Results, name: str) -> float:
+    """A step with the model's joint stops over the same step without (step_cost medians)."""
+    return cost_median(results, name, "stops") / cost_median(results, name, "exact")
+
+
+#: The scenes of goal 4 of issue 20.
+GOAL4_SCENES = ("ur5", "chain20", "chain100")
+
+
+def overhead_rows(results: D.Results) -> list[dict]:
+    """The overhead split per scene, as fractions of the solve's wall time (medians). The
+    polish's cost is that of its stiffness matrices and of the assessments it adds (timed in the
+    polished solve); its static-force evaluations, O(n) each, are left out."""
+    out = []
+    for name, p in results.overhead.items():
+        m = p["median"]
+        wall = m["wall"]
+        parts = {
+            "setup": m["setup"],
+            "estimates": m["estimates"],
+            "assessments": m["assessments"],
+        }
+        overhead = sum(parts.values())
+        polish = m.get("polish_stiffness", 0.0) + max(
+            m.get("polish_assessments", 0.0) - m["assessments"], 0.0
+        )
+        out.append(
+            {
+                "name": name,
+                "nv": p["nv"],
+                "steps": p["steps"],
+                "status": p["status"],
+                "wall": wall,
+                "parts": parts,
+                "estimate_count": p["estimate_count"],
+                "assessment_count": p["assessment_count"],
+                "polish": polish,
+                "polish_iterations": p.get("polish_iterations", 0),
+                "fraction": overhead / wall,
+                "fraction_polish": (overhead + polish) / (wall + polish),
+                "bare": m["bare_step"] * p["steps"],
+            }
+        )
+    return out
+
+
+def overhead_section(results: D.Results) -> str:
     rows = []
-    for row in results.scaling:
-        default, deep = row["runs"]
-        c = row["cost"]["ns_per_step"]
-        bare = statistics.median(c["bare"])
-        kd = statistics.median(c["exact"])
+    for r in overhead_rows(results):
+        w = r["wall"]
         rows.append(
             [
-                str(row["n"]),
-                f"{bare / 1e3:.3g} us",
-                f"{kd / 1e3:.3g} us ({kd / bare:.2f})",
-                fmt_spread([s / default.steps for s in default.seconds]),
-                f"{default.steps:,}",
-                fmt_spread(default.seconds),
-                fmt_e(default.distance),
-                fmt_steps(steps_to(deep)),
-                fmt_time(time_to(deep)),
+                f"`{r['name']}`",
+                str(r["nv"]),
+                f"{r['steps']:,} ({r['status']})",
+                fmt_time(w),
+                f"{fmt_time(r['parts']['setup'])} ({r['parts']['setup'] / w:.0%})",
+                f"{r['estimate_count']}: {fmt_time(r['parts']['estimates'])} "
+                f"({r['parts']['estimates'] / w:.0%})",
+                f"{r['assessment_count']}: {fmt_time(r['parts']['assessments'])} "
+                f"({r['parts']['assessments'] / w:.0%})",
+                f"**{r['fraction']:.0%}**",
+                f"{fmt_time(r['bare'])} ({r['bare'] / w:.0%})",
+                f"{r['polish_iterations']} it., {fmt_time(r['polish'])}",
+                f"**{r['fraction_polish']:.0%}**",
             ]
         )
-    n = np.log([row["n"] for row in results.scaling])
-    fits = ""
-    if len(n) >= 3:
-        slope = {
-            what: float(np.polyfit(n, np.log(values), 1)[0])
-            for what, values in (
-                ("steps", [row["runs"][0].steps for row in results.scaling]),
-                ("per step", [row["runs"][0].per_step for row in results.scaling]),
-                ("time", [row["runs"][0].time for row in results.scaling]),
+    goal = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
+    verdict = ""
+    if goal:
+        worst = max(max(r["fraction"], r["fraction_polish"]) for r in goal)
+        verdict = (
+            "\n\n**Goal 4 of issue 20** (set-up, step estimates, stability assessments and polish "
+            "at most 25% of a solve on the UR5, chain20 and chain100): "
+            + ", ".join(
+                f"{r['name']} {r['fraction']:.0%} ({r['fraction_polish']:.0%} with the polish)"
+                for r in goal
             )
-        }
-        fits = (
-            f"Least-squares fits over the lengths (log-log): the default solve's steps grow as "
-            f"n^{slope['steps']:.2f}, its time per step as n^{slope['per step']:.2f} (ABA is "
-            f"O(n)), its time as n^{slope['time']:.2f}.\n\n"
+            + (": met." if worst <= 0.25 else ": **not met**.")
         )
+    s = pinsettle.Settings()
     return (
-        "## Scaling with chain length\n\n"
-        "Chains of `robots/make_chain.py` (0.1 m, 0.1 kg links) released horizontal, exact "
-        "energy, kt = 0.5. Per step: the bare step and the solver's step of `step_cost` (ratio in "
-        "brackets), and the whole default solve's `wall_time / steps`. Then the default solve "
-        "(`max_e = 1e-12`): steps, time, final distance; and with "
-        f"`max_e = {D.DEEP_MAX_E:g}`: steps and time to a residual of {LEVEL:g}.\n\n"
+        "`benchmarks/kd_profile.cpp`: the default solve (`polish = "
+        f"{s.polish}`) timed whole (`wall_time`) and in its parts, by wrapping the library's "
+        "`computeTimeScale` (step estimates), `assessStability` (rest checks and the final "
+        "verdict) and `computeStiffnessMatrix` (the polish's Newton steps) at link time (`ld "
+        "--wrap`: the solver's code is unchanged, each call timed, nested calls counted once): "
+        "the *set-up* (from the call of `solve` to the end of the first step estimate: the checks "
+        "and the first estimate), the later *step estimates* (count: time), the *stability "
+        "assessments* (count: time), their sum as a fraction of the solve, the bare steps "
+        "(the solve's steps times a bare `aba` + `integrate` step) for scale, and the *polish* "
+        "(the same solve with `polish = True`: its Newton iterations and the time of its "
+        "stiffness matrices and of the assessments it adds; its static-force evaluations, O(n) "
+        "each, are left out) with the sum of all four as a fraction of the solve with the "
+        "polish. Medians of "
+        f"interleaved repeats."
+        + verdict
+        + "\n\n"
         + table(
             [
-                "links",
-                "bare step",
-                "KD step (ratio)",
-                "KD solve / steps",
-                "steps (defaults)",
-                "time (defaults)",
-                "final distance",
-                f"steps to {LEVEL:g}",
-                f"time to {LEVEL:g}",
+                "scene",
+                "nv",
+                "steps",
+                "solve",
+                "set-up",
+                "estimates",
+                "assessments",
+                "overhead",
+                "bare steps",
+                "polish",
+                "overhead with polish",
             ],
             rows,
-            right=tuple(range(0, 9)),
+            right=tuple(range(1, 11)),
         )
         + "\n"
-        + fits
-        + f"![scaling]({figures}/scaling.png)\n\n"
     )
 
 
-def write(results: D.Results, output: Path) -> None:
-    """output/benchmarks.md and output/benchmarks/*.png."""
-    figures = "benchmarks"
-    fig_dir = output / figures
-    fig_dir.mkdir(parents=True, exist_ok=True)
-    for old in fig_dir.glob("*.png"):
-        old.unlink()
-    for name, d in results.scenes.items():
-        d.bench_name = name
-        scene_figure(d, fig_dir / f"{name}.png")
-    kt_figure(results, fig_dir / "kt.png")
-    max_e_figure(results, fig_dir / "max_e.png")
-    scaling_figure(results, fig_dir / "scaling.png")
+def slope(x: Sequence[float], y: Sequence[float]) -> float:
+    """Least-squares exponent of y against x (log-log)."""
+    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
+def mujoco_ratio(row: dict) -> float | None:
+    """MuJoCo's wall time over KD's on a robot both settle; None otherwise."""
+    mj = row["mujoco"]
+    if mj.get("status") != "settled" or row["status"] != "converged":
+        return None
+    return statistics.median(mj["seconds"]) / statistics.median(row["seconds"])
+
+
+def gallery_section(results: D.Results, figures: str) -> str:
+    rows = []
+    for r in results.gallery:
+        mj = r["mujoco"]
+        scale = r["force_scale"]
+        rel = r["residual"] / scale if scale > 0 else math.nan
+        stops = ", ".join(f"{j} ({side})" for j, side in r["contacts"].items()) or "-"
+        if mj.get("status") in ("settled", "not settled", "diverged"):
+            mj_cells = [
+                mj["status"],
+                f"{mj['sim_time']:g} s",
+                fmt_time(statistics.median(mj["seconds"])),
+                fmt_e(mj["residual"] / scale if scale > 0 else mj["residual"]),
+                f"{max(mj['outside'], 0.0):.1e}",
+                mj["stability"] if mj["stability"] != "unstable" else "**unstable**",
+                f"{mj['distance']:.2g}",
+            ]
+        else:
+            mj_cells = [mj.get("status", "-"), "-", "-", "-", "-", "-", "-"]
+        ratio = mujoco_ratio(r)
+        rows.append(
+            [
+                f"`{r['name']}`",
+                str(r["nv"]),
+                r["status"],
+                f"{r['steps']:,}",
+                fmt_time(statistics.median(r["seconds"])),
+                stops,
+                f"{r['stability']} ({r['verdict']})",
+                fmt_e(rel if scale > 0 else r["residual"]),
+                "yes" if r["outside"] <= 0 else f"**no** ({r['outside']:.1e})",
+                *mj_cells,
+                f"**{ratio:.0f}**" if ratio is not None else "-",
+            ]
+        )
+    failed = [
+        f"`{r['name']}`: {r['mujoco']['reason']}"
+        for r in results.gallery
+        if r["mujoco"].get("status") == "cannot load"
+    ]
+    ratios = {r["name"]: mujoco_ratio(r) for r in results.gallery}
+    both = {n: x for n, x in ratios.items() if x is not None}
+    inside = [
+        r["name"]
+        for r in results.gallery
+        if r["status"] == "converged" and r["outside"] <= 0 and r["stability"] != "unstable"
+    ]
     text = (
-        header(results)
-        + conclusions(results)
+        "Every robot `pinsettle robots` lists, root fixed (`floating = false`), released at rest "
+        "from neutral with the default settings (`pinsettle.solve(model)`, joint stops from the "
+        "URDF: issue 18), side by side with MuJoCo's damped settle of the same URDF in the same "
+        f"run (MuJoCo {results.mujoco.get('version', '-')}). pinsettle: status, steps, wall "
+        "time (median of the repeats), the joints resting on a stop and its stability verdict "
+        "(in brackets the independent one); then **independently** (tests/scene_reference.py's "
+        "physics and stops, Pinocchio's generalized gravity): the residual of a rest against "
+        "the stops relative to the force scale at the start (absolute, N m, where that is 0), "
+        "and whether every joint is inside its limits. MuJoCo: `benchmarks/gallery.py` strips "
+        "the URDF's visual and collision elements (no meshes, no contacts), sets joint damping "
+        f"{D.MUJOCO_DAMPING:g} on every degree of freedom and a "
+        f"{D.MUJOCO_TIMESTEP * 1e3:g} ms step as its users do, keeps its URDF limits (MuJoCo "
+        "honours them; equal limits are none, as in pinsettle) and steps from qpos = 0 "
+        "(pinsettle's neutral; MuJoCo's soft limits push a start outside them back). "
+        f"**Settled**: max |qvel| <= {D.MUJOCO_QVEL:g} (rad/s or m/s) and max |qacc| <= "
+        f"{D.MUJOCO_QACC:g} at every check (every {D.MUJOCO_CHUNK} steps) for "
+        f"{D.MUJOCO_QUIET:g} s of simulated time in a row, within "
+        f"{results.config.mujoco_max_sim:g} s simulated. Its time is that of stepping the same "
+        "number of steps again in one `mj_step(model, data, nstep)` call (no checks, no Python in "
+        "between: MuJoCo is charged its steps alone; median of the repeats). Its pose is checked "
+        "by the same independent physics: residual (relative), how far its worst joint is past a "
+        "limit (rad or m; soft limits let a joint in a little), the stability of its rest (the "
+        "independent stiffness restricted to the joints off their stops: MuJoCo's criterion "
+        "also accepts a balance on a saddle) and its distance from pinsettle's rest (max |dq|, "
+        "rad or m: near 0 for the same rest; a robot with neutral directions, such as a base "
+        "turning freely, may come to another rest of the same family). Last column: MuJoCo's "
+        "time over pinsettle's.\n\n"
+        + table(
+            [
+                "robot",
+                "nv",
+                "status",
+                "steps",
+                "time",
+                "on a stop",
+                "stability",
+                "residual",
+                "inside limits",
+                "MuJoCo",
+                "simulated",
+                "MuJoCo time",
+                "MuJoCo residual",
+                "past a limit",
+                "MuJoCo rests",
+                "distance",
+                "MuJoCo / KD",
+            ],
+            rows,
+            right=(1, 3, 4, 7, 10, 11, 12, 13, 15, 16),
+        )
+        + "\n"
+    )
+    text += (
+        f"pinsettle converged inside the limits (independent check) and not on an unstable rest "
+        f"on {len(inside)} of {len(results.gallery)} robots."
+    )
+    if failed:
+        text += " MuJoCo cannot load " + "; ".join(failed) + "."
+    unstable = [
+        r["name"]
+        for r in results.gallery
+        if r["name"] in both and r["mujoco"].get("stability") == "unstable"
+    ]
+    if unstable:
+        text += (
+            f" MuJoCo's settle ends on an unstable rest (a saddle its damped motion did not "
+            f"leave) on {', '.join(unstable)}: there pinsettle pushes off and goes on to a "
+            "stable rest, so the two times are of different answers."
+        )
+        fair = [both[n] for n in both if n not in unstable]
+        if fair:
+            text += (
+                f" Without them, MuJoCo took {statistics.median(fair):.0f} times pinsettle's "
+                f"time (median over {len(fair)}; {min(fair):.1f} to {max(fair):.0f})."
+            )
+    if both:
+        values = sorted(both.values())
+        below = [n for n, x in both.items() if x < 100]
+        text += (
+            f"\n\n**Goal 3 of issue 20** (at least 100 times faster than MuJoCo on every robot "
+            f"both settle, median at least 300 times): over the {len(both)} robots both settle, "
+            f"MuJoCo took {statistics.median(values):.0f} times pinsettle's time (median; "
+            f"{values[0]:.1f} to {values[-1]:.0f})"
+            + (
+                f"; below 100 on {', '.join(f'{n} ({both[n]:.1f})' for n in below)}"
+                if below
+                else ""
+            )
+            + (": met." if not below and statistics.median(values) >= 300 else ": **not met**.")
+        )
+    text += f"\n\n![gallery]({figures}/gallery.png)\n\n"
+    if results.floating:
+        rows = [
+            [
+                f"`{r['name']}`",
+                str(r["nv"]),
+                r["status"],
+                f"{r['steps']:,}",
+                fmt_spread(r["seconds"]),
+                r["reason"] or "-",
+            ]
+            for r in results.floating
+        ]
+        text += (
+            "The floating-base robots with their free-flyer (`floating = true`), default "
+            "settings: they fall (no ground), and the solver should say `no_equilibrium` "
+            "quickly.\n\n"
+            + table(["robot", "nv", "status", "steps", "time", "reason"], rows, right=(1, 3, 4))
+            + "\n"
+        )
+    return text
+
+
+def goals_section(results: D.Results) -> str:
+    """The goals of issues 18 and 20, each measured in this run: met or not, in plain words."""
+    lines = []
+    names = compared(results)
+    if names:
+        behind = []
+        for name in names:
+            d = results.scenes[name]
+            tk = time_to(d.runs[kd_key()])
+            bests = {
+                f: time_to(d.runs[f"{f}_best"])
+                for f in BASELINES
+                if time_to(d.runs[f"{f}_best"]) is not None
+            }
+            if tk is None:
+                behind.append(f"{name} (KD did not reach it)")
+                continue
+            faster = {f: t for f, t in bests.items() if t < tk}
+            if faster:
+                f = min(faster, key=faster.get)
+                behind.append(
+                    f"{name} ({D.BASELINE_LABELS[f]} {fmt_time(faster[f])} against KD's "
+                    f"{fmt_time(tk)})"
+                )
+        fire_fails = [
+            n
+            for n in results.scenes
+            if results.scenes[n].baseline_sweep
+            and time_to(results.scenes[n].runs["fire_rule"]) is None
+        ]
+        kd_ok = [n for n in fire_fails if time_to(results.scenes[n].runs[kd_key()]) is not None]
+        lines.append(
+            f"- **Goal 1** (KD with the default settings at least as fast to a residual of "
+            f"{LEVEL:g} as every baseline at its best, on every tree scene): "
+            + (
+                f"met on {len(names) - len(behind)} of {len(names)}; **not met** on "
+                + "; ".join(behind)
+                if behind
+                else f"met on all {len(names)}"
+            )
+            + (
+                f". FIRE at its rule fails {', '.join(fire_fails)}; KD settles {len(kd_ok)} of them"
+                if fire_fails
+                else ". FIRE at its rule fails none"
+            )
+            + " (the whole comparison, per scene, in the Scenes part)."
+        )
+        defaults = [
+            (n, d.runs["kd_default"]) for n, d in results.scenes.items() if "kd_default" in d.runs
+        ]
+        worse = [f"{n} ({fmt_e(r.residual)})" for n, r in defaults if not r.residual <= LEVEL]
+        lines.append(
+            f"- **Goal 2** (the default run ends at a relative residual of at most {LEVEL:g}): "
+            + (
+                f"**not met** on {len(worse)} of {len(defaults)} scenes: " + ", ".join(worse)
+                if worse
+                else f"met on all {len(defaults)} scenes"
+            )
+            + "."
+        )
+    if results.gallery:
+        both = {r["name"]: mujoco_ratio(r) for r in results.gallery if mujoco_ratio(r)}
+        if both:
+            values = list(both.values())
+            below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
+            lines.append(
+                f"- **Goal 3** (at least 100 times faster than MuJoCo's damped settle on every "
+                f"robot both settle, median at least 300): median {statistics.median(values):.0f} "
+                f"over {len(values)} robots"
+                + (f"; below 100: {', '.join(below)}" if below else "")
+                + (": met." if not below and statistics.median(values) >= 300 else ": **not met**.")
+            )
+    rows = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
+    rows = rows or overhead_rows(results)  # a quick run: the scenes it has
+    if rows:
+        worst = max(max(r["fraction"], r["fraction_polish"]) for r in rows)
+        lines.append(
+            "- **Goal 4** (set-up, step estimates, stability assessments and polish at most 25% "
+            "of a solve on the UR5, chain20, chain100): "
+            + ", ".join(
+                f"{r['name']} {r['fraction']:.0%} ({r['fraction_polish']:.0%} with the polish)"
+                for r in rows
+            )
+            + (": met." if worst <= 0.25 else ": **not met**.")
+        )
+    done = [r for r in results.scaling if r["profile"]["status"] == "converged"]
+    if len(done) >= 2:
+        n = [r["n"] for r in done]
+        wall = [r["profile"]["median"]["wall"] for r in done]
+        per = [w / max(r["profile"]["steps"], 1) for w, r in zip(wall, done, strict=True)]
+        unfinished = [r["n"] for r in results.scaling if r["profile"]["status"] != "converged"]
+        lines.append(
+            f"- **Goal 5** (time no faster than n^2 from 5 to 1,000 links, a step O(n)): time "
+            f"grows as n^{slope(n, wall):.2f} and a step as n^{slope(n, per):.2f} over "
+            f"{n[0]} to {n[-1]} links"
+            + (
+                f"; {', '.join(map(str, unfinished))} links did not converge within "
+                f"{results.config.scaling_max_time:g} s: **not met**."
+                if unfinished
+                else (": met." if slope(n, wall) <= 2 else ": **not met**.")
+            )
+        )
+    if results.step_cost:
+        ratios = {n: stops_ratio(results, n) for n in ("ur5", "panda") if n in results.step_cost}
+        if ratios:
+            lines.append(
+                "- **Issue 18, step cost** (a step with joint stops at most 1.1 times one "
+                "without, UR5 and Panda): "
+                + ", ".join(f"{n} {x:.2f}" for n, x in ratios.items())
+                + (": met." if max(ratios.values()) <= 1.1 else ": **not met**.")
+            )
+    if results.gallery:
+        ok = [
+            r["name"]
+            for r in results.gallery
+            if r["status"] == "converged" and r["outside"] <= 0 and r["stability"] != "unstable"
+        ]
+        falls = [f"{r['name']} {r['status']} in {fmt_time(r['median'])}" for r in results.floating]
+        lines.append(
+            f"- **Issue 18, gallery**: {len(ok)} of {len(results.gallery)} robots converge inside "
+            "their limits with the default settings (independent check)"
+            + (f"; floating bases: {', '.join(falls)}" if falls else "")
+            + "."
+        )
+    return (
+        "## Goals\n\n"
+        "The figures issues 18 and 20 ask for, as measured in this run (details in the parts "
+        "below).\n\n" + "\n".join(lines) + "\n\n"
+    )
+
+
+REGION_TITLES = {
+    "scenes": "Scenes: error against run time, KD against the baselines",
+    "cost": "Cost of one step",
+    "overhead": "Where a solve's time goes",
+    "scaling": "Scaling with chain length",
+    "gallery": "The robot gallery, and MuJoCo",
+}
+
+
+def scenes_part(results: D.Results, figures: str) -> str:
+    return (
+        conclusions(results)
         + summary_rules(results)
         + scenes_table(results)
         + "\n"
+        + defaults_section(results)
+        + baselines_section(results)
         + summary_table(results)
         + "\n"
         + figures_section(results, figures)
@@ -1386,27 +2154,109 @@ def write(results: D.Results, output: Path) -> None:
         + stopping_section(results, figures)
         + backtrack_section(results)
         + dt_section(results)
-        + baselines_section(results)
-        + cost_section(results)
-        + scaling_section(results, figures)
     )
-    (output / "benchmarks.md").write_text(text, encoding="utf-8")
 
 
-# --- the README's summary ----------------------------------------------------------------------
+def parts(results: D.Results, fig_dir: Path, figures: str) -> dict[str, str]:
+    """The report's parts measured in this run (their figures written), by region name."""
+    out: dict[str, str] = {}
+    if "scenes" in results.sections:
+        for name, d in results.scenes.items():
+            d.bench_name = name
+            scene_figure(d, fig_dir / f"{name}.png")
+        kt_figure(results, fig_dir / "kt.png")
+        max_e_figure(results, fig_dir / "max_e.png")
+        out["scenes"] = scenes_part(results, figures)
+    if "cost" in results.sections:
+        out["cost"] = cost_section(results)
+    if "overhead" in results.sections:
+        out["overhead"] = overhead_section(results)
+    if "scaling" in results.sections:
+        scaling_figure(results, fig_dir / "scaling.png")
+        out["scaling"] = scaling_section(results, figures)
+    if "gallery" in results.sections:
+        gallery_figure(results, fig_dir / "gallery.png")
+        out["gallery"] = gallery_section(results, figures)
+    for name in list(out):
+        out[name] = f"## {REGION_TITLES[name]}\n\n" + stamp(results, name) + out[name]
+    if set(results.sections) == set(D.SECTIONS):
+        out["goals"] = goals_section(results)
+    return out
+
+
+REGIONS = ("header", "goals", *D.SECTIONS)
+
+
+_OPEN = re.compile(r"^<!-- ([\w.:-]+)(?: [^>]*)? -->$")
+
+
+def region(name: str, text: str) -> str:
+    return (
+        f"<!-- report:{name} (written by benchmarks/report.py; do not edit) -->\n"
+        f"{text.rstrip()}\n<!-- /report:{name} -->\n"
+    )
+
+
+def split_regions(text: str) -> tuple[dict[str, str], list[tuple[str | None, str]]]:
+    """The report's regions of an existing file (name -> whole block) and every other
+    delimited block (``<!-- NAME ... -->`` ... ``<!-- /NAME -->``, e.g. a section another tool
+    writes), each with the report region it follows (None: before any). Text outside any block
+    is dropped: the file is generated."""
+    ours: dict[str, str] = {}
+    foreign: list[tuple[str | None, str]] = []
+    lines = text.splitlines(keepends=True)
+    last: str | None = None
+    k = 0
+    while k < len(lines):
+        m = _OPEN.match(lines[k].strip())
+        if not m or m.group(1).startswith("/"):
+            k += 1
+            continue
+        name = m.group(1)
+        close = f"<!-- /{name} -->"
+        end = next((j for j in range(k + 1, len(lines)) if lines[j].strip() == close), None)
+        if end is None:
+            k += 1
+            continue
+        block = "".join(lines[k : end + 1])
+        if name.startswith("report:"):
+            last = name[len("report:") :]
+            ours[last] = block
+        else:
+            foreign.append((last, block))
+        k = end + 1
+    return ours, foreign
+
+
+def merge(existing: str, new: dict[str, str]) -> str:
+    """The report with the new regions in place of the old ones, the regions not measured now
+    kept, and the other delimited blocks kept after the region they followed (at the end when
+    they followed none)."""
+    ours, foreign = split_regions(existing)
+    blocks = []
+    for name in REGIONS:
+        if name in new:
+            blocks.append(region(name, new[name]))
+        elif name in ours:
+            blocks.append(ours[name])
+        blocks += [block for anchor, block in foreign if anchor == name]
+    # Blocks that followed no region of the report (a file written before the regions) or one
+    # it no longer has: at the end.
+    blocks += [block for anchor, block in foreign if anchor is None or anchor not in REGIONS]
+    return "\n".join(block.rstrip("\n") + "\n" for block in blocks)
+
 
 README_BEGIN = "<!-- bench:summary (written by benchmarks/report.py) -->"
 README_END = "<!-- /bench:summary -->"
 
 
 def readme_block(results: D.Results) -> str:
-    """The README's speed section: the main ratios of the report, as measured."""
+    """The README's speed section: the main ratios of the report and the goals, as measured."""
     m = results.machine
     names = list(results.step_cost)
 
     def ratio(name: str, key: str) -> float:
-        c = results.step_cost[name]["ns_per_step"]
-        return statistics.median(c[key]) / statistics.median(c["bare"])
+        return cost_median(results, name, key) / cost_median(results, name, "bare")
 
     def span(key: str) -> str:
         values = [ratio(n, key) for n in names]
@@ -1419,14 +2269,17 @@ def readme_block(results: D.Results) -> str:
     lines = [
         README_BEGIN,
         f"Measured by `python benchmarks/report.py` on this project's {m['cores']}-core machine "
-        f"({m['date']}); the whole report, with plots of error against wall time and steps for "
-        f"each scene, is [docs/benchmarks.md](docs/benchmarks.md).",
+        f"({m['date']}, shared with other jobs: ratios within one run, medians of repeats); the "
+        "whole report, with plots of error against wall time and steps for each scene, is "
+        "[docs/benchmarks.md](docs/benchmarks.md).",
         "",
         f"- **One step** costs {costs} times a bare `pinocchio::aba` + `pinocchio::integrate` "
         f"step on the same model (median of interleaved repeats; `benchmarks/step_cost.cpp`). A "
         f"scene without elements: {span('no_elements')}; a joint spring on every joint: "
         f"{span('joint_springs')}; one point spring: {span('point_spring')} (a forward-kinematics "
-        "pass per step to place its ends).",
+        "pass per step to place its ends); the model's joint stops over no stops: "
+        + ", ".join(f"{n} {stops_ratio(results, n):.2f}" for n in names)
+        + ".",
         f"- **Exact or simplified energy**: per step, simplified / exact "
         f"{cost_ratio(results):.3f} (UR5); over {len(t['ratios'])} scene and kt pairs, "
         f"{t['geomean']:.2f} times the steps to a residual of {LEVEL:g} (geometric mean; fewer "
@@ -1438,67 +2291,19 @@ def readme_block(results: D.Results) -> str:
         )
         + ").",
     ]
-    for key in BASELINES:
-        ratios, never = [], []
-        for name, d in results.scenes.items():
-            if key not in d.runs:
-                continue
-            tk, tb = time_to(d.runs["kd_exact"]), time_to(d.runs[key])
-            if tb is None or tk is None:
-                never.append(name)
-            else:
-                ratios.append(tb / tk)
-        label = D.BASELINE_LABELS[key]
-        text = f"- **{label}** (same dynamics, C++" + (
-            ", c from the slowest mode at the answer): " if key != "fire" else "): "
+    scenes = compared(results)
+    for family in BASELINES if scenes else ():
+        rule = {n: ratio_to_kd(results.scenes[n], f"{family}_rule") for n in scenes}
+        best = {n: ratio_to_kd(results.scenes[n], f"{family}_best") for n in scenes}
+        lines.append(
+            f"- **{D.BASELINE_LABELS[family]}** (same dynamics, C++, the start only), its time to "
+            f"a residual of {LEVEL:g} over KD's defaults: at its rule "
+            f"{median_with_failures(rule)}; at its best {median_with_failures(best)}."
         )
-        if ratios:
-            text += (
-                f"{statistics.median(ratios):.2g} times KD's time to a residual of {LEVEL:g} "
-                f"(median over {len(ratios)} scenes, {min(ratios):.2g} to {max(ratios):.2g})"
-            )
-        if never:
-            text += ("; " if ratios else "") + f"not reached on {', '.join(never)}"
-        lines.append(text + ".")
     if loop_scenes(results):
         lines.append(f"- The {trees_only(results)}.")
-    kinds = {}
-    for name, d in results.scenes.items():
-        run = d.runs["newton_ls"]
-        kind = f"{run.stability} root" if run.landing.q is not None else "no root"
-        kinds.setdefault(kind, []).append(name)
-    settled = [
-        name
-        for name, d in results.scenes.items()
-        if all(d.runs[k].stability in ("stable", "neutral") for k in ("kd_exact", "kd_simplified"))
-    ]
-    lines.append(
-        "- **Newton with a line search** from the same start: "
-        + "; ".join(f"{kind} on {', '.join(v)}" for kind, v in kinds.items())
-        + f"; kinetic damping rests stable or neutral on {len(settled)} of the "
-        f"{len(results.scenes)} scenes."
-    )
-    names = loop_scenes(results)
-    if names:
-        parts = []
-        for name in names:
-            d = results.scenes[name]
-            hit = d.runs["kd_exact"].reach("residual", LEVEL)
-            ratio = loop_cost_ratio(results, name)
-            parts.append(
-                f"{name} "
-                + (f"{fmt_steps(hit[0])} steps, {fmt_time(hit[1])}" if hit else "not reached")
-                + (f" (a step: {ratio:.2f})" if math.isfinite(ratio) else "")
-            )
-        worst = max(worst_constraint_error(results.scenes[n]) for n in names)
-        lines.append(
-            f"- **Closed loops** (constrained dynamics, projections onto the loops): to a "
-            f"residual of {LEVEL:g} along the allowed motions, "
-            + "; ".join(parts)
-            + f"; final constraint error at most {fmt_e(worst)} m over every KD run. A step "
-            "costs, in brackets, that many times a bare `pinocchio::constraintDynamics` + "
-            "`integrate` step (`benchmarks/loop_step_cost.cpp`)."
-        )
+    goals = goals_section(results).split("\n\n", 2)[-1].strip().splitlines()
+    lines += [line.replace("- **Goal", "- **Issue 20, goal") for line in goals]
     lines.append(README_END)
     wrapped = []
     for line in lines:

@@ -1,6 +1,9 @@
 """A scene's static force, distances between its poses and its loops, as the benchmark report
 measures them (benchmarks/report.py; the records of benchmarks/report_data.py keep one per
-scene)."""
+scene). The force, the residual, the stiffness, its verdict and the projection onto the loops
+are the independent physics of benchmarks/independent.py (tests/scene_reference.py's), never
+pinsettle's; pinsettle's stiffness is used only by the Newton *method* the report measures
+(``solver_newton_step``)."""
 
 from __future__ import annotations
 
@@ -9,29 +12,28 @@ import math
 import numpy as np
 import pinocchio
 import pinsettle
-from pinsettle import _core
+from independent import CachedReference, Physics
 
 
 class Statics:
-    """A scene's static force on its free joints, compiled once (``Scene.static_force`` compiles
-    the scene again for every q when joints are locked), and distances between poses.
+    """A scene's static force on its free joints and distances between poses.
 
-    With closed loops: ``q0`` is the start moved onto the loops (where the solver starts), the
-    force is projected onto the motions the loops allow, and ``step`` moves its result back onto
-    the loops."""
+    ``scene`` is what the solver runs; ``reference`` the same scene written independently
+    (tests/scene_reference.py). With closed loops: ``q0`` is the start moved onto the loops, the
+    force is projected onto the motions the loops allow, and ``step`` moves its result back
+    onto the loops."""
 
-    def __init__(self, scene: pinsettle.Scene) -> None:
+    def __init__(self, scene: pinsettle.Scene, reference: CachedReference) -> None:
         self.scene = scene
         self.full = scene.model
         self.compiled = scene.compile()
         self.model = self.compiled.model
         self.elements = self.compiled.elements
         self.loops = self.compiled.loops  # None for a tree
+        self.physics = Physics(reference, scene.q0())
+        if list(self.physics.model.names) != list(self.model.names):
+            raise RuntimeError(f"{scene.name}: the reference's joints differ from the scene's")
         self.data = self.model.createData()
-        self.full_data = self.full.createData()
-        self.q0, self.assembly_distance = scene.assemble(scene.q0())
-        self.mobility = scene.mobility(self.q0) if self.loops else self.model.nv
-        self.force_scale = float(np.max(np.abs(self.force(self.q0))))
         # Tangent entries that are angles of revolute joints: compared modulo 2 pi.
         angle = np.zeros(self.full.nv, dtype=bool)
         for j in range(1, self.full.njoints):
@@ -39,26 +41,48 @@ class Statics:
                 angle[self.full.idx_vs[j]] = True
         self.angle = angle[self.compiled.v_index]
         self.simple = self.full.nq == self.full.nv  # difference is a plain subtraction
+        self.q0 = self.physics.project(scene.q0())
+        if not np.all(np.isfinite(self.q0)):
+            raise RuntimeError(f"{scene.name}: the loops cannot be closed from the start")
+        self.assembly_distance = self.distance(scene.q0(), self.q0)
+        self.mobility = self.basis(self.q0).shape[1]
+        self.force_scale = float(np.max(np.abs(self.force(self.q0))))
+
+    # -- the independent physics --
 
     def force(self, q: np.ndarray) -> np.ndarray:
-        """tau_static(q) on the free joints, as ``Scene.static_force`` (with loops: projected
-        onto the motions they allow at q). Without elements and loops it is Pinocchio's
-        generalized gravity, as in pinsettle::computeStaticForce, on a Data kept here
-        (pinsettle's binding builds a pinocchio::Data per call, which on a 200-link chain costs
-        0.1 s)."""
-        if self.loops:
-            return _core.static_force(
-                self.model, q[self.compiled.q_index], self.elements, self.loops
-            )
-        if self.elements is None:
-            return pinocchio.computeGeneralizedGravity(
-                self.model, self.data, q[self.compiled.q_index]
-            ).copy()
-        return _core.static_force(self.model, q[self.compiled.q_index], self.elements)
+        """tau_static(q) on the free joints (with loops: projected onto the motions they allow
+        at q), benchmarks/independent.py."""
+        return self.physics.force(q)
 
     def residual(self, q: np.ndarray) -> float:
         """Relative residual: max |tau_static(q)| / force scale."""
         return float(np.max(np.abs(self.force(q)))) / self.force_scale
+
+    def verdict(self, q: np.ndarray) -> tuple[str, int, float]:
+        """Stability at q from the eigenvalues of the finite-difference stiffness of the
+        independent force: (verdict, neutral directions, smallest eigenvalue)."""
+        return self.physics.verdict(q)
+
+    def newton_step(self, q: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
+        """Newton's step from q with the independent finite-difference stiffness."""
+        return self.physics.newton_step(q, f)
+
+    def step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """q moved by dq (free joints), then back onto the loops; all nan when the loops cannot
+        be closed from there."""
+        return self.physics.project(self.physics.integrate(q, dq))
+
+    def project(self, q: np.ndarray) -> np.ndarray:
+        """q moved onto the loops; q itself for a tree."""
+        return self.physics.project(q)
+
+    def basis(self, q: np.ndarray) -> np.ndarray:
+        """Orthonormal basis (nv x mobility) of the motions the loops allow at q; the identity
+        for a tree."""
+        return self.physics.basis(q)
+
+    # -- distances --
 
     def tangent(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
         """qb - qa on the free joints (dim model.nv of the reduced model)."""
@@ -76,30 +100,6 @@ class Statics:
     def distance(self, qa: np.ndarray, qb: np.ndarray) -> float:
         return float(self.distances(qa, qb[None, :])[0])
 
-    def step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """q moved by dq (free joints), then back onto the loops; all nan when the loops cannot
-        be closed from there."""
-        full = np.zeros(self.full.nv)
-        full[self.compiled.v_index] = dq
-        return self.project(pinocchio.integrate(self.full, q, full))
-
-    def project(self, q: np.ndarray) -> np.ndarray:
-        """q moved onto the loops (``Scene.assemble``); q itself for a tree."""
-        if not self.loops or not np.all(np.isfinite(q)):
-            return q
-        try:
-            reduced, _ = _core.assemble_loops(self.model, q[self.compiled.q_index], self.loops)
-        except ValueError:
-            return np.full_like(q, math.nan)
-        return self.compiled.full_q(np.asarray(reduced))
-
-    def basis(self, q: np.ndarray) -> np.ndarray:
-        """Orthonormal basis (nv x mobility) of the motions the loops allow at q (the loops'
-        Jacobian's null space); the identity for a tree."""
-        if not self.loops:
-            return np.eye(self.model.nv)
-        return _core.loops(self.model, q[self.compiled.q_index], self.loops)["basis"]
-
     def loop_error(self, q: np.ndarray) -> float:
         """Largest loop error at q (m; rad for the rotation of a frame loop), from Pinocchio's
         frame placements on the full model: nothing of pinsettle's loop code. 0 for a tree."""
@@ -107,35 +107,33 @@ class Statics:
             return 0.0
         if not np.all(np.isfinite(q)):
             return math.inf
-        pinocchio.framesForwardKinematics(self.full, self.full_data, q)
+        data = self.physics.ref.data_of(self.full)
+        pinocchio.framesForwardKinematics(self.full, data, q)
         errors = []
         for loop in self.scene.loops:
-            a = self.full_data.oMf[self.full.getFrameId(loop.a_frame)]
-            b = self.full_data.oMf[self.full.getFrameId(loop.b_frame)]
+            a = data.oMf[self.full.getFrameId(loop.a_frame)]
+            b = data.oMf[self.full.getFrameId(loop.b_frame)]
             errors.append(a.act(np.asarray(loop.a_point)) - b.act(np.asarray(loop.b_point)))
             if loop.kind == "frame":
                 errors.append(pinocchio.log3(a.rotation @ b.rotation.T))
         return float(np.max(np.abs(np.concatenate(errors))))
 
+    # -- pinsettle's own tools, for the methods the report measures --
+
     def stiffness(self, q: np.ndarray) -> pinsettle.StabilityReport:
-        """K (with loops: reduced, mobility x mobility, in the coordinates of ``basis``)."""
+        """pinsettle.assess_stability: K (with loops reduced, mobility x mobility, in the
+        coordinates of its basis)."""
         return pinsettle.assess_stability(self.scene, q)
 
-    def newton_step(self, q: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
-        """Newton's step from q (dim nv of the free joints): dq = B lstsq(K, -B^T f), K and B
-        from ``pinsettle.assess_stability`` (K reduced to the motions the loops allow, B their
-        basis; the identity for a tree), rank cut 1e-10 so that neutral directions are left
-        alone."""
+    def solver_newton_step(self, q: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
+        """Newton's step as a user writes it with pinsettle: dq = B lstsq(K, -B^T f), K and B
+        from ``pinsettle.assess_stability``, rank cut 1e-10 (neutral directions left alone)."""
         f = self.force(q) if f is None else f
         report = self.stiffness(q)
         B = report.basis
         return B @ np.linalg.lstsq(report.stiffness_matrix, -(B.T @ f), rcond=1e-10)[0]
 
     def time_scale(self, q: np.ndarray, scale_stiff_modes: bool = False) -> dict:
-        return _core.time_scale(
+        return pinsettle._core.time_scale(
             self.model, q[self.compiled.q_index], self.elements, scale_stiff_modes, self.loops
         )
-
-    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
-        M = pinocchio.crba(self.model, self.data, q[self.compiled.q_index])
-        return np.triu(M) + np.triu(M, 1).T

@@ -1,0 +1,279 @@
+//
+// Where a kinetic-damping solve spends its time (benchmarks/report.py, the overhead split): the
+// solver's set-up, its step estimates, its stability assessments and the Newton polish, against
+// the whole solve and against the bare steps (pinocchio::aba + integrate) it takes.
+//
+// The solver's library calls pinsettle::computeTimeScale (from StepController: the step
+// estimates), pinsettle::assessStability (from the solver: the rest checks, the final verdict,
+// the polish) and pinsettle::computeStiffnessMatrix (the polish) across translation units. This
+// program is linked with the linker's --wrap for those symbols (benchmarks/CMakeLists.txt), so
+// each call goes through a wrapper here that times it and calls the real function: the solver's
+// code is unchanged and nothing is sampled. Nested calls (an assessment made inside another
+// part) count once, in the outermost part.
+//
+// - set-up: from the call of Solver::solve to the end of the first step estimate (the settings
+//   and model checks, the mass-matrix check, the first estimate);
+// - step estimates: every later estimate;
+// - stability assessments: every assessStability call (the rest checks and the final verdict);
+// - polish: in the solve with polish = true (the same trajectory, then Newton steps), the time
+//   of its stiffness matrices and of the assessments it adds, and its whole wall time; medians
+//   of interleaved repeats;
+// - the rest: the steps themselves, the final residual and energies.
+//
+//   kd_profile SPEC      (benchmarks/spec.hpp; the default settings but max_time, no stops)
+//
+// Prints one JSON object: the solve's status, steps, residual and final q, and per repeat its
+// wall time, set-up, estimates and assessments (s), and a bare step's time (s); with polish 1
+// the same solve with polish = true.
+//
+
+#include "bare-step.hpp"
+#include "spec.hpp"
+
+#include <pinocchio/serialization.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <iostream>
+
+namespace
+{
+  typedef std::chrono::steady_clock Clock;
+
+  /// Time spent in the wrapped calls of one solve.
+  struct Profile
+  {
+    bool active = false;
+    int depth = 0; // nesting of wrapped calls: only the outermost counts
+    Clock::time_point start;
+    double setup = -1.; // s from the solve's start to the end of the first estimate
+    int estimates = 0, assessments = 0, stiffness = 0;
+    double estimate_seconds = 0., assess_seconds = 0., stiffness_seconds = 0.;
+  } profile;
+
+  /// Times the outermost wrapped call and files it.
+  class Timed
+  {
+  public:
+    explicit Timed(int kind)
+    : kind_(kind)
+    , outer_(profile.active && profile.depth == 0)
+    , start_(Clock::now())
+    {
+      ++profile.depth;
+    }
+    ~Timed()
+    {
+      --profile.depth;
+      if (!outer_)
+        return;
+      const Clock::time_point end = Clock::now();
+      const double s = std::chrono::duration<double>(end - start_).count();
+      if (kind_ == 0 && profile.setup < 0.)
+        profile.setup = std::chrono::duration<double>(end - profile.start).count();
+      else if (kind_ == 0)
+      {
+        ++profile.estimates;
+        profile.estimate_seconds += s;
+      }
+      else if (kind_ == 1)
+      {
+        ++profile.assessments;
+        profile.assess_seconds += s;
+      }
+      else
+      {
+        ++profile.stiffness;
+        profile.stiffness_seconds += s;
+      }
+    }
+
+  private:
+    int kind_;
+    bool outer_;
+    Clock::time_point start_;
+  };
+
+  typedef pinocchio::Model Model;
+  typedef pinocchio::Data Data;
+  typedef Eigen::VectorXd Vec;
+  typedef Eigen::MatrixXd Mat;
+  using pinsettle::ForceModel;
+  using pinsettle::JointStops;
+  using pinsettle::LoopConstraints;
+  using pinsettle::StabilityReport;
+  using pinsettle::TimeScale;
+} // namespace
+
+// The wrappers (mangled names of the functions in pinsettle's library; see CMakeLists.txt).
+extern "C"
+{
+  TimeScale
+  __real__ZN9pinsettle16computeTimeScaleERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelEbPKNSA_IdLin1ELin1ELi0ELin1ELin1EEE(
+    const Model &, Data &, const Vec &, const ForceModel *, bool, const Mat *);
+  TimeScale
+  __wrap__ZN9pinsettle16computeTimeScaleERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelEbPKNSA_IdLin1ELin1ELi0ELin1ELin1EEE(
+    const Model & model,
+    Data & data,
+    const Vec & q,
+    const ForceModel * forces,
+    bool scale,
+    const Mat * stiffness)
+  {
+    Timed timed(0);
+    return __real__ZN9pinsettle16computeTimeScaleERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelEbPKNSA_IdLin1ELin1ELi0ELin1ELin1EEE(
+      model, data, q, forces, scale, stiffness);
+  }
+
+  StabilityReport
+  __real__ZN9pinsettle15assessStabilityERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+    const Model &, Data &, const Vec &, const ForceModel *);
+  StabilityReport
+  __wrap__ZN9pinsettle15assessStabilityERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+    const Model & model, Data & data, const Vec & q, const ForceModel * forces)
+  {
+    Timed timed(1);
+    return __real__ZN9pinsettle15assessStabilityERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+      model, data, q, forces);
+  }
+
+  StabilityReport
+  __real__ZN9pinsettle15assessStabilityERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKNS_10JointStopsERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+    const Model &, Data &, const JointStops &, const Vec &, const ForceModel *);
+  StabilityReport
+  __wrap__ZN9pinsettle15assessStabilityERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKNS_10JointStopsERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+    const Model & model,
+    Data & data,
+    const JointStops & stops,
+    const Vec & q,
+    const ForceModel * forces)
+  {
+    Timed timed(1);
+    return __real__ZN9pinsettle15assessStabilityERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKNS_10JointStopsERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+      model, data, stops, q, forces);
+  }
+
+  Mat __real__ZN9pinsettle22computeStiffnessMatrixERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+    const Model &, Data &, const Vec &, const ForceModel *);
+  Mat __wrap__ZN9pinsettle22computeStiffnessMatrixERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+    const Model & model, Data & data, const Vec & q, const ForceModel * forces)
+  {
+    Timed timed(2);
+    return __real__ZN9pinsettle22computeStiffnessMatrixERKN9pinocchio8ModelTplIdLi0ENS0_25JointCollectionDefaultTplEEERNS0_7DataTplIdLi0ES2_EERKN5Eigen6MatrixIdLin1ELi1ELi0ELin1ELi1EEEPKNS_10ForceModelE(
+      model, data, q, forces);
+  }
+}
+
+namespace
+{
+  struct Solve
+  {
+    pinsettle::Result result;
+    Profile profile;
+  };
+
+  Solve profiledSolve(
+    const Model & model, const Vec & q0, const ForceModel * forces, bool polish, double max_time)
+  {
+    pinsettle::Settings settings; // the defaults, within the spec's wall-clock budget
+    settings.polish = polish;
+    settings.max_time = max_time;
+    pinsettle::Solver solver(model);
+    profile = Profile();
+    profile.active = true;
+    profile.start = Clock::now();
+    Solve out;
+    out.result = solver.solve(q0, settings, forces);
+    profile.active = false;
+    out.profile = profile;
+    return out;
+  }
+
+  // Fewest and most bare steps timed per repeat.
+  constexpr long kMinBareSteps = 2000, kBareSteps = 20000;
+
+  std::string list(const std::vector<double> & x)
+  {
+    return bench::jsonVector(x);
+  }
+} // namespace
+
+int main(int argc, char ** argv)
+{
+  if (argc != 2)
+  {
+    std::cerr << "usage: " << argv[0] << " SPEC\n";
+    return 2;
+  }
+  try
+  {
+    const bench::Spec spec = bench::readSpec(argv[1]);
+    Model model;
+    model.loadFromBinary(spec.model_path);
+    if (spec.q0.size() != model.nq)
+      throw std::runtime_error("q0 does not match the model's nq");
+    pinsettle::ForceElements elements(model);
+    for (const std::string & line : spec.elements)
+      bench::addElement(elements, line);
+    const ForceModel * forces = elements.empty() ? nullptr : &elements;
+
+    std::vector<double> wall, setup, estimates, assess, polish_wall, polish_assess,
+      polish_stiffness, bare;
+    Solve plain, polished;
+    // With repeats, one solve first, untimed: the first in a process pays for cold caches and
+    // first allocations, which a solve in a running program does not.
+    if (spec.repeats > 1)
+      profiledSolve(model, spec.q0, forces, false, spec.max_time);
+    double spent = 0.;
+    for (int r = 0; r < spec.repeats && (r == 0 || spent < spec.repeat_budget); ++r)
+    {
+      plain = profiledSolve(model, spec.q0, forces, false, spec.max_time);
+      wall.push_back(plain.result.wall_time);
+      setup.push_back(plain.profile.setup);
+      estimates.push_back(plain.profile.estimate_seconds);
+      assess.push_back(plain.profile.assess_seconds);
+      spent += plain.result.wall_time;
+      if (spec.polish)
+      {
+        polished = profiledSolve(model, spec.q0, forces, true, spec.max_time);
+        polish_wall.push_back(polished.result.wall_time);
+        polish_assess.push_back(polished.profile.assess_seconds);
+        polish_stiffness.push_back(polished.profile.stiffness_seconds);
+        spent += polished.result.wall_time;
+      }
+      // A bare step (aba + integrate) from the start, at a tenth of the solver's final step (a
+      // fixed step that large may blow up; ABA costs the same whatever the step), timed over
+      // the solve's steps, at least kMinBareSteps and at most kBareSteps.
+      const long steps =
+        std::clamp<long>(static_cast<long>(plain.result.steps), kMinBareSteps, kBareSteps);
+      bare.push_back(
+        bench::timeBareAbaStep(model, spec.q0, steps, 0.1 * plain.result.dt, "bare step"));
+    }
+    const pinsettle::Result & r = plain.result;
+    std::cout << "{\"status\": \"" << pinsettle::toString(r.status) << "\", \"steps\": " << r.steps
+              << ", \"dt_estimates\": " << r.dt_estimates
+              << ", \"residual\": " << bench::number(r.residual) << ", \"wall\": " << list(wall)
+              << ", \"setup\": " << list(setup) << ", \"estimates\": " << list(estimates)
+              << ", \"estimate_count\": " << plain.profile.estimates
+              << ", \"assessments\": " << list(assess)
+              << ", \"assessment_count\": " << plain.profile.assessments
+              << ", \"bare_step\": " << list(bare) << ", \"q\": " << bench::jsonVector(r.q);
+    if (spec.polish)
+      std::cout << ", \"polish_wall\": " << list(polish_wall)
+                << ", \"polish_assessments\": " << list(polish_assess)
+                << ", \"polish_assessment_count\": " << polished.profile.assessments
+                << ", \"polish_stiffness\": " << list(polish_stiffness)
+                << ", \"polish_stiffness_count\": " << polished.profile.stiffness
+                << ", \"polish_iterations\": " << polished.result.polish_iterations
+                << ", \"polished\": " << (polished.result.polished ? "true" : "false")
+                << ", \"polish_steps\": " << polished.result.steps
+                << ", \"polish_residual\": " << bench::number(polished.result.residual);
+    std::cout << "}\n";
+  }
+  catch (const std::exception & e)
+  {
+    std::cerr << argv[0] << ": " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

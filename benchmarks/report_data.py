@@ -28,11 +28,11 @@ DSS = (10, 30, 100, 300, 1000)
 MAX_ES = (1e-8, 1e-12, 1e-16, 1e-20, 1e-24)
 #: Chain lengths of the scaling section, and the longest that also gets a run to round-off
 #: (its curve) and the whole step-cost table.
-CHAIN_LENGTHS = (5, 10, 20, 50, 100, 200, 400, 1000)
+CHAIN_LENGTHS = (5, 10, 20, 50, 100, 200, 300, 400, 1000)
 DEEP_CHAIN_MAX = 200
 #: Wall-clock budget of one solve of the scaling section (s): the 1,000-link chain is not run
 #: to its end.
-SCALING_MAX_TIME = 90.0
+SCALING_MAX_TIME = 150.0
 #: The bound of the stopping rule in the runs whose curves are plotted: far below every level,
 #: so that the curve shows how the error falls, down to round-off.
 DEEP_MAX_E = 1e-26

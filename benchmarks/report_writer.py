@@ -315,7 +315,7 @@ def scaling_figure(results: D.Results, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = results.scaling
+    rows = measured_chains(results)
     n = np.array([row["n"] for row in rows], dtype=float)
     fig, (a, b, c) = plt.subplots(1, 3, figsize=(14, 4.5))
     per_step = [row["profile"]["median"]["wall"] / max(row["profile"]["steps"], 1) for row in rows]
@@ -1237,6 +1237,23 @@ def cost_section(results: D.Results) -> str:
     )
 
 
+def measured_chains(results: D.Results) -> list[dict]:
+    """The chains of the scaling section that pinsettle took (not refused)."""
+    return [row for row in results.scaling if "refused" not in row]
+
+
+def refusals(results: D.Results) -> str:
+    refused = [row for row in results.scaling if "refused" in row]
+    if not refused:
+        return ""
+    return (
+        ", ".join(f"{row['n']}" for row in refused)
+        + " links: pinsettle refuses the model: "
+        + refused[0]["refused"].strip().splitlines()[-1]
+        + "\n\n"
+    )
+
+
 def pair_slope(a: dict, b: dict) -> float:
     """The exponent of the solve time between two chain lengths."""
     return slope([a["n"], b["n"]], [a["profile"]["median"]["wall"], b["profile"]["median"]["wall"]])
@@ -1245,6 +1262,9 @@ def pair_slope(a: dict, b: dict) -> float:
 def scaling_section(results: D.Results, figures: str) -> str:
     rows = []
     for row in results.scaling:
+        if "refused" in row:
+            rows.append([str(row["n"]), "**refused**", *["-"] * 11])
+            continue
         p = row["profile"]
         m = p["median"]
         wall, steps = m["wall"], max(p["steps"], 1)
@@ -1266,7 +1286,7 @@ def scaling_section(results: D.Results, figures: str) -> str:
                 fmt_time(time_to(deep)) if deep else "-",
             ]
         )
-    done = [r for r in results.scaling if r["profile"]["status"] == "converged"]
+    done = [r for r in measured_chains(results) if r["profile"]["status"] == "converged"]
     fits = ""
     if len(done) >= 2:
         n = [r["n"] for r in done]
@@ -1284,12 +1304,14 @@ def scaling_section(results: D.Results, figures: str) -> str:
         if local:
             fits += "Between neighbours, time grows as " + ", ".join(local) + ". "
         verdict = slope(n, wall) <= 2.0 and all(pair_slope(a, b) <= 2.0 for a, b in pairs)
-        unfinished = [r["n"] for r in results.scaling if r["profile"]["status"] != "converged"]
+        unfinished = [
+            r["n"] for r in results.scaling if r.get("profile", {}).get("status") != "converged"
+        ]
         fits += (
             "**Goal 5 of issue 20** (time no faster than n^2 over 5 to 1,000 links, a step O(n)): "
             + ("met over the converged lengths" if verdict else "**not met**")
             + (
-                f"; not converged within {results.config.scaling_max_time:g} s: "
+                f"; not converged within {results.config.scaling_max_time:g} s or refused: "
                 + ", ".join(f"{n} links" for n in unfinished)
                 + " (**not met** there)"
                 if unfinished
@@ -1327,6 +1349,7 @@ def scaling_section(results: D.Results, figures: str) -> str:
             right=(0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12),
         )
         + "\n"
+        + refusals(results)
         + fits
         + f"![scaling]({figures}/scaling.png)\n\n"
     )
@@ -2082,19 +2105,21 @@ def goals_section(results: D.Results) -> str:
             )
             + (": met." if worst <= 0.25 else ": **not met**.")
         )
-    done = [r for r in results.scaling if r["profile"]["status"] == "converged"]
+    done = [r for r in measured_chains(results) if r["profile"]["status"] == "converged"]
     if len(done) >= 2:
         n = [r["n"] for r in done]
         wall = [r["profile"]["median"]["wall"] for r in done]
         per = [w / max(r["profile"]["steps"], 1) for w, r in zip(wall, done, strict=True)]
-        unfinished = [r["n"] for r in results.scaling if r["profile"]["status"] != "converged"]
+        unfinished = [
+            r["n"] for r in results.scaling if r.get("profile", {}).get("status") != "converged"
+        ]
         lines.append(
             f"- **Goal 5** (time no faster than n^2 from 5 to 1,000 links, a step O(n)): time "
             f"grows as n^{slope(n, wall):.2f} and a step as n^{slope(n, per):.2f} over "
             f"{n[0]} to {n[-1]} links"
             + (
                 f"; {', '.join(map(str, unfinished))} links did not converge within "
-                f"{results.config.scaling_max_time:g} s: **not met**."
+                f"{results.config.scaling_max_time:g} s or were refused: **not met**."
                 if unfinished
                 else (": met." if slope(n, wall) <= 2 else ": **not met**.")
             )

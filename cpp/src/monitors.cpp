@@ -112,6 +112,15 @@ namespace pinsettle
     drift_.setZero();
   }
 
+  namespace
+  {
+    // Net motion (rad or m) a runaway must have made before it is confirmed: a revolute joint
+    // that falls without bound keeps turning, so a full turn at least; a long first fall into a
+    // well (a slow pendulum whose step is set by a stiff spring, over 100,000 steps) grows its
+    // release per doubling for as long as it falls, but never travels that far.
+    constexpr double kMinTravel = 2. * 3.14159265358979323846;
+  } // namespace
+
   bool RunawayMonitor::sample(double e)
   {
     const double released = e - e_reset_ + removed_ + switch_loss_;
@@ -126,7 +135,7 @@ namespace pinsettle
     increment_sample_ = increment;
     drift_sample_ = drift;
     next_sample_ *= 2;
-    return growing_ >= kRunawayDoublings;
+    return growing_ >= kRunawayDoublings && drift >= kMinTravel;
   }
 
   void RestCheck::start(std::int64_t window, double push_energy, EnergyMeasure measure)

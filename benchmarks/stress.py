@@ -577,10 +577,11 @@ it is pushed along the most negative eigenvector and goes on to a stable rest.
 
 ## No equilibrium
 
-A run whose released energy (kinetic energy gained plus energy taken out) and travelled distance
-both grow at least 1.5x per doubling of the run, ten times in a row, ends with `no_equilibrium`
-and a reason: first kt drops to 0 (full stops at every peak, to tell a deep well from a
-runaway), then a second such run decides. That takes at most 2 x 1024 x ds steps.
+A run whose energy released per doubling of the run (kinetic energy gained plus energy taken
+out) and travelled distance both grow at least 1.5x per doubling, eight times in a row, ends with
+`no_equilibrium` and a reason naming the joint that travelled furthest: first kt drops to 0 (full
+stops at every peak, to tell a deep well from a runaway), then a second such run decides. That
+takes at most 2 x 256 x ds steps after the release starts to grow.
 
 ## Newton polish
 

@@ -7,6 +7,7 @@
 #include <pinocchio/multibody.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -84,6 +85,52 @@ namespace pinsettle
       refuse(model, j, why.str());
     }
 
+    std::string vectorText(const Eigen::Vector3d & v)
+    {
+      std::ostringstream out;
+      out.precision(17);
+      out << "(" << v.x() << ", " << v.y() << ", " << v.z() << ")";
+      return out.str();
+    }
+
+    // A joint about or along an axis takes it to be a unit vector (Pinocchio asserts so only in
+    // debug builds): a URDF's <axis xyz="0 0 0"> stays zero after Pinocchio's parser normalizes
+    // the others, and the joint's "rotation" is then cos(q) times the identity, no motion a body
+    // can make. Same precision as Pinocchio's check (Eigen's isUnitary).
+    void checkAxes(
+      const pinocchio::Model & model,
+      std::size_t j,
+      const pinocchio::JointModel::JointModelVariant & variant)
+    {
+      auto unit = [&](const Eigen::Vector3d & axis, const char * which) {
+        if (!axis.allFinite() || !axis.isUnitary())
+          refuse(
+            model, j,
+            std::string("has ") + which + " " + vectorText(axis)
+              + ", not a unit vector: its motion is no rotation about or translation along an "
+                "axis (a URDF <axis xyz=\"0 0 0\">?)");
+      };
+      if (const auto * r = boost::get<pinocchio::JointModelRevoluteUnaligned>(&variant))
+        unit(r->axis, "the axis");
+      else if (
+        const auto * u = boost::get<pinocchio::JointModelRevoluteUnboundedUnaligned>(&variant))
+        unit(u->axis, "the axis");
+      else if (const auto * p = boost::get<pinocchio::JointModelPrismaticUnaligned>(&variant))
+        unit(p->axis, "the axis");
+      else if (const auto * h = boost::get<pinocchio::JointModelHelicalUnaligned>(&variant))
+        unit(h->axis, "the axis");
+      else if (const auto * universal = boost::get<pinocchio::JointModelUniversal>(&variant))
+      {
+        unit(universal->axis1, "the first axis");
+        unit(universal->axis2, "the second axis");
+        if (std::abs(universal->axis1.dot(universal->axis2)) > 1e-12)
+          refuse(
+            model, j,
+            "is a universal joint whose axes " + vectorText(universal->axis1) + " and "
+              + vectorText(universal->axis2) + " are not orthogonal");
+      }
+    }
+
     // A joint's own type, then those inside a composite.
     void checkJoint(
       const pinocchio::Model & model,
@@ -101,6 +148,7 @@ namespace pinsettle
           (part_of_composite ? "is a composite joint with a part of type " : "is of type ") + type
             + ", which pinsettle does not know: it has not been tried with the algorithms "
               "pinsettle runs on Pinocchio 4.1");
+      checkAxes(model, j, variant);
       if (const auto * composite = boost::get<pinocchio::JointModelComposite>(&variant))
         for (const pinocchio::JointModel & part : composite->joints)
           checkJoint(model, j, part, true);
@@ -186,6 +234,31 @@ namespace pinsettle
       }
     }
 
+    // Pinocchio 4.1's Data constructor allocates and zeroes four nv x nv x nv tensors (the
+    // second-order derivatives of rnea), 32 nv^3 bytes, whichever algorithm is run: 32 GB for
+    // nv = 1000, where the allocation fails (std::bad_alloc) or, with memory overcommitted, the
+    // zeroing wakes the kernel's OOM killer. Such a model is refused before any Data is made.
+    constexpr double kMaxDataTensorBytes = 1024. * 1024. * 1024.; // 1 GiB: nv up to 322
+
+    void checkDataSize(const pinocchio::Model & model)
+    {
+      const double nv = static_cast<double>(model.nv);
+      const double bytes = 4. * nv * nv * nv * static_cast<double>(sizeof(double));
+      if (bytes <= kMaxDataTensorBytes)
+        return;
+      int largest = static_cast<int>(std::cbrt(kMaxDataTensorBytes / (4. * sizeof(double))));
+      while (4. * std::pow(largest + 1., 3) * sizeof(double) <= kMaxDataTensorBytes)
+        ++largest;
+      std::ostringstream msg;
+      msg.precision(3);
+      msg << "model: nv = " << model.nv
+          << " degrees of freedom is more than pinsettle supports (nv up to " << largest
+          << "): every pinocchio::Data for it, which each Pinocchio algorithm works in, holds "
+             "four nv x nv x nv tensors (second-order derivatives of rnea), "
+          << bytes / 1e9 << " GB, allocated and zeroed whenever one is made";
+      throw std::invalid_argument(msg.str());
+    }
+
   } // namespace
 
   void checkSupportedModel(const pinocchio::Model & model)
@@ -195,6 +268,7 @@ namespace pinsettle
       checkJoint(model, j, model.joints[j]);
     checkTables(model);
     checkDepthFirstOrder(model);
+    checkDataSize(model);
   }
 
 } // namespace pinsettle

@@ -87,7 +87,10 @@ namespace pinsettle
     stiff_s_.resize(stiff, stiff);
     stiff_z_.resize(stiff);
     stiff_p_.resize(stiff);
-    stiff_llt_ = Eigen::LLT<Eigen::MatrixXd>(stiff);
+    // Sized by a factorization (of the identity), not by assigning LLT(stiff): that constructor
+    // leaves its info() unset, and the assignment copies the unset value (UBSan: an invalid
+    // ComputationInfo).
+    stiff_llt_.compute(Eigen::MatrixXd::Identity(stiff, stiff));
     double next = std::isfinite(scale.critical_step)
                     ? dt_safety_ * scale.critical_step * step_scale_
                     : kRestStep * step_scale_;

@@ -221,3 +221,76 @@ BOOST_AUTO_TEST_CASE(stiffness_of_a_composite_joint_is_the_derivative_of_gravity
   pinocchio::buildModels::manipulator(manipulator);
   BOOST_CHECK(!pinsettle::stiffnessByFiniteDifferences(manipulator, nullptr));
 }
+
+BOOST_AUTO_TEST_CASE(models_whose_data_would_not_fit_are_refused_before_any_data_is_made)
+{
+  // A chain of n hinges (Model only: a Data of the refused one would hold 32 nv^3 bytes).
+  auto chain = [](int n) {
+    pinocchio::Model model;
+    pinocchio::JointIndex parent = 0;
+    for (int k = 0; k < n; ++k)
+    {
+      parent = model.addJoint(
+        parent, pinocchio::JointModelRY(),
+        pinocchio::SE3(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0., 0., k ? -0.1 : 0.)),
+        "joint" + std::to_string(k + 1));
+      model.appendBodyToJoint(
+        parent, pinocchio::Inertia(
+                  0.1, Eigen::Vector3d(0., 0., -0.05), Eigen::Matrix3d::Identity() * 1e-4));
+    }
+    return model;
+  };
+  const std::string message = refusal(chain(1000));
+  BOOST_TEST_MESSAGE(message);
+  BOOST_CHECK(contains(message, "nv = 1000"));
+  BOOST_CHECK(contains(message, "nv up to 322"));
+  BOOST_CHECK(contains(message, "32 GB"));
+  // The largest model accepted: its four tensors take at most 1 GiB.
+  BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(chain(322)));
+  BOOST_CHECK(contains(refusal(chain(323)), "nv = 323"));
+}
+
+BOOST_AUTO_TEST_CASE(joints_whose_axis_is_not_a_unit_vector_are_refused)
+{
+  // What Pinocchio's URDF parser makes of <axis xyz="0 0 0">: an unaligned joint with a zero
+  // axis (it normalizes any other), whose motion would be no rotation at all. The axes are set
+  // after construction: the constructors assert unit axes in a debug build.
+  auto oneJoint = [](const pinocchio::JointModel & joint) {
+    pinocchio::Model model;
+    const pinocchio::JointIndex j = model.addJoint(0, joint, pinocchio::SE3::Identity(), "axis");
+    model.appendBodyToJoint(
+      j, pinocchio::Inertia(1., Eigen::Vector3d(0., 0., -0.5), Eigen::Matrix3d::Identity() * 1e-2));
+    return model;
+  };
+  const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
+  const Eigen::Vector3d unit = Eigen::Vector3d(1., 2., 2.) / 3.;
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX(), y = Eigen::Vector3d::UnitY();
+
+  pinocchio::JointModelRevoluteUnaligned revolute(unit);
+  BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(oneJoint(revolute)));
+  revolute.axis = zero;
+  const std::string message = refusal(oneJoint(revolute));
+  BOOST_TEST_MESSAGE(message);
+  BOOST_CHECK(contains(message, "'axis'") && contains(message, "(0, 0, 0), not a unit vector"));
+
+  pinocchio::JointModelPrismaticUnaligned prismatic(unit);
+  prismatic.axis = 2. * unit;
+  BOOST_CHECK(contains(refusal(oneJoint(prismatic)), "not a unit vector"));
+  pinocchio::JointModelRevoluteUnboundedUnaligned unbounded(unit);
+  unbounded.axis = zero;
+  BOOST_CHECK(contains(refusal(oneJoint(unbounded)), "not a unit vector"));
+  pinocchio::JointModelHelicalUnaligned helical(unit, 0.1);
+  helical.axis = zero;
+  BOOST_CHECK(contains(refusal(oneJoint(helical)), "not a unit vector"));
+
+  pinocchio::JointModelUniversal universal(x, y);
+  BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(oneJoint(universal)));
+  universal.axis2 = unit;
+  BOOST_CHECK(contains(refusal(oneJoint(universal)), "not orthogonal"));
+
+  // Inside a composite too.
+  pinocchio::JointModelComposite composite;
+  composite.addJoint(pinocchio::JointModelRX());
+  composite.addJoint(revolute);
+  BOOST_CHECK(contains(refusal(oneJoint(composite)), "not a unit vector"));
+}

@@ -56,7 +56,11 @@ def check(df: Any, results: list[pinsettle.Result], names: list[str], what: str)
             and all(row[name] == result.joints[name] for name in names)
         )
         if not same:
-            raise AssertionError(f"{what}: case {row['case']} differs from pinsettle.solve")
+            raise AssertionError(
+                f"{what}: case {row['case']} differs from pinsettle.solve: {row.to_dict()} "
+                f"against {result.status}, {result.steps} steps, residual {result.residual!r}, "
+                f"{result.joints}"
+            )
 
 
 def runs(scene: pinsettle.Scene, starts: np.ndarray, client: Any) -> dict[str, Any]:
@@ -81,6 +85,7 @@ def measure_scene(name: str, n: int, client: Any, repeats: int) -> dict[str, Any
     names = [scene.model.names[j] for j in range(1, scene.model.njoints)]
     ways = runs(scene, starts, client)
     times: dict[str, list[float]] = {key: [] for key in ways}
+    solver: list[float] = []  # the loop's mean solver time per case, each repeat
     for run in ways.values():  # a warm-up of each (imports, the workers' first scene)
         run()
     results = loop(scene, starts)
@@ -89,11 +94,17 @@ def measure_scene(name: str, n: int, client: Any, repeats: int) -> dict[str, Any
             started = time.perf_counter()
             value = run()
             times[key].append(time.perf_counter() - started)
-            if key != "loop":
+            if key.startswith("dask"):
+                # The cluster forgets the tasks and its workers settle after the run: not on
+                # the next run's clock.
+                time.sleep(1.0)
+            if key == "loop":
+                solver.append(float(np.mean([r.wall_time for r in value])))
+            else:
                 check(value, results[: len(value)], names, f"{name} {key}")
     return {
         "cases": n,
-        "solver": float(np.mean([r.wall_time for r in results])),
+        "solver": statistics.median(solver),
         "median": {key: statistics.median(t) for key, t in times.items()},
         "converged": sum(r.converged for r in results),
     }
@@ -130,19 +141,28 @@ def section(data: dict[str, Any]) -> str:
         "",
         f"Measured by `python benchmarks/sweep_throughput.py --write` on this project's 2-core "
         f"machine ({today}; load average {data['load_before']:.1f} before, "
-        f"{data['load_after']:.1f} after: other work was running). Random starts inside the "
+        f"{data['load_after']:.1f} after"
+        + (
+            ": other work was running, so the ratios below are uncertain to tens of percent; "
+            "run it again on an idle machine"
+            if max(data["load_before"], data["load_after"]) > 1.5
+            else ""
+        )
+        + "). Random starts inside the "
         "stops, drawn once and passed to every run as an array, solved by a plain Python loop "
         "over `pinsettle.solve`, by `pinsettle.sweep` on 1 and 2 local threads, and by "
         "`pinsettle.sweep(client=...)` on a `dask.distributed.LocalCluster` of 2 worker "
         "processes with 1 thread each (127.0.0.1; default chunks, then one case per task). "
         f"Median of {data['repeats']} interleaved repeats, each timed whole (planning, the "
-        "table and sending the scene included, starting the cluster not). Every table was "
-        "checked against the loop's results to the bit (wall times aside).",
+        "table and sending the scene included, starting the cluster not), all in one process "
+        "with the Dask client connected (its thread shares the GIL). Every table was checked "
+        "against the loop's results to the bit (wall times aside).",
         "",
-        "| scene | cases | solver time per case | loop over `solve` | sweep, 1 thread | "
-        "sweep, 2 threads | Dask, 2 processes | Dask, 1 case per task |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| scene | cases | solver time per case | GIL released | loop over `solve` | "
+        "sweep, 1 thread | sweep, 2 threads | Dask, 2 processes | Dask, 1 case per task |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
+    bounds = []
     overheads = []
     for name, item in data["scenes"].items():
         n, median = item["cases"], item["median"]
@@ -151,9 +171,13 @@ def section(data: dict[str, Any]) -> str:
             rate = n / median[key]
             return f"{rate:,.0f} /s ({median['loop'] / median[key]:.2f}x)"
 
+        # The share of a case's time spent in the C++ solve (the GIL released) in the loop.
+        share = min(1.0, item["solver"] / (median["loop"] / n))
+        bounds.append(f"{name} {1 / ((1 - share) + share / 2):.2f}x")
         lines.append(
-            f"| {name} | {n} | {item['solver'] * 1e3:.3f} ms | {cell('loop')} | "
-            f"{cell('sweep1')} | {cell('sweep2')} | {cell('dask')} | {cell('dask1')} |"
+            f"| {name} | {n} | {item['solver'] * 1e3:.3f} ms | {100 * share:.0f}% | "
+            f"{cell('loop')} | {cell('sweep1')} | {cell('sweep2')} | {cell('dask')} | "
+            f"{cell('dask1')} |"
         )
         # Worker time a case costs on the cluster beyond what it costs on one local thread.
         for key in ("dask", "dask1"):
@@ -161,8 +185,12 @@ def section(data: dict[str, Any]) -> str:
     lines += [
         "",
         "Solves per second (the loop's time over each run's in brackets). The solver time is "
-        "the C++ loop's own (`Result.wall_time`, mean); the rest of a loop's time per case is "
-        "Python: settings, the scene's specs, the result and its joint names.",
+        "the C++ loop's own (`Result.wall_time`, mean over the cases of the loop, median over "
+        "the repeats), run with the GIL released; its share of the loop's time per case is the "
+        "next column, the rest is Python (settings, the "
+        "scene's specs, the result and its joint names), which threads run one at a time. "
+        "With a share p released, two threads can be at most 1 / ((1 - p) + p / 2) times as "
+        "fast as one: " + ", ".join(bounds) + " here; the load of the machine takes the rest.",
         "",
         "Overhead of the Dask path per case: worker-seconds per case on the cluster (its wall "
         "time times its 2 workers, over the cases) less the time per case of the sweep on one "

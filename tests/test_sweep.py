@@ -580,27 +580,31 @@ def test_cluster_reruns_the_cases_of_a_worker_that_dies(cluster):
     cluster.wait_for_workers(2, timeout=60)  # the nanny starts a new one
 
 
-class _KillFirstTask(distributed.WorkerPlugin):
-    """A worker plugin: the worker running the sweep's first task dies (every time)."""
+KILL_FIRST_TASK = """
+import os
+
+import distributed
+
+
+class KillFirstTask(distributed.WorkerPlugin):
+    \"\"\"The worker running the sweep's first task dies (every time).\"\"\"
 
     name = "pinsettle-test-kill-first-task"
 
-    def setup(self, worker):
-        self.worker = worker
-
     def transition(self, key, start, finish, **kwargs):
-        if (
-            finish == "executing"
-            and str(key).startswith("pinsettle-sweep-")
-            and str(key).endswith("-0")
-        ):
+        key = str(key)
+        if finish == "executing" and key.startswith("pinsettle-sweep-") and key.endswith("-0"):
             os._exit(1)
+"""
 
 
-def test_cluster_marks_the_cases_dask_gives_up_on():
-    import cloudpickle
+def test_cluster_marks_the_cases_dask_gives_up_on(tmp_path, monkeypatch):
+    # The plugin in a module of its own, importable by the workers (they inherit PYTHONPATH).
+    (tmp_path / "sweep_kill_first_task.py").write_text(KILL_FIRST_TASK, encoding="utf-8")
+    monkeypatch.setenv("PYTHONPATH", f"{tmp_path}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    from sweep_kill_first_task import KillFirstTask
 
-    cloudpickle.register_pickle_by_value(sys.modules[__name__])
     # A LocalCluster (workers in processes of their own) whose scheduler gives up on a task the
     # first time a worker dies running it.
     spec = distributed.LocalCluster(
@@ -613,7 +617,7 @@ def test_cluster_marks_the_cases_dask_gives_up_on():
     )
     client = distributed.Client(spec, set_as_default=False)
     try:
-        client.register_plugin(_KillFirstTask())
+        client.register_plugin(KillFirstTask())
         df = pinsettle.sweep(
             bistable(), starts=("random", 12, 1), client=client, chunk_size=3, progress=False
         )
@@ -659,8 +663,8 @@ def test_cluster_left_without_workers_marks_the_cases_left(monkeypatch):
     assert list(df["case"]) == list(range(40))  # every case: solved, or marked
     marked = df[df["status"] == "error"]
     assert len(marked) > 0, marked["error"].unique()
-    reasons = "no worker left on the cluster|the cluster dropped this case"
-    assert marked["error"].str.fullmatch(reasons + r"( \(its task was cancelled there\))?").all()
+    reasons = r"no worker left on the cluster|the cluster dropped this case \(.*\)"
+    assert marked["error"].str.fullmatch(reasons).all(), marked["error"].unique()
     assert (df.drop(marked.index)["status"] == "converged").all()
 
 

@@ -14,6 +14,7 @@ reason. Each task's rows are taken once, from its one result.
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import importlib
 import pickle
@@ -23,6 +24,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Iterator, Sequence
+from concurrent.futures import CancelledError
 from contextlib import contextmanager
 from typing import Any
 
@@ -35,6 +37,8 @@ CLUSTER_EXTRA = "pip install 'pinsettle[cluster]'"
 NO_WORKER_TIMEOUT = 20.0
 #: How long to wait for a finished task's rows (longer: its worker left with them).
 GATHER_TIMEOUT = 2.0
+#: How many times a task the cluster cancels by itself (a worker died around it) is sent again.
+RESUBMITS = 3
 
 _ADDRESS = re.compile(r"^(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d+)$")
 
@@ -218,41 +222,51 @@ def run(
     # The scene as the result of a task, not scattered data: if every worker holding it dies,
     # the scheduler computes it again (scattered data would be lost, and the tasks with it).
     shared = client.submit(_scene, blob, pure=False, key=f"pinsettle-scene-{token}")
-    submitted = {
-        client.submit(
-            remote_run, shared, task, pure=False, key=f"pinsettle-sweep-{token}-{k}"
-        ): task
-        for k, task in enumerate(tasks)
-    }
-    pending = dict(submitted)
+    tries = [0] * len(tasks)
+
+    def submit(k: int) -> Any:
+        nonlocal shared
+        if shared.status == "cancelled":  # the scene itself was dropped: send it again
+            shared = client.submit(
+                _scene, blob, pure=False, key=f"pinsettle-scene-{token}-{tries[k]}-{k}"
+            )
+        key = f"pinsettle-sweep-{token}-{k}" + (f"-try{tries[k]}" if tries[k] else "")
+        return client.submit(remote_run, shared, tasks[k], pure=False, key=key)
+
+    pending = {submit(k): k for k in range(len(tasks))}
     no_worker_since: float | None = None
     checked = time.monotonic()
     try:
         while pending:
             if stop.count:
                 return
-            # Polled (no as_completed: that needs the client to be Dask's default one).
-            # 'lost' (its worker died with the result) is not an end: Dask runs it again.
-            ended = ("finished", "error", "cancelled")
-            for future in [f for f in pending if f.done() and f.status in ended]:
-                try:
-                    if future.status == "finished":
-                        rows = future.result(timeout=GATHER_TIMEOUT)
-                    else:
-                        error = (
-                            future.exception(timeout=GATHER_TIMEOUT)
-                            if future.status == "error"
-                            else None
-                        )
-                        reason = (
-                            _reason(error)
-                            if error is not None
-                            else "the cluster dropped this case (its task was cancelled there)"
-                        )
-                        rows = _failed(runner, pending[future], reason)
-                except TimeoutError:  # its worker left with the result: Dask runs it again
+            for future in list(pending):
+                # One reading of the status: it changes under us as the cluster reports.
+                # 'lost' (its worker died with the result) is not an end: Dask runs it again.
+                status = future.status
+                if status not in ("finished", "error", "cancelled") or not future.done():
                     continue
-                del pending[future]
+                k = pending.pop(future)
+                try:
+                    if status == "finished":
+                        rows = future.result(timeout=GATHER_TIMEOUT)
+                    elif status == "error":
+                        rows = _failed(
+                            runner, tasks[k], _reason(future.exception(timeout=GATHER_TIMEOUT))
+                        )
+                    else:
+                        raise CancelledError
+                except TimeoutError:  # its worker left with the result: Dask runs it again
+                    pending[future] = k
+                    continue
+                except (CancelledError, asyncio.CancelledError):
+                    # Dropped by the cluster (a worker died around it), not by us: again.
+                    if tries[k] < RESUBMITS:
+                        tries[k] += 1
+                        pending[submit(k)] = k
+                        continue
+                    reason = f"the cluster dropped this case ({tries[k] + 1} times, cancelled)"
+                    rows = _failed(runner, tasks[k], reason)
                 collect(rows)
             time.sleep(0.02)
             if time.monotonic() - checked < 1.0:
@@ -263,8 +277,8 @@ def run(
             elif no_worker_since is None:
                 no_worker_since = checked
             elif checked - no_worker_since > NO_WORKER_TIMEOUT:
-                for task in pending.values():
-                    collect(_failed(runner, task, "no worker left on the cluster"))
+                for k in pending.values():
+                    collect(_failed(runner, tasks[k], "no worker left on the cluster"))
                 pending.clear()
     finally:
         if pending:

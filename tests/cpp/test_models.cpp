@@ -111,8 +111,13 @@ BOOST_AUTO_TEST_CASE(supported_models_pass)
     model.addJoint(0, composite, pinocchio::SE3::Identity(), "composite");
   model.appendBodyToJoint(j, pinocchio::Inertia::Random());
   model.addJoint(j, pinocchio::JointModelPlanar(), pinocchio::SE3::Random(), "planar");
-  model.addJoint(2, pinocchio::JointModelUniversal(), pinocchio::SE3::Random(), "universal");
-  model.addJoint(3, pinocchio::JointModelHelicalUnaligned(), pinocchio::SE3::Random(), "helical");
+  // Axes given: the default constructors of these two leave them uninitialized.
+  model.addJoint(
+    2, pinocchio::JointModelUniversal(Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY()),
+    pinocchio::SE3::Random(), "universal");
+  model.addJoint(
+    3, pinocchio::JointModelHelicalUnaligned(Eigen::Vector3d(0., 0.6, 0.8), 0.05),
+    pinocchio::SE3::Random(), "helical");
   model.addJoint(4, pinocchio::JointModelEllipsoid(), pinocchio::SE3::Random(), "ellipsoid");
   BOOST_CHECK_NO_THROW(pinsettle::checkSupportedModel(model));
 }

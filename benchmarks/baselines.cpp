@@ -31,7 +31,8 @@
 // the explicit stability limit 2 / omega_max (pinsettle::computeTimeScale, no stiff-mode
 // scaling: the baselines have none). The viscous rule c damps the softest mode of that
 // linearisation critically (K phi = lambda M phi, phi M-normalised, the smallest |lambda| above
-// 1e-9 of the largest, omega = sqrt|lambda|): c = 2 omega (mass-proportional) or
+// 1e-6 omega_max^2, omega = sqrt|lambda|; none: omega = omega_max, as on a chain held
+// horizontal, whose motion only the pull of gravity sets): c = 2 omega (mass-proportional) or
 // 2 omega / |phi|^2 (joint dampers), times damping_factor; the viscous step is dt_safety times
 // the stability limit with that damping, 4 / (r + sqrt(r^2 + 4 omega_max^2)), r = c (mass) or
 // c max eig(M^-1) (joint dampers). FIRE's dt_max is dt_max times the limit, dt0 = dt_max / 10.
@@ -108,6 +109,8 @@ namespace
   constexpr long kStallResets = 1000;
   // Step halvings tried on a divergence or a stall.
   constexpr int kMaxHalvings = 6;
+  // The viscous rule damps the softest mode with lambda above this fraction of omega_max^2.
+  constexpr double kSoftestMode = 1e-6;
 
   // What a baseline takes from the start: its steps and damping (see the top of the file).
   void setUp(
@@ -135,7 +138,9 @@ namespace
     }
     Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> modes(Ks, M);
     const Eigen::VectorXd & lambda = modes.eigenvalues();
-    const double tol = 1e-9 * lambda.cwiseAbs().maxCoeff();
+    // Modes far softer than the time scale (a chain held horizontal has no stiffness at all:
+    // its motion is set by the pull of gravity) are not the ones to damp.
+    const double tol = kSoftestMode * omega * omega;
     Eigen::Index softest = -1;
     for (Eigen::Index k = 0; k < lambda.size(); ++k)
       if (
@@ -151,7 +156,9 @@ namespace
     }
     else
     {
-      const double phi2 = softest >= 0 ? modes.eigenvectors().col(softest).squaredNorm() : 1.;
+      // |phi|^2 of an M-normalised mode is about 1 / its mass; without a mode, the mean one.
+      const double phi2 = softest >= 0 ? modes.eigenvectors().col(softest).squaredNorm()
+                                       : static_cast<double>(model.nv) / M.trace();
       out.damping = spec.damping_factor * 2. * out.omega_rule / phi2;
       rate = out.damping
              / Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(M, Eigen::EigenvaluesOnly)

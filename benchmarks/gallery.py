@@ -8,7 +8,10 @@ conditions of a rest against stops recomputed from Pinocchio's generalized gravi
 pinsettle's.
 
 MuJoCo (``pip install ".[bench]"``, never needed to install or test pinsettle) loads the URDF with
-its visual and collision elements removed (no meshes, no contacts), honours the URDF's position
+its visual and collision elements removed (no meshes, no contacts) and its ``<mimic>`` tags too
+(MuJoCo would couple the joints by an equality; pinsettle's model of the robot, like
+``pinocchio.buildModelFromUrdf`` by default, moves them freely: the Panda's and Baxter's
+fingers, Talos' grippers), so that both settle the same mechanism; it honours the URDF's position
 limits as it does by default (a joint whose limits are equal has none, as in pinsettle), and
 steps it as its users let a robot settle: joint damping MUJOCO_DAMPING on every degree of freedom
 and a MUJOCO_TIMESTEP step, its default (Euler) integrator, from qpos = 0 (pinsettle's neutral).
@@ -29,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio
 import pinsettle
-from independent import CachedReference
+from independent import VERDICT_TOLERANCE, CachedReference
 from report_data import (
     GALLERY_MAX_TIME,
     MUJOCO_CHUNK,
@@ -113,7 +116,7 @@ def verdict(ref: CachedReference, q: np.ndarray, force: np.ndarray, contacts: di
         K[:, k] = (plus - minus) / (2 * h)
     K = K[free]
     w = np.linalg.eigvalsh(0.5 * (K + K.T))
-    tol = 1e-7 * max(float(np.max(np.abs(w))), 1e-300)
+    tol = VERDICT_TOLERANCE * max(float(np.max(np.abs(w))), 1e-300)
     if w[0] < -tol:
         return "unstable"
     return "neutral" if np.any(np.abs(w) <= tol) else "stable"
@@ -133,13 +136,17 @@ def distance(model: pinocchio.Model, qa: np.ndarray, qb: np.ndarray) -> float:
 
 
 def stripped_urdf(path: Path) -> str:
-    """The URDF without its visual and collision elements (no meshes, no contacts), compiled by
-    MuJoCo with its visuals discarded and fixed links kept as bodies."""
+    """The URDF without its visual and collision elements (no meshes, no contacts) and without
+    its <mimic> tags, compiled by MuJoCo with its visuals discarded and fixed links kept as
+    bodies."""
     root = ET.parse(path).getroot()
     for link in root.iter("link"):
         for tag in ("visual", "collision"):
             for element in link.findall(tag):
                 link.remove(element)
+    for joint in root.iter("joint"):  # see the top of the file
+        for element in joint.findall("mimic"):
+            joint.remove(element)
     for element in root.findall("mujoco"):
         root.remove(element)
     extension = ET.SubElement(root, "mujoco")

@@ -79,7 +79,7 @@ BASELINE_RULES = {
 #: The sweeps: step safety and c (as a multiple of the rule's) of the viscous baselines; FIRE's
 #: dt_max (a multiple of the stability limit) and the metric of its velocity mixing.
 VISCOUS_SAFETIES = (0.2, 0.5, 0.8, 0.9)
-DAMPING_FACTORS = (0.25, 1.0, 4.0)
+DAMPING_FACTORS = (0.0625, 0.25, 1.0, 4.0)
 FIRE_DT_MAXES = (0.5, 1.0, 1.5, 2.0)
 FIRE_METRICS = ("euclid", "mass")
 #: Budget of one sweep run (s); it stops at the residual LEVEL.

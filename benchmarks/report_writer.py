@@ -1831,8 +1831,9 @@ def overhead_section(results: D.Results) -> str:
         )
     s = pinsettle.Settings()
     return (
-        "`benchmarks/kd_profile.cpp`: the default solve (`polish = "
-        f"{s.polish}`) timed whole (`wall_time`) and in its parts, by wrapping the library's "
+        "`benchmarks/kd_profile.cpp`: the solve with the default settings but `polish = False` "
+        f"(the default is `polish = {s.polish}`) timed whole (`wall_time`) and in its parts, by "
+        "wrapping the library's "
         "`computeTimeScale` (step estimates), `assessStability` (rest checks and the final "
         "verdict) and `computeStiffnessMatrix` (the polish's Newton steps) at link time (`ld "
         "--wrap`: the solver's code is unchanged, each call timed, nested calls counted once): "

@@ -141,11 +141,11 @@ def section(data: dict[str, Any]) -> str:
         "",
         f"Measured by `python benchmarks/sweep_throughput.py --write` on this project's 2-core "
         f"machine ({today}; load average {data['load_before']:.1f} before, "
-        f"{data['load_after']:.1f} after"
+        f"{data['load_after']:.1f} after, this run's own two workers included"
         + (
             ": other work was running, so the ratios below are uncertain to tens of percent; "
             "run it again on an idle machine"
-            if max(data["load_before"], data["load_after"]) > 1.5
+            if data["load_before"] > 1.0
             else ""
         )
         + "). Random starts inside the "

@@ -409,12 +409,9 @@ namespace pinsettle
           f.setZero();
       forces_->computeForces(model_, data, q_, v_, tau_, fext_);
     }
-    if (loops_ != nullptr)
-      stepper_->dynamics(data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
-    else if (use_fext_)
-      pinocchio::aba(model_, data, q_, v_, tau_, fext_);
-    else
-      pinocchio::aba(model_, data, q_, v_, tau_);
+    // Joints held on their stops at the last step stay locked while they rest: one ABA.
+    locked_ = hold_ != nullptr ? hold_->lockedModel(q_, v_, &step_control_.timeScale()) : nullptr;
+    computeAcceleration(locked_ != nullptr ? *locked_ : model_);
     // Both measures every step, from the body velocities the dynamics just computed. With stiff
     // modes scaled, the exact signal includes their added inertia: it is the energy the scaled
     // system exchanges with its potential.
@@ -424,6 +421,41 @@ namespace pinsettle
     e.added = step_control_.addedEnergy(v_);
     e.signal = settings_->energy == EnergyMeasure::Exact ? e.exact + e.added : e.simplified;
     return e;
+  }
+
+  void Solver::computeAcceleration(const pinocchio::Model & model)
+  {
+    if (loops_ != nullptr)
+      stepper_->dynamics(data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
+    else if (use_fext_)
+      pinocchio::aba(model, data, q_, v_, tau_, fext_);
+    else
+      pinocchio::aba(model, data, q_, v_, tau_);
+  }
+
+  void Solver::correctAcceleration()
+  {
+    if (locked_ != nullptr)
+    {
+      // Stiff modes scaled at this step's peak would need the free model's dynamics.
+      if (step_control_.stiffModes() == 0)
+      {
+        if (hold_->acceptLocked(data, q_, v_))
+          return;
+        // Joints pulled off their stops leave them: once more with those free.
+        if (const pinocchio::Model * unlocked = hold_->unlockPulled(data, q_, v_))
+        {
+          computeAcceleration(*unlocked);
+          if (hold_->acceptLocked(data, q_, v_))
+            return;
+        }
+      }
+      computeAcceleration(model_); // from the free motion: hold() decides
+    }
+    // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
+    step_control_.correctAcceleration(data, q_);
+    if (stops_ != nullptr)
+      hold_->hold(data, q_, v_, &step_control_.timeScale());
   }
 
   void Solver::restartStretch()
@@ -521,10 +553,7 @@ namespace pinsettle
 
   bool Solver::integrate()
   {
-    // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
-    step_control_.correctAcceleration(data, q_);
-    if (stops_ != nullptr)
-      hold_->hold(data, q_, v_, &step_control_.timeScale());
+    correctAcceleration();
     const double h = step_control_.nextStep(v_);
     integrateSemiImplicitEuler(model_, q_, v_, data.ddq, h, dq_, q_next_);
     if (!q_next_.allFinite() || !v_.allFinite())

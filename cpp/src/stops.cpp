@@ -240,6 +240,34 @@ namespace pinsettle
   : stops_(stops)
   , loops_(loops)
   {
+    if (loops_ != nullptr)
+      return;
+    locked_ = stops_.model();
+    locked_side_.assign(stops_.stops().size(), 0.);
+    side_ = locked_side_;
+    lock_mass_ = locked_side_;
+  }
+
+  double StopHold::restingSide(const JointStops::Stop & s, const Eigen::VectorXd & q, double v)
+  {
+    if (q[s.iq] <= s.lower && v <= 0.)
+      return 1.;
+    if (q[s.iq] >= s.upper && v >= 0.)
+      return -1.;
+    return 0.;
+  }
+
+  void StopHold::findResting(const Eigen::VectorXd & q, const Eigen::VectorXd & v)
+  {
+    // Joints on a stop and not moving off it: +1 on a lower stop, -1 on an upper one, the
+    // direction in which its stop pushes.
+    resting_.clear();
+    for (const JointStops::Stop & s : stops_.stops())
+    {
+      const double side = restingSide(s, q, v[s.iv]);
+      if (side != 0.)
+        resting_.emplace_back(s.iv, side);
+    }
   }
 
   bool StopHold::hold(
@@ -248,29 +276,15 @@ namespace pinsettle
     const Eigen::VectorXd & v,
     const TimeScale * added)
   {
-    // Joints resting on a stop (on it, not moving off it): +1 on a lower stop, -1 on an upper
-    // one, the direction in which its stop pushes.
-    resting_.clear();
+    findResting(q, v);
     bool into = false;
-    for (const JointStops::Stop & s : stops_.stops())
-    {
-      const double a = data.ddq[s.iv];
-      if (q[s.iq] <= s.lower && v[s.iv] <= 0.)
-      {
-        resting_.emplace_back(s.iv, 1.);
-        into = into || a < 0.;
-      }
-      else if (q[s.iq] >= s.upper && v[s.iv] >= 0.)
-      {
-        resting_.emplace_back(s.iv, -1.);
-        into = into || a > 0.;
-      }
-    }
+    for (const std::pair<int, double> & r : resting_)
+      into = into || r.second * data.ddq[r.first] < 0.;
     if (!into)
       return false;
 
     const pinocchio::Model & model = stops_.model();
-    const Eigen::VectorXd free_acceleration = data.ddq;
+    free_acceleration_ = data.ddq;
     if (loops_ != nullptr)
       motions_ = computeLoopMotion(model, data, *loops_, q).basis;
     pinocchio::crba(model, data, q);
@@ -278,53 +292,130 @@ namespace pinsettle
     if (added != nullptr && added->stiff_masses.size() > 0)
       mass_.noalias() +=
         added->stiff_momenta.transpose() * added->stiff_masses.asDiagonal() * added->stiff_momenta;
-    force_.noalias() = mass_ * free_acceleration;
+    force_.noalias() = mass_ * free_acceleration_;
+    for (std::size_t k = 0; k < lock_mass_.size(); ++k)
+      lock_mass_[k] = mass_(stops_.stops()[k].iv, stops_.stops()[k].iv);
 
     // Active set: hold the resting joints accelerated into their stop; then release a held
     // joint whose stop would have to pull, and hold a resting one now accelerated into its
     // stop, until neither happens (a bounded number of passes: the last one keeps its answer).
-    std::vector<bool> held(resting_.size(), false);
+    held_.assign(resting_.size(), false);
     for (std::size_t k = 0; k < resting_.size(); ++k)
-      held[k] = resting_[k].second * free_acceleration[resting_[k].first] < 0.;
-    Eigen::VectorXd a = free_acceleration;
+      held_[k] = resting_[k].second * free_acceleration_[resting_[k].first] < 0.;
+    held_acceleration_ = free_acceleration_;
     const std::size_t passes = 2 * resting_.size() + 2;
     for (std::size_t pass = 0; pass < passes; ++pass)
     {
       if (loops_ != nullptr)
-        solveHeldOnLoops(held, free_acceleration, a);
+        solveHeldOnLoops(held_, free_acceleration_, held_acceleration_);
       else
-        solveHeld(held, a);
+        solveHeld(held_, held_acceleration_);
       bool changed = false;
       for (std::size_t k = 0; k < resting_.size(); ++k)
       {
         const int i = resting_[k].first;
         const double side = resting_[k].second;
         // The stop may only push (side * force >= 0).
-        const bool release = held[k] && side * reactions_[static_cast<Eigen::Index>(k)] < 0.;
-        const bool hold = !held[k] && side * a[i] < 0.;
+        const bool release = held_[k] && side * reactions_[static_cast<Eigen::Index>(k)] < 0.;
+        const bool hold = !held_[k] && side * held_acceleration_[i] < 0.;
         if (release || hold)
         {
-          held[k] = hold;
+          held_[k] = hold;
           changed = true;
         }
       }
       if (!changed)
         break;
     }
-    data.ddq = a;
-    return std::find(held.begin(), held.end(), true) != held.end();
+    data.ddq = held_acceleration_;
+    return std::find(held_.begin(), held_.end(), true) != held_.end();
+  }
+
+  void StopHold::lock()
+  {
+    locked_.armature = stops_.model().armature;
+    for (std::size_t k = 0; k < side_.size(); ++k)
+      if (side_[k] != 0.)
+        locked_.armature[stops_.stops()[k].iv] += kLockArmature * lock_mass_[k];
+    locked_side_ = side_;
+  }
+
+  const pinocchio::Model * StopHold::lockedModel(
+    const Eigen::VectorXd & q, const Eigen::VectorXd & v, const TimeScale * added)
+  {
+    if (loops_ != nullptr || (added != nullptr && added->stiff_masses.size() > 0))
+      return nullptr;
+    // Every joint resting on a stop and still (a held joint keeps v = 0; a joint that hits a
+    // stop has its velocity into it removed).
+    bool any = false;
+    for (std::size_t k = 0; k < side_.size(); ++k)
+    {
+      const JointStops::Stop & s = stops_.stops()[k];
+      side_[k] = v[s.iv] == 0. ? restingSide(s, q, 0.) : 0.;
+      if (side_[k] != 0. && lock_mass_[k] <= 0.)
+        return nullptr;
+      any = any || side_[k] != 0.;
+    }
+    if (!any)
+      return nullptr;
+    if (side_ != locked_side_)
+      lock();
+    return &locked_;
+  }
+
+  bool StopHold::acceptLocked(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v)
+  {
+    for (std::size_t k = 0; k < locked_side_.size(); ++k)
+    {
+      const JointStops::Stop & s = stops_.stops()[k];
+      const double a = data.ddq[s.iv];
+      // A locked joint still accelerates a little, into its stop while the stop pushes (its
+      // armature takes the stop's force); a resting joint not locked must not move into its stop.
+      const double side = locked_side_[k] != 0. ? -locked_side_[k] : restingSide(s, q, v[s.iv]);
+      if (side * a < 0.)
+        return false;
+    }
+    for (std::size_t k = 0; k < locked_side_.size(); ++k)
+      if (locked_side_[k] != 0.)
+        data.ddq[stops_.stops()[k].iv] = 0.;
+    return true;
+  }
+
+  const pinocchio::Model * StopHold::unlockPulled(
+    const pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v)
+  {
+    bool pulled = false, any = false;
+    for (std::size_t k = 0; k < locked_side_.size(); ++k)
+    {
+      const JointStops::Stop & s = stops_.stops()[k];
+      const double a = data.ddq[s.iv];
+      side_[k] = locked_side_[k];
+      if (locked_side_[k] != 0. && locked_side_[k] * a > 0.)
+      {
+        side_[k] = 0.;
+        pulled = true;
+      }
+      else if (locked_side_[k] == 0. && restingSide(s, q, v[s.iv]) * a < 0.)
+        return nullptr;
+      any = any || side_[k] != 0.;
+    }
+    if (!pulled || !any)
+      return nullptr;
+    lock();
+    return &locked_;
   }
 
   void StopHold::solveHeld(const std::vector<bool> & held, Eigen::VectorXd & a)
   {
     const Eigen::Index nv = force_.size();
-    std::vector<bool> fixed(static_cast<std::size_t>(nv), false);
+    fixed_.assign(static_cast<std::size_t>(nv), false);
     for (std::size_t k = 0; k < resting_.size(); ++k)
       if (held[k])
-        fixed[static_cast<std::size_t>(resting_[k].first)] = true;
+        fixed_[static_cast<std::size_t>(resting_[k].first)] = true;
     free_.clear();
     for (Eigen::Index i = 0; i < nv; ++i)
-      if (!fixed[static_cast<std::size_t>(i)])
+      if (!fixed_[static_cast<std::size_t>(i)])
         free_.push_back(static_cast<int>(i));
     const Eigen::Index n = static_cast<Eigen::Index>(free_.size());
     mass_ff_.resize(n, n);

@@ -180,6 +180,11 @@ namespace pinsettle
     void closeLoopsOnStops();
     void reestimateStep();
     StepEnergies evaluateDynamics();
+    // pinocchio::aba (or the loops' dynamics) at the current state, on model or a copy of it.
+    void computeAcceleration(const pinocchio::Model & model);
+    // The acceleration the step integrates: with the scaled stiff modes' inertia and the joints
+    // resting on their stops held (StopHold).
+    void correctAcceleration();
     void restartStretch();
     bool rollBack(Result & result);
     bool isRunaway(const StepEnergies & e, Result & result);
@@ -208,6 +213,7 @@ namespace pinsettle
     std::unique_ptr<LoopStepper> stepper_;
     const JointStops * stops_;
     std::unique_ptr<StopHold> hold_;
+    const pinocchio::Model * locked_ = nullptr; // the model this step's dynamics ran on, if locked
     std::unique_ptr<pinocchio::Data> progress_data_; // made on the first progress report
     std::vector<pinocchio::JointIndex> hits_;        // joints that hit a stop in a step
     std::vector<Eigen::Index> on_stops_;             // indices in v of joints on a stop

@@ -227,7 +227,48 @@ namespace pinsettle
       const Eigen::VectorXd & v,
       const TimeScale * added);
 
+    ///
+    /// \brief The model to run the next step's dynamics on while joints rest on their stops:
+    /// the mechanism with every resting joint locked, or nullptr.
+    ///
+    /// A locked joint has an armature of kLockArmature times its diagonal mass (as last
+    /// computed by hold()), so that pinocchio::aba passes its subtree's inertia on to its
+    /// parent all but unprojected, as if the joint were welded, and its acceleration is about
+    /// 1e-12 of the free one's scale: one ABA gives the held motion that hold() finds with the
+    /// free ABA, a mass matrix and an active set, whenever every resting joint is held.
+    /// nullptr when no joint rests (on a stop with v = 0), one has no diagonal mass yet, loops
+    /// close the mechanism or stiff modes are scaled (their correction assumes the free model).
+    ///
+    const pinocchio::Model * lockedModel(
+      const Eigen::VectorXd & q, const Eigen::VectorXd & v, const TimeScale * added);
+
+    ///
+    /// \brief After the dynamics of lockedModel(): whether every locked joint is pressed into
+    /// its stop and no other resting joint is accelerated into its own; if so, the locked
+    /// joints' accelerations are set to zero in data.ddq.
+    ///
+    bool acceptLocked(pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v);
+
+    ///
+    /// \brief After acceptLocked() said no: the model with the locked joints that are pulled off
+    /// their stop unlocked, to run the dynamics on once more, or nullptr when that cannot be the
+    /// answer (a resting joint not locked is accelerated into its stop, or none was pulled
+    /// off): then the free dynamics and hold() decide.
+    ///
+    const pinocchio::Model * unlockPulled(
+      const pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v);
+
+    /// Armature of a locked joint over its diagonal mass.
+    static constexpr double kLockArmature = 1e12;
+
   private:
+    // Joints resting on a stop at (q, v): (index in v, +1 lower stop / -1 upper stop).
+    void findResting(const Eigen::VectorXd & q, const Eigen::VectorXd & v);
+    // Lock the joints of stops whose side_ is not 0 in locked_ (from the model's armature).
+    void lock();
+    // Whether the joint of stop k rests on it (+1 lower, -1 upper, 0 not), moving or not.
+    static double restingSide(const JointStops::Stop & s, const Eigen::VectorXd & q, double v);
+
     // The acceleration with the held joints' at zero, M_ff a_f = f_f, and the stops' forces
     // (reactions_, one per resting joint, 0 for those not held).
     void solveHeld(const std::vector<bool> & held, Eigen::VectorXd & a);
@@ -243,8 +284,14 @@ namespace pinsettle
     std::vector<std::pair<int, double>> resting_;
     std::vector<int> free_;
     Eigen::MatrixXd mass_, mass_ff_;
-    Eigen::VectorXd force_, force_f_;
+    Eigen::VectorXd force_, force_f_, free_acceleration_, held_acceleration_;
     Eigen::LLT<Eigen::MatrixXd> llt_;
+    std::vector<bool> held_, fixed_;
+    // The model with resting joints locked; per stop, the side its joint is locked on (0: not
+    // locked), the side wanted for the next lock and its diagonal mass when last computed (0:
+    // not yet).
+    pinocchio::Model locked_;
+    std::vector<double> locked_side_, side_, lock_mass_;
   };
 
 } // namespace pinsettle

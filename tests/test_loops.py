@@ -158,10 +158,13 @@ def test_loop_reduced_stiffness_is_the_potentials_curvature(solved) -> None:
         q = pinocchio.integrate(scene.model, r.q, s * n)
         return potential(ref, scene.assemble(q)[0])
 
-    h = 1e-4
+    # h = 1e-3: the assembled path carries the assembly's round-off (about 1e-12 J of potential),
+    # which a second difference divides by h^2 (at 1e-4 that is already 1e-4 relative on the
+    # four-bar); the truncation error at 1e-3 is 1e-6 relative.
+    h = 1e-3
     curvature = (along(h) - 2 * along(0.0) + along(-h)) / h**2
     assert curvature > 0
-    assert report.stiffness_matrix[0, 0] == pytest.approx(curvature, rel=1e-4)
+    assert report.stiffness_matrix[0, 0] == pytest.approx(curvature, rel=1e-5)
 
 
 @functools.cache

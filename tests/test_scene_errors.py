@@ -470,7 +470,7 @@ CLI_RUNS: dict[str, list[str]] = {
     "torque-disk-text": ["solve", "torque_disk"],
     "max-steps-flag": ["solve", "pendulum", "--json", "--max-steps", "10"],
     "flags-override-solver": ["solve", "torque_disk", "--json", "--max-steps", "100"],
-    "kt-flag": ["solve", "slider_spring", "--json", "--kt", "0", "--energy", "simplified"],
+    "kt-flag": ["solve", "slider_spring", "--json", "--kt", "0.5", "--energy", "simplified"],
     "start-flag": ["solve", "bistable_pendulum", "--json", "--start", "hinge=-0.2"],
     "start-flag-locked": [
         "solve",
@@ -714,7 +714,7 @@ def test_cli_flags_override_the_scene(cli):
     assert out["status"] == "max_steps" and out["steps"] == 100
     out = json_of(cli["run-kt-flag"])
     scene = pinsettle.load_scene(ROBOTS / "slider_spring.toml")
-    result = pinsettle.solve(scene, kt=0.0, energy="simplified")
+    result = pinsettle.solve(scene, kt=0.5, energy="simplified")
     assert out["steps"] == result.steps != pinsettle.solve(scene).steps
     assert out["q"] == result.q.tolist()
 

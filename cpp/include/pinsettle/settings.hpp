@@ -43,8 +43,9 @@ namespace pinsettle
     /// effective mass, so that the step follows the slow modes (computeTimeScale). The
     /// equilibria are unchanged; only the stiff modes' motion is slowed.
     bool scale_stiff_modes = true;
-    /// Velocity scale applied at each detected energy peak, in [0, 1).
-    double kt = 0.5;
+    /// Velocity scale applied at each detected energy peak, in [0, 1). 0 (the default, the
+    /// fewest steps measured: docs/benchmarks.md) stops the mechanism dead at each peak.
+    double kt = 0.;
     /// Relative peak threshold: the middle of three samples is a peak when it exceeds both
     /// neighbours by more than err times its own value (dimensionless, >= 0). Relative so that
     /// peaks keep being detected when the energy has fallen by many orders of magnitude.
@@ -71,8 +72,10 @@ namespace pinsettle
     /// per recorded sample.
     bool trace_configurations = false;
     /// After convergence, Newton steps on the static force with the stiffness matrix bring the
-    /// residual to round-off; kept only if the rest stays stable (or neutral) and close.
-    bool polish = false;
+    /// residual to round-off; kept only if the rest stays stable (or neutral) and close. On by
+    /// default: a few Newton steps take the default run's residual to 1e-10 of the force scale
+    /// or below (docs/benchmarks.md).
+    bool polish = true;
     /// The wall clock and the abort callback are checked every check_every steps (>= 1).
     std::int64_t check_every = 256;
   };

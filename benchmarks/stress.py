@@ -477,10 +477,24 @@ def main() -> int:
 
         print("measuring the safety factor of the automatic step ...", file=sys.stderr)
         dt_rows = dt_safety.measure(dt_safety.FACTORS, 2_000_000)
-    text = report(outcomes, passed, dt_rows)
+    text = report(outcomes, passed, dt_rows) + kept_sections(Path(args.output))
     Path(args.output).write_text(text, encoding="utf-8")
     print(f"{passed}/{len(outcomes)} passed; wrote {args.output}", file=sys.stderr)
     return 0 if passed == len(outcomes) else 1
+
+
+# Sections of the output written by hand, after the generated ones: kept as they are.
+KEPT_SECTIONS = "\n## Reliability\n"
+
+
+def kept_sections(path: Path) -> str:
+    """The hand-written end of an existing output (from its Reliability section on), or ''."""
+    try:
+        old = path.read_text(encoding="utf-8")
+    except OSError:
+        return ""
+    at = old.find(KEPT_SECTIONS)
+    return "" if at < 0 else old[at:]
 
 
 def report(outcomes: list[Outcome], passed: int, dt_rows) -> str:

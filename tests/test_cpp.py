@@ -61,7 +61,16 @@ def cpp_build(tmp_path_factory) -> Path:
 
 
 @pytest.mark.parametrize(
-    "suite", ["test_core", "test_elements", "test_loops", "test_parts", "test_stops", "test_models"]
+    "suite",
+    [
+        "test_core",
+        "test_elements",
+        "test_loops",
+        "test_parts",
+        "test_stops",
+        "test_models",
+        "test_mimic",
+    ],
 )
 def test_cpp_boost_tests(cpp_build: Path, suite: str) -> None:
     proc = _run([str(cpp_build / suite), "--report_level=short"])

@@ -3,9 +3,11 @@
 A two-link arm whose second joint has a URDF ``<mimic>`` tag (as in most parallel grippers),
 loaded with ``pinocchio.buildModelFromUrdf(path, mimic=True)``, holds a ``JointModelMimic``:
 ``pinocchio::aba`` does not support it and only asserts so (a segmentation fault in a release
-build). Every entry point that takes a model must refuse it with a ValueError that names the
-joint. Each call runs in a subprocess of its own, so that a crash is a failing test here rather
-than the end of pytest.
+build). ``solve``, ``assess_stability``, ``static_force`` and ``Scene`` answer for the coupled
+mechanism (tests/test_mimic.py checks the answers against an independent reference); every
+other entry point that takes a model must refuse it with a ValueError that names the joint.
+Each call runs in a subprocess of its own, so that a crash is a failing test here rather than
+the end of pytest.
 """
 
 from __future__ import annotations
@@ -52,13 +54,23 @@ MIMIC_URDF = """<?xml version="1.0"?>
 </robot>
 """
 
-# Each call on the mimic model; `model` and `q` are defined in the child before it runs.
-CALLS = {
-    "solve": "pinsettle.solve(model, q, max_steps=100)",
-    "assess_stability": "pinsettle.assess_stability(model, q)",
-    "static_force": "pinsettle.static_force(model, q)",
-    "scene_solve": "pinsettle.solve(pinsettle.Scene(model), max_steps=100)",
+# Each call on the mimic model; `model` and `q` are defined in the child before it runs. Those
+# that answer for the coupled arm, with what the child checks of their answer (Pinocchio's own
+# rnea on the mimic model: the chain rule), and those that refuse it.
+ANSWERED = {
+    "solve": "r = pinsettle.solve(model, q); assert r.converged and r.q.shape == (1,); "
+    "assert abs(pinocchio.computeGeneralizedGravity(model, model.createData(), r.q)[0]) < 1e-8",
+    "assess_stability": "assert pinsettle.assess_stability(model, q).verdict in "
+    "('stable', 'neutral', 'unstable')",
+    "static_force": "assert np.allclose(pinsettle.static_force(model, q), "
+    "pinocchio.computeGeneralizedGravity(model, model.createData(), q), atol=1e-12)",
+    "scene_solve": "r = pinsettle.solve(pinsettle.Scene(model)); "
+    "assert r.converged and abs(r.q[1] + r.q[0]) < 1e-12",
 }
+REFUSED = {
+    "kinetic_energies": "pinsettle.kinetic_energies(model, q, np.zeros(1))",
+}
+CALLS = {**ANSWERED, **REFUSED}
 
 CHILD = """
 import json, sys
@@ -87,7 +99,7 @@ def mimic_urdf(tmp_path_factory) -> Path:
 
 
 @pytest.mark.parametrize("call", sorted(CALLS))
-def test_mimic_joint_is_refused_not_a_crash(mimic_urdf: Path, call: str) -> None:
+def test_mimic_joint_is_answered_or_refused_not_a_crash(mimic_urdf: Path, call: str) -> None:
     code = textwrap.dedent(CHILD).format(call=CALLS[call])
     proc = subprocess.run(
         [sys.executable, "-c", code, str(mimic_urdf)],
@@ -100,6 +112,9 @@ def test_mimic_joint_is_refused_not_a_crash(mimic_urdf: Path, call: str) -> None
         f"(a negative code is a signal: {-proc.returncode} = SIGSEGV when 11)\n{proc.stderr}"
     )
     outcome = json.loads(proc.stdout.strip().splitlines()[-1])
+    if call in ANSWERED:
+        assert outcome["raised"] is None, outcome
+        return
     assert outcome["raised"] is not None and outcome["raised"][1], outcome  # a ValueError
     message = outcome["message"]
     assert "'follower'" in message  # the joint, by name

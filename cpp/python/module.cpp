@@ -88,7 +88,8 @@ namespace
   }
 
   // Loop closures resolved to frame indices by the Python layer: a list of tuples
-  // (frame_a, point_a, frame_b, point_b, kind, name); None or empty for a tree.
+  // (frame_a, point_a, frame_b, point_b, kind, name), and joint couplings (mimic joints)
+  // ("coupling", follower, leader, multiplier, offset, name); None or empty for a tree.
   std::unique_ptr<LoopConstraints> loopsFrom(
     const pinocchio::Model & model, const py::object & spec)
   {
@@ -97,6 +98,14 @@ namespace
     auto loops = std::make_unique<LoopConstraints>(model);
     for (const py::handle & e : spec.cast<py::list>())
     {
+      if (py::isinstance<py::str>(e.cast<py::tuple>()[0]))
+      {
+        const auto c =
+          e.cast<std::tuple<std::string, std::size_t, std::size_t, double, double, std::string>>();
+        loops->addCoupling(
+          std::get<1>(c), std::get<2>(c), std::get<3>(c), std::get<4>(c), std::get<5>(c));
+        continue;
+      }
       const auto t = e.cast<std::tuple<
         std::size_t, Eigen::Vector3d, std::size_t, Eigen::Vector3d, std::string, std::string>>();
       const std::string & kind = std::get<4>(t);
@@ -415,16 +424,35 @@ PYBIND11_MODULE(_core, m)
     py::arg("model"), py::arg("q"), py::arg("v"));
 
   m.def(
+    "release_mimic",
+    [](const py::object & model_obj) {
+      bp::extract<pinocchio::Model &> model(model_obj.ptr());
+      if (!model.check())
+        throw py::type_error("model must be a pinocchio.Model");
+      std::vector<MimicJoint> mimics;
+      pinocchio::Model released = releaseMimicJoints(model(), mimics);
+      checkSupportedModel(released);
+      py::list couplings;
+      for (const MimicJoint & m : mimics)
+        couplings.append(py::make_tuple(m.follower, m.leader, m.multiplier, m.offset));
+      // A pinocchio.Model of Pinocchio's own bindings (Boost.Python owns the copy).
+      const bp::object out(released);
+      return py::make_tuple(py::reinterpret_borrow<py::object>(out.ptr()), couplings);
+    },
+    py::arg("model"),
+    "The model with its mimic joints made ordinary joints, and the couplings [(follower, leader, "
+    "multiplier, offset)] that hold them (joint indices, the same in both models).");
+
+  m.def(
     "stiffness",
     [](
       const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
       const py::object & loops, const py::object & stops) {
       Evaluation at = evaluationAt(model_obj, q, spec, loops, stops);
-      if (at.loops && at.stops && !at.stops->empty())
-        throw std::invalid_argument(
-          "joint stops on a mechanism with loops are not supported yet: assess it without stops");
+      const bool both = at.loops && at.stops && !at.stops->empty();
       const StabilityReport report =
-        at.loops   ? assessStability(at.model, at.data, *at.loops, q, at.elements.get())
+        both       ? assessStability(at.model, at.data, *at.loops, *at.stops, q, at.elements.get())
+        : at.loops ? assessStability(at.model, at.data, *at.loops, q, at.elements.get())
         : at.stops ? assessStability(at.model, at.data, *at.stops, q, at.elements.get())
                    : assessStability(at.model, at.data, q, at.elements.get());
       py::dict out;
@@ -436,7 +464,15 @@ PYBIND11_MODULE(_core, m)
       out["eigenvalues"] = report.eigenvalues;
       out["softest_direction"] = report.softest_direction;
       out["basis"] = report.basis;
-      if (at.stops)
+      if (both)
+      {
+        const StopBalance balance = balanceStops(
+          at.model, at.data, *at.loops, *at.stops, q,
+          computeStaticForce(at.model, at.data, *at.loops, q, at.elements.get()));
+        out["stop_contacts"] = stopContactsToList(at.model, balance.contacts);
+        out["stop_residual"] = balance.residual;
+      }
+      else if (at.stops)
       {
         const Eigen::VectorXd tau = computeStaticForce(at.model, at.data, q, at.elements.get());
         out["stop_contacts"] = stopContactsToList(at.model, computeStopContacts(*at.stops, q, tau));

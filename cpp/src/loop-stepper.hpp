@@ -22,6 +22,7 @@ namespace pinsettle
   class LoopStepper
   {
   public:
+    /// \throws std::invalid_argument for joint couplings together with loops (not supported).
     LoopStepper(const pinocchio::Model & model, const LoopConstraints & loops);
     ~LoopStepper();
 
@@ -30,8 +31,10 @@ namespace pinsettle
     void init(pinocchio::Data & data, const Eigen::VectorXd & q);
 
     ///
-    /// \brief Constrained forward dynamics (pinocchio::constraintDynamics): data.ddq holds the
-    /// acceleration; data.v the body velocities (local frames) for the energy measures.
+    /// \brief Constrained forward dynamics (pinocchio::constraintDynamics; with joint couplings
+    /// only, a = N (N^T M N)^-1 N^T (tau - b) from crba and rnea, N the motions they allow):
+    /// data.ddq holds the acceleration; data.v the body velocities (local frames) for the
+    /// energy measures.
     ///
     /// \param[in] tau Applied joint efforts (dim model.nv).
     /// \param[in] fext Spatial forces per joint (local frames), or nullptr.

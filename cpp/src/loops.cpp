@@ -75,6 +75,44 @@ namespace pinsettle
     rows_ += loops_.back().rows();
   }
 
+  void LoopConstraints::addCoupling(
+    pinocchio::JointIndex follower,
+    pinocchio::JointIndex leader,
+    double multiplier,
+    double offset,
+    const std::string & name)
+  {
+    const std::string what =
+      name.empty() ? "coupling #" + std::to_string(couplings_.size() + 1) : name;
+    for (const pinocchio::JointIndex joint : {follower, leader})
+    {
+      if (joint == 0 || joint >= static_cast<pinocchio::JointIndex>(model_.njoints))
+      {
+        std::ostringstream msg;
+        msg << what << ": joint index " << joint << " is out of range (1 to " << model_.njoints - 1
+            << ")";
+        throw std::invalid_argument(msg.str());
+      }
+      if (model_.nqs[joint] != 1 || model_.nvs[joint] != 1)
+        throw std::invalid_argument(
+          what + ": joint '" + model_.names[joint] + "' (" + model_.joints[joint].shortname()
+          + ") has " + std::to_string(model_.nqs[joint]) + " configuration entries and "
+          + std::to_string(model_.nvs[joint])
+          + " velocities; a coupling takes 1-DoF joints with one of each (revolute, prismatic, "
+            "helical)");
+    }
+    if (follower == leader)
+      throw std::invalid_argument(
+        what + ": joint '" + model_.names[follower] + "' cannot follow itself");
+    if (!std::isfinite(multiplier) || !std::isfinite(offset))
+      throw std::invalid_argument(what + ": the multiplier and the offset must be finite");
+    couplings_.push_back(
+      JointCoupling{
+        what, follower, leader, model_.idx_qs[follower], model_.idx_vs[follower],
+        model_.idx_qs[leader], model_.idx_vs[leader], multiplier, offset});
+    rows_ += 1;
+  }
+
   namespace
   {
     // World placement of a loop end from the kinematics in data.oMi.
@@ -96,9 +134,10 @@ namespace pinsettle
       pinocchio::Data::Matrix6x & work_a,
       pinocchio::Data::Matrix6x & work_b)
     {
-      if (J != nullptr)
+      const bool kinematics = !loops.loops().empty(); // couplings need none
+      if (kinematics && J != nullptr)
         pinocchio::computeJointJacobians(model, data, q);
-      else
+      else if (kinematics)
         pinocchio::forwardKinematics(model, data, q);
       Eigen::Index row = 0;
       for (const Loop & loop : loops.loops())
@@ -128,6 +167,18 @@ namespace pinsettle
             J->middleRows<3>(row + 3) = work_a.bottomRows<3>() - work_b.bottomRows<3>();
         }
         row += loop.rows();
+      }
+      // Couplings: linear in q, a constant Jacobian row.
+      for (const JointCoupling & c : loops.couplings())
+      {
+        error[row] = q[c.iq_follower] - c.multiplier * q[c.iq_leader] - c.offset;
+        if (J != nullptr)
+        {
+          J->row(row).setZero();
+          (*J)(row, c.iv_follower) = 1.;
+          (*J)(row, c.iv_leader) -= c.multiplier;
+        }
+        ++row;
       }
     }
 
@@ -309,9 +360,30 @@ namespace pinsettle
         }
         row += rows;
       }
-      const Loop & loop = loops.loops()[worst];
       std::ostringstream msg;
       msg.precision(4);
+      const JointCoupling * coupling = nullptr;
+      for (const JointCoupling & c : loops.couplings())
+      {
+        if (std::abs(error[row]) > worst_size)
+        {
+          coupling = &c;
+          worst_size = std::abs(error[row]);
+          worst_start = std::abs(error_start[row]);
+        }
+        ++row;
+      }
+      if (coupling != nullptr)
+      {
+        msg << "cannot assemble the couplings from the start configuration: " << coupling->name
+            << " (q['" << model.names[coupling->follower] << "'] = " << coupling->multiplier
+            << " * q['" << model.names[coupling->leader] << "'] + " << coupling->offset
+            << ") is still off by " << worst_size << " (rad or m) after Gauss-Newton from "
+            << worst_start;
+        q = start;
+        throw std::invalid_argument(msg.str());
+      }
+      const Loop & loop = loops.loops()[worst];
       msg << "cannot assemble the loops from the start configuration: " << loop.name << " ("
           << toString(loop.kind) << ", joint '" << model.names[loop.joint_a] << "' to joint '"
           << model.names[loop.joint_b] << "') is still " << worst_size
@@ -592,6 +664,33 @@ namespace pinsettle
     , work_a(6, model.nv)
     , work_b(6, model.nv)
     {
+      if (!loops.couplings().empty())
+      {
+        // constraintDynamics takes frame constraints only; a coupling of joints is none.
+        if (!loops.loops().empty())
+          throw std::invalid_argument(
+            "joint couplings (mimic joints) together with loop closures are not supported yet: "
+            ""
+            + loops.couplings().front().name + " and " + loops.loops().front().name);
+        // The couplings' Jacobian is constant: the motions they allow, an orthonormal basis N,
+        // are found once, and the dynamics are those of the reduced coordinates s (v = N s).
+        Eigen::MatrixXd Jc = Eigen::MatrixXd::Zero(loops.rows(), model.nv);
+        Eigen::Index row = 0;
+        for (const JointCoupling & c : loops.couplings())
+        {
+          Jc(row, c.iv_follower) = 1.;
+          Jc(row, c.iv_leader) -= c.multiplier;
+          ++row;
+        }
+        Eigen::JacobiSVD<Eigen::MatrixXd> jsvd(Jc, Eigen::ComputeFullV);
+        N = jsvd.matrixV().rightCols(model.nv - svdRank(jsvd));
+        reduced_mass.resize(N.cols(), N.cols());
+        reduced_force.resize(N.cols());
+        MN.resize(model.nv, N.cols());
+        // Sized by a factorization (assigning LLT(n) copies an unset info()).
+        mass_llt.compute(Eigen::MatrixXd::Identity(N.cols(), N.cols()));
+        return;
+      }
       for (const Loop & loop : loops.loops())
       {
         // LOCAL_WORLD_ALIGNED: the same axes as the errors and Jacobians above.
@@ -615,6 +714,10 @@ namespace pinsettle
     Eigen::JacobiSVD<Eigen::MatrixXd> svd;
     Eigen::VectorXd dq, q_next, tau, zero, velocity;
     pinocchio::Data::Matrix6x work_a, work_b;
+    // Couplings only: the allowed motions N and the reduced dynamics' workspace.
+    Eigen::MatrixXd N, MN, reduced_mass;
+    Eigen::VectorXd reduced_force;
+    Eigen::LLT<Eigen::MatrixXd> mass_llt;
   };
 
   LoopStepper::LoopStepper(const pinocchio::Model & model, const LoopConstraints & loops)
@@ -627,6 +730,8 @@ namespace pinsettle
   void LoopStepper::init(pinocchio::Data & data, const Eigen::VectorXd & q)
   {
     Impl & d = *impl_;
+    if (d.constraint_models.empty()) // couplings only: no constraint data to set up
+      return;
     pinocchio::initConstraintDynamics(d.model, data, d.constraint_models, d.constraint_datas);
     // Redundant equations make the Delassus matrix J M^-1 J^T singular; the proximal iterations
     // of constraintDynamics handle that with a regularisation mu, here 1e-12 of the matrix's
@@ -648,6 +753,23 @@ namespace pinsettle
     Impl & d = *impl_;
     const pinocchio::Model & model = d.model;
     d.tau = tau;
+    if (d.constraint_models.empty())
+    {
+      // Couplings only (a constant Jacobian, no drift): M a = tau - b + J^T lambda with J a = 0
+      // is a = N (N^T M N)^-1 N^T (tau - b). rnea leaves the body velocities in data.v.
+      pinocchio::crba(model, data, q);
+      if (fext != nullptr)
+        d.tau -= pinocchio::rnea(model, data, q, v, d.zero, *fext);
+      else
+        d.tau -= pinocchio::rnea(model, data, q, v, d.zero);
+      d.MN.noalias() = data.M.selfadjointView<Eigen::Upper>() * d.N;
+      d.reduced_mass.noalias() = d.N.transpose() * d.MN;
+      d.reduced_force.noalias() = d.N.transpose() * d.tau;
+      d.mass_llt.compute(d.reduced_mass);
+      d.mass_llt.solveInPlace(d.reduced_force);
+      data.ddq.noalias() = d.N * d.reduced_force;
+      return;
+    }
     if (fext != nullptr) // constraintDynamics takes no fext: add their joint efforts
     {
       d.tau += pinocchio::computeGeneralizedGravity(model, data, q);

@@ -78,10 +78,13 @@ namespace pinsettle
       why << "is a mimic joint of '" << leading
           << "': it couples q_follower = multiplier * q_leader + offset (here q[" << follower
           << "] = " << mimic.scaling() << " * q[" << leading << "] + " << mimic.offset()
-          << "), and pinsettle does not support mimic joints yet (pinocchio::aba, its forward "
-             "dynamics, does not). Load the URDF with mimic=False "
-             "(pinocchio.buildModelFromUrdf(path, mimic=False), Pinocchio's default) to ignore "
-             "the <mimic> tag as Pinocchio does: the joint then moves on its own";
+          << "), which pinocchio::aba, the solver's forward dynamics, does not support. "
+             "pinsettle.solve, assess_stability, static_force and Scene take such a model and "
+             "hold the coupling as a constraint (in C++: releaseMimicJoints, then "
+             "LoopConstraints::addCoupling); this function does not. Load the URDF with "
+             "mimic=False (pinocchio.buildModelFromUrdf(path, mimic=False), Pinocchio's "
+             "default) to ignore the <mimic> tag as Pinocchio does: the joint then moves on its "
+             "own";
       refuse(model, j, why.str());
     }
 
@@ -182,7 +185,8 @@ namespace pinsettle
         throw std::invalid_argument(
           "model: its extended velocity space (nvExtended " + std::to_string(model.nvExtended)
           + ") differs from its velocity space (nv " + std::to_string(model.nv)
-          + "): a joint mimics another, which pinsettle does not support yet");
+          + "): a joint mimics another, which pinocchio::aba does not support (releaseMimicJoints "
+            "makes it an ordinary joint to couple as a constraint)");
 
       int iq = 0, iv = 0;
       for (std::size_t j = 1; j < n; ++j)
@@ -260,6 +264,77 @@ namespace pinsettle
     }
 
   } // namespace
+
+  pinocchio::Model releaseMimicJoints(
+    const pinocchio::Model & model, std::vector<MimicJoint> & mimics)
+  {
+    mimics.clear();
+    const std::size_t n = model.joints.size();
+    if (
+      model.parents.size() != n || model.names.size() != n || model.jointPlacements.size() != n
+      || model.inertias.size() != n)
+      checkTables(model); // names the table that disagrees
+    pinocchio::Model out;
+    out.name = model.name;
+    out.gravity = model.gravity;
+    for (std::size_t j = 1; j < n; ++j)
+    {
+      const pinocchio::JointModel & jmodel = model.joints[j];
+      const auto * mimic = boost::get<pinocchio::JointModelMimic>(&jmodel.toVariant());
+      if (mimic == nullptr)
+      {
+        const pinocchio::JointIndex id =
+          out.addJoint(model.parents[j], jmodel, model.jointPlacements[j], model.names[j]);
+        const pinocchio::JointModel & copy = out.joints[id];
+        // Limits and joint properties, each joint's segment (indices shift after a follower).
+        copy.jointConfigSelector(out.lowerPositionLimit) =
+          jmodel.jointConfigSelector(model.lowerPositionLimit);
+        copy.jointConfigSelector(out.upperPositionLimit) =
+          jmodel.jointConfigSelector(model.upperPositionLimit);
+        copy.jointVelocitySelector(out.lowerEffortLimit) =
+          jmodel.jointVelocitySelector(model.lowerEffortLimit);
+        copy.jointVelocitySelector(out.upperEffortLimit) =
+          jmodel.jointVelocitySelector(model.upperEffortLimit);
+        copy.jointVelocitySelector(out.lowerVelocityLimit) =
+          jmodel.jointVelocitySelector(model.lowerVelocityLimit);
+        copy.jointVelocitySelector(out.upperVelocityLimit) =
+          jmodel.jointVelocitySelector(model.upperVelocityLimit);
+        copy.jointVelocitySelector(out.armature) = jmodel.jointVelocitySelector(model.armature);
+        copy.jointVelocitySelector(out.rotorInertia) =
+          jmodel.jointVelocitySelector(model.rotorInertia);
+        copy.jointVelocitySelector(out.rotorGearRatio) =
+          jmodel.jointVelocitySelector(model.rotorGearRatio);
+        copy.jointVelocitySelector(out.damping) = jmodel.jointVelocitySelector(model.damping);
+      }
+      else
+      {
+        // The follower's own joint (type and axis); its id is the leader's.
+        const pinocchio::JointModel own = mimic->jmodel();
+        const pinocchio::JointIndex leader = own.id();
+        if (leader == 0 || leader >= j)
+          refuse(model, j, "is a mimic joint of a joint that does not come before it");
+        if (boost::get<pinocchio::JointModelMimic>(&model.joints[leader].toVariant()) != nullptr)
+          refuse(
+            model, j, "is a mimic joint of another mimic joint (" + jointName(model, leader) + ")");
+        if (own.nq() != 1 || own.nv() != 1)
+          refuse(
+            model, j,
+            "is a mimic joint of type " + own.shortname() + " (" + std::to_string(own.nq())
+              + " configuration entries, " + std::to_string(own.nv())
+              + " velocities); pinsettle couples 1-DoF joints with one of each (revolute, "
+                "prismatic, helical)");
+        const pinocchio::JointIndex id =
+          out.addJoint(model.parents[j], own, model.jointPlacements[j], model.names[j]);
+        mimics.push_back(MimicJoint{id, leader, mimic->scaling(), mimic->offset()});
+      }
+      out.appendBodyToJoint(
+        static_cast<pinocchio::JointIndex>(j), model.inertias[j], pinocchio::SE3::Identity());
+    }
+    // Frames keep their indices: the joints do.
+    for (std::size_t f = 1; f < model.frames.size(); ++f)
+      out.addFrame(model.frames[f], false);
+    return out;
+  }
 
   void checkSupportedModel(const pinocchio::Model & model)
   {

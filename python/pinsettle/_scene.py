@@ -23,6 +23,7 @@ from ._checks import as_flag, as_vector, unknown_key_message
 from ._mjcf import MjcfError, load_mjcf
 from ._model_files import file_kind, load_srdf_poses, robot_srdf
 from ._settings import SETTING_TYPES, Settings, make_settings, set_setting
+from ._urdf_mimic import urdf_mimic_tags
 from .robots import load_robot, load_urdf, robot_urdf
 from .scenes import scene_path
 
@@ -94,6 +95,25 @@ class Loop:
 
 
 LOOP_KINDS = ("point", "frame")
+
+
+@dataclass(frozen=True)
+class Coupling:
+    """A joint coupling (a URDF ``<mimic>`` tag, a mimic joint): q[follower] = multiplier *
+    q[leader] + offset, two 1-DoF joints (rad or m)."""
+
+    follower: str
+    leader: str
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+    def text(self) -> str:
+        return f"'{self.follower}' = {self.multiplier:g} * '{self.leader}' + {self.offset:g}"
+
+
+def has_mimic_joints(model: pinocchio.Model) -> bool:
+    """Whether a model holds mimic joints (``pinocchio.buildModelFromUrdf(path, mimic=True)``)."""
+    return any("Mimic" in str(joint.shortname()) for joint in model.joints)
 
 
 @dataclass(frozen=True)
@@ -232,6 +252,30 @@ class Scene:
         if not isinstance(model, pinocchio.Model):
             raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
         self._limits = True
+        #: Joint couplings (``add_coupling``, a URDF's ``<mimic>`` tags, mimic joints).
+        self.couplings: list[Coupling] = []
+        #: The model given, when it has mimic joints (``pinocchio.buildModelFromUrdf(path,
+        #: mimic=True)``); ``model`` is then that model with each follower made an ordinary
+        #: joint (of its own type and axis, without position limits) and coupled back in
+        #: ``couplings``. None otherwise.
+        self.mimic_model: pinocchio.Model | None = None
+        notes = []
+        if has_mimic_joints(model):
+            released, couplings = _core.release_mimic(model)
+            self.mimic_model = pinocchio.Model(model)
+            model = released
+            for follower, leader, multiplier, offset in couplings:
+                self.couplings.append(
+                    Coupling(
+                        str(model.names[follower]),
+                        str(model.names[leader]),
+                        float(multiplier),
+                        float(offset),
+                    )
+                )
+            notes.append(
+                "mimic joints honoured as couplings: " + "; ".join(c.text() for c in self.couplings)
+            )
         self.model = pinocchio.Model(model)
         self.name = name
         self.description = description
@@ -245,7 +289,7 @@ class Scene:
         self.srdf: list[Path] = []
         #: What the model file said that the scene leaves out (an MJCF file's damping,
         #: actuators, ...), one line each; ``pinsettle solve`` prints them.
-        self.notes: list[str] = []
+        self.notes: list[str] = notes
         self._pose_notes: dict[str, str] = {}
         self.settings = make_settings(settings, {})
         self.joint_springs: list[JointSpring] = []
@@ -265,18 +309,63 @@ class Scene:
     # -- construction -------------------------------------------------------------------------
 
     @classmethod
-    def from_urdf(cls, path: str | Path, *, floating: bool = False, **kwargs: Any) -> Scene:
-        """A scene of the mechanism in a URDF file (meshes are not loaded)."""
+    def from_urdf(
+        cls, path: str | Path, *, floating: bool = False, mimic: bool | None = None, **kwargs: Any
+    ) -> Scene:
+        """A scene of the mechanism in a URDF file (meshes are not loaded). ``mimic``: its
+        ``<mimic>`` tags are joint couplings (True, the default when it has any) or ignored as
+        ``pinocchio.buildModelFromUrdf`` does by default (False, each joint then moves on its
+        own); a line of ``notes`` says which."""
         scene = cls(load_urdf(path, floating=floating), **kwargs)
         scene.urdf = Path(path)
+        scene.apply_urdf_mimic(Path(path), mimic)
         return scene
 
     @classmethod
-    def from_robot(cls, name: str, *, floating: bool = False, **kwargs: Any) -> Scene:
-        """A scene of a robot shipped by example-robot-data (see ``pinsettle.robot_names()``)."""
+    def from_robot(
+        cls, name: str, *, floating: bool = False, mimic: bool | None = None, **kwargs: Any
+    ) -> Scene:
+        """A scene of a robot shipped by example-robot-data (see ``pinsettle.robot_names()``);
+        ``mimic`` as for ``from_urdf``."""
         scene = cls(load_robot(name, floating=floating), **kwargs)
         scene.urdf = robot_urdf(name)
+        scene.apply_urdf_mimic(scene.urdf, mimic)
         return scene
+
+    def apply_urdf_mimic(self, path: Path, mimic: bool | None) -> None:
+        """Couple the joints of the URDF's ``<mimic>`` tags (``mimic`` True or None) or leave
+        them free (False); a line of ``notes`` says which. Nothing happens without tags.
+
+        Raises:
+            SceneError: ``mimic`` not a bool or None; a tag naming a joint the model lacks or one
+                that cannot be coupled (the message names the tag's joint).
+        """
+        if mimic is not None and not isinstance(mimic, (bool, np.bool_)):
+            raise SceneError(f"mimic must be true or false, got {mimic!r}")
+        try:
+            tags = urdf_mimic_tags(path)
+        except ValueError as error:
+            raise SceneError(str(error)) from None
+        tags = [tag for tag in tags if tag.follower_type != "fixed"]  # a fixed joint: no motion
+        if not tags:
+            return
+        if mimic is not None and not mimic:
+            self.notes.append(
+                "URDF <mimic> tags ignored (mimic = false, pinocchio.buildModelFromUrdf's "
+                "default): " + ", ".join(f"'{tag.follower}'" for tag in tags) + " move"
+                f"{'s' if len(tags) == 1 else ''} on "
+                f"{'its' if len(tags) == 1 else 'their'} own, uncoupled"
+            )
+            return
+        for tag in tags:
+            try:
+                self.add_coupling(tag.follower, tag.leader, tag.multiplier, tag.offset)
+            except SceneError as error:
+                raise SceneError(f"the <mimic> tag of joint '{tag.follower}': {error}") from None
+        self.notes.append(
+            "URDF <mimic> tags honoured as joint couplings (mimic = true): "
+            + "; ".join(c.text() for c in self.couplings[-len(tags) :])
+        )
 
     @classmethod
     def from_mjcf(cls, path: str | Path, *, floating: bool = False, **kwargs: Any) -> Scene:
@@ -605,6 +694,42 @@ class Scene:
         self._changed()
         return self
 
+    def add_coupling(
+        self, follower: str, leader: str, multiplier: Any = 1.0, offset: Any = 0.0
+    ) -> Scene:
+        """Couple two 1-DoF joints (revolute, prismatic, helical), as a URDF ``<mimic>`` tag
+        does: q[follower] = multiplier * q[leader] + offset (rad or m). The solver holds it as
+        a constraint (as it holds loops): the follower moves with its leader, and its effort
+        (gravity, springs, loads, a stop) acts on the leader through the coupling. The start
+        sets the follower from its leader unless ``set_start`` names it.
+
+        Raises:
+            SceneError: an unknown joint, one with other than one coordinate and one velocity,
+                the same joint twice, a follower coupled already, a multiplier or offset that is
+                not a finite number.
+        """
+        ids = []
+        for joint, role in ((follower, "follower"), (leader, "leader")):
+            j = self._joint_id(joint, role)
+            if self.model.nqs[j] != 1 or self.model.nvs[j] != 1:
+                raise SceneError(
+                    f"{role} '{joint}' is a {_joint_kind(self.model, j)} with "
+                    f"{self.model.nqs[j]} configuration entries and {self.model.nvs[j]} "
+                    "velocities; a coupling needs 1-DoF joints with one of each (revolute, "
+                    "prismatic, helical)"
+                )
+            ids.append(j)
+        if ids[0] == ids[1]:
+            raise SceneError(f"joint '{follower}' cannot follow itself")
+        if any(c.follower == follower for c in self.couplings):
+            raise SceneError(f"joint '{follower}' follows another joint already")
+        coupling = Coupling(
+            follower, leader, _number(multiplier, "multiplier"), _number(offset, "offset")
+        )
+        self.couplings.append(coupling)
+        self._changed()
+        return self
+
     def add_loop(self, a: Any, b: Any, kind: str = "point") -> Scene:
         """Close a loop of the tree: the point ``a`` and the point ``b`` (each a frame name, a
         ``(frame, point)`` pair or ``{"frame": ..., "point": [x, y, z]}``, point in the frame,
@@ -657,7 +782,75 @@ class Scene:
         for joint, value in self._start.items():
             j = self.model.getJointId(joint)
             q[self.model.idx_qs[j] : self.model.idx_qs[j] + self.model.nqs[j]] = value
+        for c in self.couplings:  # a follower not named starts where its leader puts it
+            if c.follower not in self._start:
+                iq = self.model.idx_qs[self.model.getJointId(c.follower)]
+                q[iq] = c.multiplier * q[self.model.idx_qs[self.model.getJointId(c.leader)]]
+                q[iq] += c.offset
         return q
+
+    # -- a model with mimic joints, in its own coordinates ------------------------------------
+
+    def _mimic_indices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the coordinates of ``mimic_model`` sit in those of ``model``: every joint's
+        segment but the followers'."""
+        model = self.model
+        followers = {model.getJointId(c.follower) for c in self.couplings}
+        kept = [j for j in range(1, model.njoints) if j not in followers]
+        q_index = [np.arange(model.idx_qs[j], model.idx_qs[j] + model.nqs[j]) for j in kept]
+        v_index = [np.arange(model.idx_vs[j], model.idx_vs[j] + model.nvs[j]) for j in kept]
+        return (
+            np.concatenate(q_index or [np.zeros(0)]).astype(int),
+            np.concatenate(v_index or [np.zeros(0)]).astype(int),
+        )
+
+    def from_mimic_q(self, q: Any) -> np.ndarray:
+        """A configuration of ``mimic_model`` (the model given, with mimic joints) as one of
+        ``model``: each follower set from its leader."""
+        assert self.mimic_model is not None
+        q = as_vector(q, "q", self.mimic_model.nq, "model.nq")
+        out = np.zeros(self.model.nq)
+        out[self._mimic_indices()[0]] = q
+        for c in self.couplings:
+            leader = out[self.model.idx_qs[self.model.getJointId(c.leader)]]
+            out[self.model.idx_qs[self.model.getJointId(c.follower)]] = (
+                c.multiplier * leader + c.offset
+            )
+        return out
+
+    def from_mimic_v(self, v: Any) -> np.ndarray:
+        """A velocity of ``mimic_model`` as one of ``model`` (each follower's from its
+        leader's)."""
+        assert self.mimic_model is not None
+        v = as_vector(v, "v", self.mimic_model.nv, "model.nv")
+        out = np.zeros(self.model.nv)
+        out[self._mimic_indices()[1]] = v
+        for c in self.couplings:
+            leader = out[self.model.idx_vs[self.model.getJointId(c.leader)]]
+            out[self.model.idx_vs[self.model.getJointId(c.follower)]] = c.multiplier * leader
+        return out
+
+    def to_mimic_q(self, q: np.ndarray) -> np.ndarray:
+        """A configuration of ``model`` as one of ``mimic_model`` (the followers left out)."""
+        return np.asarray(q)[..., self._mimic_indices()[0]]
+
+    def to_mimic_v(self, v: np.ndarray) -> np.ndarray:
+        """A velocity (or rows of a matrix over velocities) of ``model`` in the coordinates of
+        ``mimic_model`` (the followers' rows left out)."""
+        return np.asarray(v)[self._mimic_indices()[1], ...]
+
+    def to_mimic_force(self, tau: np.ndarray) -> np.ndarray:
+        """A generalized force of ``model`` (dim model.nv) as one of ``mimic_model``: each
+        follower's effort added to its leader's times the multiplier (the chain rule, as
+        Pinocchio's rnea on a model with mimic joints)."""
+        out = np.array(tau, dtype=float)
+        for c in self.couplings:
+            iv_leader = self.model.idx_vs[self.model.getJointId(c.leader)]
+            out[iv_leader] += (
+                c.multiplier * out[self.model.idx_vs[self.model.getJointId(c.follower)]]
+            )
+        reduced: np.ndarray = out[self._mimic_indices()[1]]
+        return reduced
 
     @property
     def has_elements(self) -> bool:
@@ -727,6 +920,7 @@ class Scene:
             ("springs", self.springs),
             ("loads", self.loads),
             ("loops", self.loops),
+            ("couplings", self.couplings),
             ("stops set", self.joint_limits),
         ):
             if items:
@@ -838,8 +1032,29 @@ class _Compiled:
                     + (", once the locked joints are removed" if locked_ids else "")
                     + "); such a loop holds nothing"
                 )
-        #: Loop closures as the C++ core takes them; None for a tree (plain ABA).
-        self.loops = [
+        couplings: list[tuple[Any, ...]] = []
+        for c in scene.couplings:
+            locked = [joint for joint in (c.follower, c.leader) if joint in scene.locked]
+            if len(locked) == 2:  # both held at their start values
+                continue
+            if locked:
+                raise SceneError(
+                    f"coupling {c.text()}: joint '{locked[0]}' is locked and the other is not; "
+                    "lock both or neither"
+                )
+            couplings.append(
+                (
+                    "coupling",
+                    model.getJointId(c.follower),
+                    model.getJointId(c.leader),
+                    c.multiplier,
+                    c.offset,
+                    f"coupling {c.text()}",
+                )
+            )
+        #: Loop closures and joint couplings as the C++ core takes them; None for a tree
+        #: (plain ABA).
+        self.loops: list[tuple[Any, ...]] | None = [
             (
                 frame(loop.a_frame),
                 np.array(loop.a_point),
@@ -849,7 +1064,7 @@ class _Compiled:
                 f"[[loop]] #{k} ('{loop.a_frame}' to '{loop.b_frame}')",
             )
             for k, loop in enumerate(scene.loops, start=1)
-        ] or None
+        ] + couplings or None
         # Joint stops: the model's own (the reduced model keeps the position limits of the
         # joints it keeps) and those set by name, resolved when the limits setting is known.
         self._own_stops = model_stops(model)
@@ -913,7 +1128,7 @@ def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | lis
 # --- the scene file ----------------------------------------------------------------------------
 
 _TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "limit", "solver"]
-_MODEL_KEYS = ["urdf", "robot", "mjcf", "srdf", "floating", "locked", "gravity", "limits"]
+_MODEL_KEYS = ["urdf", "robot", "mjcf", "srdf", "floating", "locked", "gravity", "limits", "mimic"]
 _JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
 _SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
 _LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
@@ -1046,6 +1261,14 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
     limits = m.get("limits", True)
     if not isinstance(limits, bool):
         raise SceneError(f"[model] limits must be true or false, got {limits!r}")
+    mimic = m.get("mimic")
+    if mimic is not None and not isinstance(mimic, bool):
+        raise SceneError(f"[model] mimic must be true or false, got {mimic!r}")
+    if mimic is not None and "mjcf" in m:
+        raise SceneError(
+            "[model] mimic is for a URDF's <mimic> tags ('urdf' or 'robot'); an MJCF file "
+            "couples joints with <equality><joint>"
+        )
     sources = [key for key in ("urdf", "robot", "mjcf") if key in m]
     if len(sources) != 1:
         raise SceneError(
@@ -1093,6 +1316,11 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         scene = Scene(model, name=path.stem, description=_description(path), limits=limits)
     scene.path = path
     scene.urdf = urdf_path
+    if urdf_path is not None:
+        try:
+            scene.apply_urdf_mimic(urdf_path, mimic)
+        except SceneError as error:
+            raise SceneError(f"[model] mimic: {error}") from None
     srdf = m.get("srdf")
     if srdf is not None:
         if not isinstance(srdf, str):

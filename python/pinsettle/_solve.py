@@ -3,6 +3,7 @@ settings are in ``_settings``)."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -12,7 +13,7 @@ import pinocchio
 
 from . import _core
 from ._checks import as_flag, as_vector
-from ._scene import Scene, joint_values
+from ._scene import Scene, has_mimic_joints, joint_values
 from ._settings import Settings, make_settings
 
 
@@ -295,8 +296,14 @@ def kinetic_energies(model: pinocchio.Model, q: Any, v: Any) -> tuple[float, flo
 
 def static_force(model: pinocchio.Model, q: Any) -> np.ndarray:
     """rnea(q, 0, 0): the net static generalized force under gravity (dim model.nv, N m or N).
-    For a scene, ``scene.static_force(q)`` includes its springs and loads."""
+    For a scene, ``scene.static_force(q)`` includes its springs and loads. A model with mimic
+    joints: each follower's effort counts on its leader (times the multiplier), as Pinocchio's
+    own rnea on such a model."""
     _check_model(model)
+    if has_mimic_joints(model):
+        scene = Scene(model)
+        q_full = scene.from_mimic_q(as_vector(q, "q", model.nq, "model.nq"))
+        return scene.to_mimic_force(_core.static_force(scene.model, q_full))
     return _core.static_force(model, as_vector(q, "q", model.nq, "model.nq"))
 
 
@@ -347,7 +354,10 @@ def assess_stability(model: Any, q: Any, *, limits: bool | None = None) -> Stabi
     (all its elements; K on the free joints). Gravity's part of K comes from Pinocchio's
     analytic derivatives, the elements' part from central finite differences. With joint stops
     (``limits`` as for ``solve``: None honours a bare model's position limits and a scene's own
-    setting) K is restricted to the joints not pressed on a stop at q."""
+    setting) K is restricted to the joints not pressed on a stop at q. A model with mimic joints
+    is assessed as the coupled mechanism: K on an orthonormal basis of the motions the couplings
+    allow, each follower counted as a joint of its own (``Scene(model).model``); ``basis`` and
+    ``softest_direction`` in the model's own coordinates (the followers' rows left out)."""
     if isinstance(model, Scene):
         q = as_vector(q, "q", model.model.nq, "model.nq")
         compiled = model.compile(q)
@@ -357,6 +367,15 @@ def assess_stability(model: Any, q: Any, *, limits: bool | None = None) -> Stabi
         )
     else:
         _check_model(model)
+        if has_mimic_joints(model):  # the coupled mechanism, reported in the model's coordinates
+            scene = Scene(model)
+            q_full = scene.from_mimic_q(as_vector(q, "q", model.nq, "model.nq"))
+            report = assess_stability(scene, q_full, limits=limits)
+            return dataclasses.replace(
+                report,
+                softest_direction=scene.to_mimic_v(report.softest_direction),
+                basis=scene.to_mimic_v(report.basis),
+            )
         stops = (True, []) if _limits_flag(limits, True) else None
         raw = _core.stiffness(model, as_vector(q, "q", model.nq, "model.nq"), None, None, stops)
     return StabilityReport(**raw)
@@ -404,6 +423,28 @@ def solve(
     """
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
+    if isinstance(model, pinocchio.Model) and has_mimic_joints(model):
+        # Each follower coupled to its leader (a constraint, as loops are); the answer in the
+        # model's own coordinates.
+        scene = Scene(model)
+        result = solve(
+            scene,
+            None if q0 is None else scene.from_mimic_q(as_vector(q0, "q0", model.nq, "model.nq")),
+            settings,
+            v0=None
+            if v0 is None
+            else scene.from_mimic_v(as_vector(v0, "v0", model.nv, "model.nv")),
+            callback=callback,
+            limits=limits,
+            progress=progress,
+            **overrides,
+        )
+        trace = result.trace
+        if trace is not None and trace.q is not None:
+            trace = dataclasses.replace(trace, q=scene.to_mimic_q(trace.q))
+        return dataclasses.replace(
+            result, q=scene.to_mimic_q(result.q), v=scene.to_mimic_v(result.v), trace=trace
+        )
     report = _progress_reporter(progress)
     stops: tuple[bool, list[tuple[int, float, float]]] | None
     if isinstance(model, Scene):

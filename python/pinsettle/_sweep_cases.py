@@ -247,6 +247,7 @@ def scene_data(scene: Scene) -> dict[str, Any]:
         "springs": list(scene.springs),
         "loads": list(scene.loads),
         "loops": list(scene.loops),
+        "couplings": list(scene.couplings),
         "locked": list(scene.locked),
         "joint_limits": list(scene.joint_limits),
         "q0": scene.q0(),
@@ -350,6 +351,8 @@ def build_scene(data: Mapping[str, Any], keys: Sequence[Key], changes: Changes) 
             )
     for loop in data["loops"]:
         scene.add_loop((loop.a_frame, loop.a_point), (loop.b_frame, loop.b_point), loop.kind)
+    for c in data["couplings"]:
+        scene.add_coupling(c.follower, c.leader, c.multiplier, c.offset)
     if data["locked"]:
         scene.lock(*data["locked"])
     for limit in data["joint_limits"]:

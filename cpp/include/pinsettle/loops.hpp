@@ -49,8 +49,25 @@ namespace pinsettle
   };
 
   ///
+  /// \brief A linear coupling of two 1-DoF joints, q[follower] = multiplier * q[leader] + offset
+  /// (a URDF <mimic> tag): one constraint equation, error q_f - multiplier q_l - offset (rad or
+  /// m), constant Jacobian row e_f - multiplier e_l.
+  ///
+  struct JointCoupling
+  {
+    std::string name;
+    pinocchio::JointIndex follower;
+    pinocchio::JointIndex leader;
+    int iq_follower, iv_follower, iq_leader, iv_leader;
+    double multiplier;
+    double offset;
+  };
+
+  ///
   /// \brief The loop closures of a mechanism whose model is a tree (a four-bar, a slider-crank,
-  /// a parallel gripper): the model describes the tree, these constraints close it.
+  /// a parallel gripper): the model describes the tree, these constraints close it; and the
+  /// joint couplings of its mimic joints (JointCoupling), which every function below treats as
+  /// more constraint equations.
   ///
   /// The constraint error of a loop is p_a - p_b for a point loop, and
   /// [p_a - p_b; log3(R_a R_b^T)] for a frame loop, in world axes (m and rad). Its Jacobian along
@@ -83,15 +100,38 @@ namespace pinsettle
       LoopKind kind = LoopKind::Point,
       const std::string & name = std::string());
 
+    ///
+    /// \brief Couple two 1-DoF joints (revolute, prismatic, helical: one configuration entry
+    /// and one velocity each): q[follower] = multiplier * q[leader] + offset. Its equation comes
+    /// after those of the loops.
+    ///
+    /// \param[in] name How messages call it ("coupling #1" when empty).
+    /// \throws std::invalid_argument for an unknown joint, a joint with other than one
+    ///         configuration entry and one velocity, the same joint twice, or a non-finite
+    ///         multiplier or offset.
+    ///
+    void addCoupling(
+      pinocchio::JointIndex follower,
+      pinocchio::JointIndex leader,
+      double multiplier,
+      double offset,
+      const std::string & name = std::string());
+
     const std::vector<Loop> & loops() const
     {
       return loops_;
     }
+    const std::vector<JointCoupling> & couplings() const
+    {
+      return couplings_;
+    }
+    /// \brief No loop and no coupling.
     bool empty() const
     {
-      return loops_.empty();
+      return loops_.empty() && couplings_.empty();
     }
-    /// \brief Number of constraint equations (3 per point loop, 6 per frame loop).
+    /// \brief Number of constraint equations (3 per point loop, 6 per frame loop, 1 per
+    /// coupling).
     int rows() const
     {
       return rows_;
@@ -104,6 +144,7 @@ namespace pinsettle
   private:
     const pinocchio::Model & model_;
     std::vector<Loop> loops_;
+    std::vector<JointCoupling> couplings_;
     int rows_ = 0;
   };
 

@@ -7,6 +7,8 @@
 
 #include <pinocchio/multibody/fwd.hpp>
 
+#include <vector>
+
 namespace pinsettle
 {
 
@@ -19,7 +21,9 @@ namespace pinsettle
   /// Refused:
   /// - a mimic joint (pinocchio::JointModelMimic, as pinocchio.buildModelFromUrdf(path,
   ///   mimic=True) makes of a URDF <mimic> tag), also inside a composite joint: it couples
-  ///   q_follower = multiplier * q_leader + offset, which pinocchio::aba does not support;
+  ///   q_follower = multiplier * q_leader + offset, which pinocchio::aba does not support
+  ///   (releaseMimicJoints turns such a model into one the solver takes, with the couplings as
+  ///   LoopConstraints::addCoupling constraints; pinsettle's Python layer does so itself);
   /// - a joint type this check does not know (one a later Pinocchio adds);
   /// - a model whose tables disagree with each other (joint, parent, name, placement and inertia
   ///   lists of different lengths, a parent listed after its child, joints' configuration or
@@ -31,6 +35,30 @@ namespace pinsettle
   /// \throws std::invalid_argument naming the joint and why.
   ///
   void checkSupportedModel(const pinocchio::Model & model);
+
+  /// \brief A mimic joint of a model: q[follower] = multiplier * q[leader] + offset.
+  struct MimicJoint
+  {
+    pinocchio::JointIndex follower; ///< Index in the model (and in the released model).
+    pinocchio::JointIndex leader;
+    double multiplier;
+    double offset;
+  };
+
+  ///
+  /// \brief The model with each mimic joint made an ordinary joint of its own type and axis
+  /// (what pinocchio.buildModelFromUrdf(path, mimic=False) makes of the URDF), the same joint
+  /// indices, names, placements, inertias and frames; a follower has no position limits (the
+  /// mimic model keeps none for it) and the effort, velocity, friction, damping and armature
+  /// defaults. Couple the followers back with LoopConstraints::addCoupling.
+  ///
+  /// \param[out] mimics The mimic joints found, in joint order (empty: the copy is the model).
+  /// \throws std::invalid_argument naming the joint for a mimic joint with other than one
+  ///         configuration entry and one velocity, one inside a composite joint, or one that
+  ///         follows a joint after it or another mimic joint.
+  ///
+  pinocchio::Model releaseMimicJoints(
+    const pinocchio::Model & model, std::vector<MimicJoint> & mimics);
 
 } // namespace pinsettle
 

@@ -11,10 +11,12 @@ tau_leader + multiplier * tau_follower), which must vanish at a rest.
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from pathlib import Path
 
+import loop_reference  # tests/loop_reference.py (pytest puts tests/ on sys.path)
 import numpy as np
 import pinocchio
 import pinsettle
@@ -23,6 +25,7 @@ from pinsettle import Scene, SceneError, load_scene
 from scipy.optimize import brentq
 
 MULTIPLIER, OFFSET = -1.5, 0.25
+ROBOTS = Path(__file__).parents[1] / "robots"
 
 # A two-link arm in the x-z plane, hanging under gravity; joint2 follows joint1. The second
 # link's mass is off its axis so that the coupled potential has several wells.
@@ -296,11 +299,54 @@ def test_panda_fingers_move_together() -> None:
             assert abs(g[iv]) <= 1e-8 * scale, (name, g[iv])
 
 
-def test_mimic_with_loops_is_refused_clearly(arm_urdf: Path) -> None:
-    scene = Scene.from_urdf(arm_urdf, limits=False)
-    scene.add_loop(("link2", (0.0, 0.0, -0.5)), ("universe", (0.3, 0.0, -0.6)))
-    with pytest.raises(ValueError, match="couplings .mimic joints. together with loop closures"):
-        pinsettle.solve(scene, max_steps=100)
+PENDULUM = """
+  <link name="pendulum">
+    <inertial>
+      <origin xyz="0.125 0 0"/>
+      <mass value="0.7"/>
+      <inertia ixx="1e-5" ixy="0" ixz="0" iyy="0.0036458" iyz="0" izz="0.0036458"/>
+    </inertial>
+  </link>
+  <joint name="pendulum_joint" type="revolute">
+    <parent link="base"/>
+    <child link="pendulum"/>
+    <origin xyz="-0.3 0 0"/>
+    <axis xyz="0 1 0"/>
+    <limit lower="-100" upper="100" effort="10" velocity="1"/>
+    <mimic joint="crank_joint" multiplier="0.5" offset="0.3"/>
+  </joint>
+</robot>"""
+
+
+def test_mimic_joint_with_a_loop_rests_at_the_minimum_of_the_potential(tmp_path: Path) -> None:
+    """robots/fourbar (crank spring, coupler load, a loop) with a pendulum whose joint follows
+    the crank (0.5 crank + 0.3): the rest is the minimum of the four-bar's closed-form potential
+    (tests/loop_reference.py) plus the pendulum's, m g z of its centre at that crank angle."""
+    urdf = (ROBOTS / "fourbar.urdf").read_text(encoding="utf-8").replace("</robot>", PENDULUM)
+    (tmp_path / "fourbar_pendulum.urdf").write_text(urdf, encoding="utf-8")
+    toml = (ROBOTS / "fourbar.toml").read_text(encoding="utf-8")
+    (tmp_path / "fourbar_pendulum.toml").write_text(
+        toml.replace('"fourbar.urdf"', '"fourbar_pendulum.urdf"'), encoding="utf-8"
+    )
+    scene = load_scene(tmp_path / "fourbar_pendulum.toml")
+    assert len(scene.couplings) == 1 and len(scene.loops) == 1
+    result = pinsettle.solve(scene)
+    assert result.converged, (result.status, result.reason)
+    assert result.mobility == 1
+    crank, pendulum = result.joints["crank_joint"], result.joints["pendulum_joint"]
+    assert isinstance(crank, float) and isinstance(pendulum, float)
+    assert pendulum == pytest.approx(0.5 * crank + 0.3, abs=1e-12)
+
+    fourbar = loop_reference.fourbar()
+
+    def potential(t: float) -> float:
+        return fourbar.potential(t) + 0.7 * loop_reference.G * 0.125 * -math.sin(0.5 * t + 0.3)
+
+    reference = loop_reference.Mechanism(fourbar.joints, potential, "crank_joint")
+    rest = reference.equilibrium(crank)
+    assert rest["stable"] and result.stability == "stable"
+    for joint in ("crank_joint", "coupler_joint", "rocker_joint"):
+        assert result.joints[joint] == pytest.approx(rest[joint], abs=1e-7), joint
 
 
 def test_bad_couplings_are_refused_with_names(arm_urdf: Path) -> None:

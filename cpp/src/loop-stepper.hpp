@@ -22,7 +22,6 @@ namespace pinsettle
   class LoopStepper
   {
   public:
-    /// \throws std::invalid_argument for joint couplings together with loops (not supported).
     LoopStepper(const pinocchio::Model & model, const LoopConstraints & loops);
     ~LoopStepper();
 
@@ -31,8 +30,9 @@ namespace pinsettle
     void init(pinocchio::Data & data, const Eigen::VectorXd & q);
 
     ///
-    /// \brief Constrained forward dynamics (pinocchio::constraintDynamics; with joint couplings
-    /// only, a = N (N^T M N)^-1 N^T (tau - b) from crba and rnea, N the motions they allow):
+    /// \brief Constrained forward dynamics (pinocchio::constraintDynamics; with joint couplings,
+    /// a = N s_dot with (N^T M N) s_dot = N^T (tau - b) from crba and rnea, N the motions they
+    /// allow, and the loops' rows, if any, as constraints on s_dot):
     /// data.ddq holds the acceleration; data.v the body velocities (local frames) for the
     /// energy measures.
     ///
@@ -61,6 +61,10 @@ namespace pinsettle
       const std::vector<Eigen::Index> * pinned = nullptr);
 
   private:
+    // With couplings and loops: the loops' constraint on the reduced acceleration.
+    void loopAcceleration(
+      pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v);
+
     struct Impl;
     std::unique_ptr<Impl> impl_;
   };

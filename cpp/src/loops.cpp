@@ -666,14 +666,10 @@ namespace pinsettle
     {
       if (!loops.couplings().empty())
       {
-        // constraintDynamics takes frame constraints only; a coupling of joints is none.
-        if (!loops.loops().empty())
-          throw std::invalid_argument(
-            "joint couplings (mimic joints) together with loop closures are not supported yet: "
-            ""
-            + loops.couplings().front().name + " and " + loops.loops().front().name);
-        // The couplings' Jacobian is constant: the motions they allow, an orthonormal basis N,
-        // are found once, and the dynamics are those of the reduced coordinates s (v = N s).
+        // constraintDynamics takes frame constraints only; a coupling of joints is none. The
+        // couplings' Jacobian is constant: the motions they allow, an orthonormal basis N, are
+        // found once, and the dynamics are those of the reduced coordinates s (v = N s), with
+        // the loops' rows, if any, as constraints on s.
         Eigen::MatrixXd Jc = Eigen::MatrixXd::Zero(loops.rows(), model.nv);
         Eigen::Index row = 0;
         for (const JointCoupling & c : loops.couplings())
@@ -687,6 +683,7 @@ namespace pinsettle
         reduced_mass.resize(N.cols(), N.cols());
         reduced_force.resize(N.cols());
         MN.resize(model.nv, N.cols());
+        gamma.resize(loops.rows());
         // Sized by a factorization (assigning LLT(n) copies an unset info()).
         mass_llt.compute(Eigen::MatrixXd::Identity(N.cols(), N.cols()));
         return;
@@ -716,7 +713,7 @@ namespace pinsettle
     pinocchio::Data::Matrix6x work_a, work_b;
     // Couplings only: the allowed motions N and the reduced dynamics' workspace.
     Eigen::MatrixXd N, MN, reduced_mass;
-    Eigen::VectorXd reduced_force;
+    Eigen::VectorXd reduced_force, gamma;
     Eigen::LLT<Eigen::MatrixXd> mass_llt;
   };
 
@@ -767,6 +764,8 @@ namespace pinsettle
       d.reduced_force.noalias() = d.N.transpose() * d.tau;
       d.mass_llt.compute(d.reduced_mass);
       d.mass_llt.solveInPlace(d.reduced_force);
+      if (!d.loops.loops().empty())
+        loopAcceleration(data, q, v);
       data.ddq.noalias() = d.N * d.reduced_force;
       return;
     }
@@ -780,6 +779,46 @@ namespace pinsettle
     // Body velocities in their own frames, as aba leaves them for the energy measures.
     for (pinocchio::JointIndex i = 1; i < static_cast<pinocchio::JointIndex>(model.njoints); ++i)
       data.v[i] = data.oMi[i].actInv(data.ov[i]);
+  }
+
+  void LoopStepper::loopAcceleration(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v)
+  {
+    // Loops with couplings: the loops' rows J N s_dot = -gamma, gamma = Jdot v (the relative
+    // acceleration of their ends at zero joint acceleration), the reactions lambda by least
+    // squares (redundant rows): s_dot = s_free + M_r^-1 (J N)^T lambda.
+    Impl & d = *impl_;
+    const pinocchio::Model & model = d.model;
+    evaluateLoops(model, data, d.loops, q, d.error, &d.J, d.work_a, d.work_b);
+    pinocchio::forwardKinematics(model, data, q, v, d.zero); // data.a: the bias accelerations
+    Eigen::Index rows = 0;
+    for (const Loop & loop : d.loops.loops())
+    {
+      Eigen::Vector3d linear = Eigen::Vector3d::Zero(), angular = Eigen::Vector3d::Zero();
+      for (const double sign : {1., -1.})
+      {
+        const pinocchio::JointIndex joint = sign > 0. ? loop.joint_a : loop.joint_b;
+        const pinocchio::SE3 & placement = sign > 0. ? loop.placement_a : loop.placement_b;
+        if (joint == 0)
+          continue;
+        const pinocchio::Motion velocity = placement.actInv(data.v[joint]);
+        const pinocchio::Motion acceleration = placement.actInv(data.a[joint]);
+        const Eigen::Matrix3d R = data.oMi[joint].rotation() * placement.rotation();
+        linear += sign * R * (acceleration.linear() + velocity.angular().cross(velocity.linear()));
+        angular += sign * R * acceleration.angular();
+      }
+      d.gamma.segment<3>(rows) = linear;
+      if (loop.kind == LoopKind::Frame)
+        d.gamma.segment<3>(rows + 3) = angular;
+      rows += loop.rows();
+    }
+    const Eigen::MatrixXd JN = d.J.topRows(rows) * d.N;
+    const Eigen::MatrixXd MinvJt = d.mass_llt.solve(JN.transpose());
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(
+      JN * MinvJt, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::VectorXd lambda;
+    solveLeastNorm(svd, svdRank(svd), (-d.gamma.head(rows) - JN * d.reduced_force).eval(), lambda);
+    d.reduced_force.noalias() += MinvJt * lambda;
   }
 
   double LoopStepper::project(

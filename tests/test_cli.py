@@ -79,6 +79,8 @@ def test_demo_flags_reach_the_solver():
         (["--dt", "2e-3"], {"dt": 2e-3}),
         (["--dt-safety", "0.1"], {"dt_safety": 0.1}),
         (["--polish"], {"polish": True}),
+        (["--no-polish"], {"polish": False}),
+        (["--no-backtrack"], {"backtrack": False}),
     ],
 )
 def test_demo_step_flags_reach_the_solver(flags, settings):

@@ -35,7 +35,10 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--dt", type=_step, help="time step (s), or 'auto' (the default)")
     group.add_argument("--dt-safety", type=float, help="fraction of the stable step (dt auto)")
     group.add_argument(
-        "--polish", action="store_true", default=None, help="Newton polish after convergence"
+        "--polish",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="Newton polish after convergence (default: on)",
     )
     group.add_argument(
         "--scale-stiff-modes",
@@ -48,7 +51,12 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--max-e", type=float, help="bound on the energy summed over the window")
     group.add_argument("--max-steps", type=int, help="largest number of steps")
     group.add_argument("--max-time", type=float, help="wall-clock budget (s)")
-    group.add_argument("--backtrack", action="store_true", default=None, help="back up to the peak")
+    group.add_argument(
+        "--backtrack",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="back up to the interpolated peak before damping (default: on)",
+    )
 
 
 def _add_floating_flag(parser: argparse.ArgumentParser) -> None:

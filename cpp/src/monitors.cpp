@@ -148,10 +148,10 @@ namespace pinsettle
     report_ = StabilityReport();
   }
 
-  bool RestCheck::isDue(bool quiet, bool decreasing, bool exact_rest, std::int64_t step)
+  bool RestCheck::isDue(bool quiet, bool not_rising, bool exact_rest, std::int64_t step)
   {
-    creeping_ = quiet && !decreasing && step - last_assessed_ >= window_;
-    return (quiet && decreasing) || exact_rest || creeping_;
+    creeping_ = quiet && !not_rising && step - last_assessed_ >= window_;
+    return (quiet && not_rising) || exact_rest || creeping_;
   }
 
   void RestCheck::record(

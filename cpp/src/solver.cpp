@@ -158,6 +158,8 @@ namespace pinsettle
   , v_(model.nv)
   , dq_(model.nv)
   , q_next_(model.nq)
+  , q_before_(model.nq)
+  , q_before2_(model.nq)
   , tau_(Eigen::VectorXd::Zero(model.nv))
   , fext_(model.joints.size(), pinocchio::Force::Zero())
   , window_(1, 0.)
@@ -276,6 +278,8 @@ namespace pinsettle
         continue; // re-evaluate the dynamics at the damped state
       }
       peaks_.record(e.signal);
+      if (settings.backtrack)
+        keepConfiguration(e.exact + e.added);
       if (!integrate())
       {
         if (rollBack(result))
@@ -514,7 +518,7 @@ namespace pinsettle
   {
     window_.record(e.signal);
     const bool quiet = window_.isQuiet(e.signal);
-    if (!rest_.isDue(quiet, peaks_.isDecreasing(e.signal), window_.isExactRest(), step_))
+    if (!rest_.isDue(quiet, peaks_.isNotRising(e.signal), window_.isExactRest(), step_))
       return false;
     rest_.record(assess(q_, forces_), q_, step_);
     return true;
@@ -535,20 +539,36 @@ namespace pinsettle
     ++result.peaks;
     trace_.event(step_, time_, EventKind::Damping);
     if (settings_->backtrack)
-    {
-      const double back = peaks_.stepsPastPeak(e.signal) * step_control_.lastStep();
-      dq_.noalias() = -back * v_;
-      pinocchio::integrate(model_, q_, dq_, q_next_);
-      q_.swap(q_next_);
-      if (loops_ != nullptr)
-        stepper_->project(data, q_, v_);
-      time_ -= back;
-    }
+      backtrackToPeak(e.signal, e.exact + e.added);
     v_ *= kt_;
     runaway_.addRemoved((1. - kt_ * kt_) * (e.exact + e.added));
     peaks_.restart();
     guard_.keepIfClean(q_, v_, time_);
     reestimateStep();
+  }
+
+  void Solver::keepConfiguration(double exact)
+  {
+    q_before2_.swap(q_before_);
+    q_before_ = q_;
+    exact_before_ = exact;
+  }
+
+  void Solver::backtrackToPeak(double e, double exact)
+  {
+    // With kt > 0 the mechanism keeps going; moving it back then helps only if the exact energy
+    // is falling too: the simplified signal (masses left out) may peak where the real motion
+    // still gains speed, and moving back there would undo its progress at every such peak.
+    if (kt_ > 0. && !(exact < exact_before_))
+      return;
+    // A sample pairs q_k with the velocity of the step into it, v_{k-1/2}: the energy's vertex,
+    // stepsPastPeak samples back, lies half a step earlier along the path, between the two
+    // configurations kept before this one (1 to 2 steps back).
+    const double back = std::clamp(peaks_.stepsPastPeak(e) + 0.5, 1., 2.);
+    pinocchio::interpolate(model_, q_before_, q_before2_, back - 1., q_);
+    if (loops_ != nullptr)
+      stepper_->project(data, q_, v_);
+    time_ -= back * step_control_.lastStep();
   }
 
   bool Solver::integrate()

@@ -60,8 +60,9 @@ BOOST_AUTO_TEST_CASE(peak_detector_finds_the_maximum_one_sample_late)
     peaks.record(samples[k]);
   }
   BOOST_CHECK_EQUAL(found_at, 3); // the maximum is sample 2, seen at sample 3
-  BOOST_CHECK(peaks.isDecreasing(2.5));
-  BOOST_CHECK(!peaks.isDecreasing(3.5));
+  BOOST_CHECK(peaks.isNotRising(2.5));
+  BOOST_CHECK(!peaks.isNotRising(3.5));
+  BOOST_CHECK(peaks.isNotRising(3.)); // flat: an orbit repeating exactly is not rising
 }
 
 BOOST_AUTO_TEST_CASE(peak_detector_ignores_bumps_below_err_and_needs_a_fresh_stretch)

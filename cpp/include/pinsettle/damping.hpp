@@ -40,10 +40,11 @@ namespace pinsettle
       return fresh_ >= 2 && e_prev_ - e_prev2_ > err_ * e_prev_ && e_prev_ - e > err_ * e_prev_;
     }
 
-    /// \brief Whether e is below the previous sample of the stretch.
-    bool isDecreasing(double e) const
+    /// \brief Whether e is at most the previous sample of the stretch: falling, or flat (an
+    /// orbit whose samples repeat exactly: the three-sample rule sees no peak in it).
+    bool isNotRising(double e) const
     {
-      return fresh_ >= 1 && e < e_prev_;
+      return fresh_ >= 1 && e <= e_prev_;
     }
 
     /// \brief Whether the stretch has a sample before the current one.
@@ -83,7 +84,7 @@ namespace pinsettle
 
   ///
   /// \brief The stopping rule of kinetic damping: the energy summed over the last ds samples is
-  /// at most max_e (the caller adds "and decreasing"), and a whole window of exactly zero energy
+  /// at most max_e (the caller adds "and not rising"), and a whole window of exactly zero energy
   /// (a start at rest on an equilibrium, where the energy never decreases).
   ///
   /// Its memory is allocated by the constructor only.

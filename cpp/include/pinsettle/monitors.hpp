@@ -253,7 +253,7 @@ namespace pinsettle
   /// \brief Rest check: when the energy signals call for a stability assessment, whether the
   /// assessed rest ends the run, and the push off an unstable one.
   ///
-  /// The signals: quiet and decreasing (the stopping rule); a whole window at exact rest (a
+  /// The signals: quiet and not rising (the stopping rule); a whole window at exact rest (a
   /// start on an equilibrium); quiet but still rising, once a window (creeping away from a
   /// saddle a round-off off). A stable or neutral rest ends the run unless it was only creeping;
   /// an unstable one (a saddle, a maximum) is pushed along its most negative stiffness direction
@@ -270,7 +270,7 @@ namespace pinsettle
     void start(std::int64_t window, double push_energy, EnergyMeasure measure);
 
     /// \brief Whether the signals call for an assessment at step.
-    bool isDue(bool quiet, bool decreasing, bool exact_rest, std::int64_t step);
+    bool isDue(bool quiet, bool not_rising, bool exact_rest, std::int64_t step);
 
     /// \brief Keep the assessment of q, made at step.
     void record(const StabilityReport & report, const Eigen::VectorXd & q, std::int64_t step);

@@ -19,7 +19,7 @@ namespace pinsettle
   /// \brief How a solve ended.
   enum class Status
   {
-    /// The stopping rule held: energy decreasing and the window sum <= max_e.
+    /// The stopping rule held: energy not rising and the window sum <= max_e.
     Converged,
     /// Settings::max_steps steps were taken without convergence.
     MaxSteps,

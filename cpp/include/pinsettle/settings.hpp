@@ -37,7 +37,8 @@ namespace pinsettle
     /// start and again whenever the state has moved far (computeTimeScale).
     double dt = 0.;
     /// Safety factor c of the automatic step, in (0, 1]: the fraction of the linearised
-    /// stability limit used (docs/robustness.md shows how the default was measured).
+    /// stability limit used (docs/benchmarks.md and docs/robustness.md show how the default was
+    /// measured).
     double dt_safety = 0.2;
     /// With the automatic step: give modes far stiffer than the rest (kStiffGap) a larger
     /// effective mass, so that the step follows the slow modes (computeTimeScale). The
@@ -61,7 +62,8 @@ namespace pinsettle
     double max_time = std::numeric_limits<double>::infinity();
     /// Energy signal of the peak detector and the stopping rule.
     EnergyMeasure energy = EnergyMeasure::Exact;
-    /// Move the configuration back to the parabola-interpolated peak before damping.
+    /// Move the configuration back to the parabola-interpolated peak before damping, along the
+    /// path of the last two steps (with kt > 0 only while the exact energy falls too).
     bool backtrack = false;
     /// Record a trace sample every trace_every steps; 0 disables the trace.
     std::int64_t trace_every = 0;

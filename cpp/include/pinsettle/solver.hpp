@@ -191,6 +191,10 @@ namespace pinsettle
     bool isAssessedAtRest(const StepEnergies & e);
     void pushOff(Result & result);
     void damp(const StepEnergies & e, Result & result);
+    // With backtracking: the configurations of the last two samples, and the move back to the
+    // peak between them.
+    void keepConfiguration(double exact);
+    void backtrackToPeak(double e, double exact);
     bool integrate();
     double residualAt(const Eigen::VectorXd & q, const ForceModel * forces);
     double residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau);
@@ -229,6 +233,9 @@ namespace pinsettle
 
     // Workspace, sized once for the model.
     Eigen::VectorXd q_, v_, dq_, q_next_, tau_;
+    // q one and two samples back, and the exact energy (with added inertia) one back
+    Eigen::VectorXd q_before_, q_before2_;
+    double exact_before_ = 0.;
     ForceVector fext_;
 
     // The parts of the loop, each with its own state.

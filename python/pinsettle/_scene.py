@@ -784,11 +784,8 @@ class Scene:
         for joint, value in self._start.items():
             j = self.model.getJointId(joint)
             q[self.model.idx_qs[j] : self.model.idx_qs[j] + self.model.nqs[j]] = value
-        for c in self.couplings:  # a follower not named starts where its leader puts it
-            if c.follower not in self._start:
-                iq = self.model.idx_qs[self.model.getJointId(c.follower)]
-                q[iq] = c.multiplier * q[self.model.idx_qs[self.model.getJointId(c.leader)]]
-                q[iq] += c.offset
+        # a follower not named starts where its leader puts it
+        self._set_followers(q, self.model.idx_qs, with_offset=True, keep=self._start)
         return q
 
     # -- a model with mimic joints, in its own coordinates ------------------------------------
@@ -806,6 +803,18 @@ class Scene:
             np.concatenate(v_index or [np.zeros(0)]).astype(int),
         )
 
+    def _set_followers(self, x: np.ndarray, index: Any, with_offset: bool, keep: Any = ()) -> None:
+        """Each coupling's follower coordinate in x (a configuration with ``model.idx_qs`` and
+        the offset, or a velocity with ``model.idx_vs``) set from its leader's, in coupling
+        order; followers named in keep are left as they are."""
+        for c in self.couplings:
+            if c.follower in keep:
+                continue
+            leader = x[index[self.model.getJointId(c.leader)]]
+            x[index[self.model.getJointId(c.follower)]] = c.multiplier * leader + (
+                c.offset if with_offset else 0.0
+            )
+
     def from_mimic_q(self, q: Any) -> np.ndarray:
         """A configuration of ``mimic_model`` (the model given, with mimic joints) as one of
         ``model``: each follower set from its leader."""
@@ -813,11 +822,7 @@ class Scene:
         q = as_vector(q, "q", self.mimic_model.nq, "model.nq")
         out = np.zeros(self.model.nq)
         out[self._mimic_indices()[0]] = q
-        for c in self.couplings:
-            leader = out[self.model.idx_qs[self.model.getJointId(c.leader)]]
-            out[self.model.idx_qs[self.model.getJointId(c.follower)]] = (
-                c.multiplier * leader + c.offset
-            )
+        self._set_followers(out, self.model.idx_qs, with_offset=True)
         return out
 
     def from_mimic_v(self, v: Any) -> np.ndarray:
@@ -827,9 +832,7 @@ class Scene:
         v = as_vector(v, "v", self.mimic_model.nv, "model.nv")
         out = np.zeros(self.model.nv)
         out[self._mimic_indices()[1]] = v
-        for c in self.couplings:
-            leader = out[self.model.idx_vs[self.model.getJointId(c.leader)]]
-            out[self.model.idx_vs[self.model.getJointId(c.follower)]] = c.multiplier * leader
+        self._set_followers(out, self.model.idx_vs, with_offset=False)
         return out
 
     def to_mimic_q(self, q: np.ndarray) -> np.ndarray:

@@ -361,6 +361,16 @@ BOOST_AUTO_TEST_CASE(rest_check_assesses_when_the_signals_say_so)
   const Eigen::VectorXd q = Eigen::VectorXd::Zero(1);
   rest.record(stable, q, 100);
   BOOST_CHECK(!rest.accepts()); // a creeping stable rest is not accepted yet
+  pinsettle::StabilityReport neutral;
+  neutral.verdict = pinsettle::Stability::Neutral;
+  rest.record(neutral, q, 100);
+  BOOST_CHECK(rest.accepts()); // a creeping neutral one is: its energy may never peak
+  pinsettle::StabilityReport unstable;
+  unstable.verdict = pinsettle::Stability::Unstable;
+  rest.record(unstable, q, 100);
+  BOOST_CHECK(!rest.accepts());
+  BOOST_CHECK(rest.isUnstable());
+  rest.record(stable, q, 100);
   BOOST_CHECK(!rest.isDue(true, false, false, 150));
   BOOST_CHECK(rest.isDue(true, true, false, 150));
   rest.record(stable, q, 150);

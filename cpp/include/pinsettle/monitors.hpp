@@ -255,7 +255,9 @@ namespace pinsettle
   ///
   /// The signals: quiet and not rising (the stopping rule); a whole window at exact rest (a
   /// start on an equilibrium); quiet but still rising, once a window (creeping away from a
-  /// saddle a round-off off). A stable or neutral rest ends the run unless it was only creeping;
+  /// saddle a round-off off). A neutral rest ends the run, creeping or not: a round-off force
+  /// along its neutral direction (a joint about the vertical) raises the energy forever without
+  /// a peak. A stable rest ends it unless it was only creeping (it swings back: a peak comes);
   /// an unstable one (a saddle, a maximum) is pushed along its most negative stiffness direction
   /// with a tiny energy, so that it falls away to where the mechanism would really stay.
   ///
@@ -278,7 +280,8 @@ namespace pinsettle
     /// \brief Whether the rest just assessed ends the run.
     bool accepts() const
     {
-      return report_.verdict != Stability::Unstable && !creeping_;
+      return report_.verdict == Stability::Neutral
+             || (report_.verdict == Stability::Stable && !creeping_);
     }
 
     /// \brief Whether the rest just assessed must be pushed off.

@@ -86,6 +86,36 @@ BOOST_AUTO_TEST_CASE(peak_detector_ignores_bumps_below_err_and_needs_a_fresh_str
   BOOST_CHECK(exact.isPeak(1.));
 }
 
+BOOST_AUTO_TEST_CASE(peak_detector_sees_the_flat_top_of_a_periodic_orbit)
+{
+  // Semi-implicit Euler on x'' = -omega^2 x from rest with h omega = 1 repeats every 6 steps;
+  // the kinetic energy samples (the velocity of the step into each) are 0, E, E, 0, E, E, ...:
+  // no sample exceeds both neighbours, the top is flat.
+  pinsettle::PeakDetector peaks(1e-12);
+  double x = 1., v = 0.;
+  const double h = 0.1, omega = 10.;
+  int found_at = -1;
+  for (int k = 0; k < 6 && found_at < 0; ++k)
+  {
+    v -= h * omega * omega * x;
+    x += h * v;
+    const double e = 0.5 * v * v;
+    if (peaks.isPeak(e))
+      found_at = k;
+    peaks.record(e);
+  }
+  BOOST_CHECK_EQUAL(found_at, 2); // the samples: E, E, 0
+  // Rising to a plateau is not a peak; a plateau that stays is not either.
+  pinsettle::PeakDetector plateau(1e-12);
+  plateau.record(1.);
+  plateau.record(2.);
+  BOOST_CHECK(!plateau.isPeak(2.));
+  plateau.record(2.);
+  BOOST_CHECK(!plateau.isPeak(2.));
+  BOOST_CHECK(plateau.isPeak(1.));
+  BOOST_CHECK_CLOSE(plateau.stepsPastPeak(1.), 1.5, 1e-12); // the vertex halfway along the top
+}
+
 BOOST_AUTO_TEST_CASE(peak_detector_locates_the_vertex_of_a_parabola)
 {
   // Samples of e(t) = 10 - (t - t0)^2 at t = 0, 1, 2: the vertex at t0; the last sample lies

@@ -16,7 +16,10 @@ namespace pinsettle
   ///
   /// The middle of the last three samples of one undamped stretch is a peak when it exceeds both
   /// neighbours by more than err times itself (relative, so that peaks are still found after the
-  /// energy has fallen by many decades). The peak is seen one step late.
+  /// energy has fallen by many decades). The peak is seen one step late. A flat top, the middle
+  /// sample exactly equal to the one before it and above the next, is a peak too: the samples of
+  /// a periodic orbit of the integrator repeat exactly (one mode at h omega = 1 turns 60 degrees a
+  /// step), and the rule would never see its tops.
   ///
   class PeakDetector
   {
@@ -37,7 +40,8 @@ namespace pinsettle
     /// \brief Whether the newest sample e makes the previous one a peak (nothing is recorded).
     bool isPeak(double e) const
     {
-      return fresh_ >= 2 && e_prev_ - e_prev2_ > err_ * e_prev_ && e_prev_ - e > err_ * e_prev_;
+      return fresh_ >= 2 && (e_prev_ - e_prev2_ > err_ * e_prev_ || e_prev_ == e_prev2_)
+             && e_prev_ - e > err_ * e_prev_;
     }
 
     /// \brief Whether e is at most the previous sample of the stretch: falling, or flat (an

@@ -8,7 +8,10 @@ and kt in {0, 0.5, 0.9}. A case passes when it ends
   Pinocchio's RNEA, springs and loads written out here with frame Jacobians, a finite-difference
   Jacobian: nothing of pinsettle's force or stiffness code), and that equilibrium stable or
   neutral by the eigenvalues of the symmetric part of that same finite-difference Jacobian (a
-  rest on a saddle fails, whatever the solver's own verdict says);
+  rest on a saddle fails, whatever the solver's own verdict says); a case with joint stops
+  (the UR5's own limits) holds the joints pressed on a stop out of Newton and of the
+  eigenvalues, and checks the conditions of a rest there: every joint within its stops, the
+  static force at a pressed one pushing into the stop;
 - or with the status the case expects (``no_equilibrium``),
 
 and never with a non-finite value, a crash or a hang (each run has a wall-clock budget).
@@ -52,9 +55,13 @@ class Physics:
     # (frame a, point in a, frame b, point in b, stiffness, rest length)
     springs: list[tuple[str, tuple, str, tuple, float, float]] = field(default_factory=list)
     loads: list[tuple[str, float]] = field(default_factory=list)  # joint, effort (1-DoF)
+    # joint, lower, upper (rad or m, 1-DoF): the only stops; the model's own limits are off
+    stops: list[tuple[str, float, float]] = field(default_factory=list)
 
     def scene(self) -> pinsettle.Scene:
-        scene = pinsettle.Scene(self.model)
+        scene = pinsettle.Scene(self.model, limits=False)
+        for joint, lower, upper in self.stops:
+            scene.set_limit(joint, lower, upper)
         for joint, k, rest in self.joint_springs:
             scene.add_joint_spring(joint, stiffness=k, rest=rest)
         for fa, pa, fb, pb, k, rest in self.springs:
@@ -116,29 +123,63 @@ def jacobian(physics: Physics, q: np.ndarray) -> np.ndarray:
     return J
 
 
-def newton(physics: Physics, q: np.ndarray, iterations: int = 30) -> tuple[np.ndarray, float]:
+def newton(
+    physics: Physics, q: np.ndarray, iterations: int = 30, held: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
     """Newton's method on the static force from q with a central-difference Jacobian (least
     squares: neutral directions are left alone), until the step is below 1e-13 or stops
-    helping. Returns the root and the size of the last step taken (rad or m): the root is known
-    to about that."""
+    helping. ``held`` (velocity indices) are coordinates pressed against a stop: they do not
+    move and their force is the stop's to carry. Returns the root and the size of the last step
+    taken (rad or m): the root is known to about that."""
     model = physics.model
+    free = np.setdiff1d(np.arange(model.nv), [] if held is None else held)
     q = q.copy()
     last = math.inf
     for _ in range(iterations):
-        r = static_force(physics, q)
+        r = static_force(physics, q)[free]
         if not np.any(r):
             return q, 0.0
-        J = jacobian(physics, q)
-        step = np.linalg.lstsq(J, -r, rcond=1e-8)[0]  # FD noise: ~1e-8 of the largest
+        J = jacobian(physics, q)[np.ix_(free, free)]
+        step = np.zeros(model.nv)
+        step[free] = np.linalg.lstsq(J, -r, rcond=1e-8)[0]  # FD noise: ~1e-8 of the largest
         size = float(np.max(np.abs(step)))
         trial = pinocchio.integrate(model, q, step)
         # From a good answer Newton takes full steps; one that does not lower |r| is round-off.
-        if np.max(np.abs(static_force(physics, trial))) >= np.max(np.abs(r)):
+        if np.max(np.abs(static_force(physics, trial)[free])) >= np.max(np.abs(r)):
             return q, min(last, size)
         q, last = trial, size
         if size < 1e-13:
             break
     return q, last
+
+
+STOP_TOLERANCE = 1e-9  # rad or m: a coordinate this close to a stop is pressed against it
+
+
+def pressed(physics: Physics, q: np.ndarray) -> tuple[np.ndarray, str]:
+    """The coordinates of q pressed against a stop (velocity indices), and what breaks the
+    conditions of a rest at stops, "" if nothing: every coordinate within its stops, and at a
+    pressed one the static force pushing into the stop (a stop pushes, it never pulls), to
+    1e-8 of the largest static force."""
+    model = physics.model
+    force = static_force(physics, q)
+    slack = 1e-8 * max(float(np.max(np.abs(force))), 1e-300)
+    held = []
+    for joint, lower, upper in physics.stops:
+        j = model.getJointId(joint)
+        x, i = float(q[model.idx_qs[j]]), model.idx_vs[j]
+        if not lower - STOP_TOLERANCE <= x <= upper + STOP_TOLERANCE:
+            return np.array(held, dtype=int), f"{joint} at {x:.6g} outside [{lower:g}, {upper:g}]"
+        # The static force is what holds the mechanism: positive at a lower stop means the
+        # mechanism pushes down into it.
+        for bound, sign in ((lower, 1.0), (upper, -1.0)):
+            if abs(x - bound) <= STOP_TOLERANCE:
+                if sign * force[i] < -slack:
+                    return np.array(held, dtype=int), (
+                        f"{joint} at its stop {bound:g} pulled away from it ({force[i]:.2e})"
+                    )
+                held.append(i)
+    return np.array(held, dtype=int), ""
 
 
 # Zero eigenvalues (neutral directions) are told from negative ones within this fraction of the
@@ -154,10 +195,14 @@ class Stability:
     tolerance: float
 
 
-def stability(physics: Physics, q: np.ndarray) -> Stability:
+def stability(physics: Physics, q: np.ndarray, held: np.ndarray | None = None) -> Stability:
     """The kind of rest at q from the eigenvalues of the symmetric part of this module's own
-    finite-difference stiffness (the Jacobian Newton uses), not from pinsettle's verdict."""
-    J = jacobian(physics, q)
+    finite-difference stiffness (the Jacobian Newton uses), not from pinsettle's verdict; with
+    ``held`` (coordinates pressed against a stop) that of the free coordinates."""
+    free = np.setdiff1d(np.arange(physics.model.nv), [] if held is None else held)
+    if free.size == 0:  # every coordinate pressed on a stop: nothing can move
+        return Stability("stable", math.inf, 0.0)
+    J = jacobian(physics, q)[np.ix_(free, free)]
     eigenvalues = np.linalg.eigvalsh(0.5 * (J + J.T))
     noise = len(J) * float(np.max(np.abs(J - J.T)))
     tolerance = max(NEUTRAL_TOLERANCE * float(np.max(np.abs(eigenvalues))), noise, 1e-300)
@@ -227,6 +272,25 @@ class Case:
     settings: dict = field(default_factory=dict)  # beyond the defaults, said in the table
 
 
+def model_stops(model: pinocchio.Model) -> list[tuple[str, float, float]]:
+    """The stops of a model's own position limits, read here: joints with one coordinate and one
+    degree of freedom whose limits differ (a URDF writes equal ones for none); a side beyond
+    1e10 (rad or m) or not finite is no stop."""
+    stops = []
+    for j in range(1, model.njoints):
+        if model.nqs[j] != 1 or model.nvs[j] != 1:
+            continue
+        lower = float(model.lowerPositionLimit[model.idx_qs[j]])
+        upper = float(model.upperPositionLimit[model.idx_qs[j]])
+        if lower == upper:
+            continue
+        lower = lower if -1e10 < lower else -math.inf
+        upper = upper if upper < 1e10 else math.inf
+        if math.isfinite(lower) or math.isfinite(upper):
+            stops.append((model.names[j], lower, upper))
+    return stops
+
+
 def _physics_case(physics: Physics, q0) -> Callable:
     def build():
         return physics, physics.scene(), np.asarray(q0, dtype=float)
@@ -239,7 +303,8 @@ def _scene_case(name: str, reference: bool = True) -> Callable:
 
     def build():
         scene = pinsettle.load_scene(pinsettle.scene_path(name))
-        physics = Physics(scene.model) if reference else None
+        stops = model_stops(scene.model) if scene.limits and not scene.joint_limits else []
+        physics = Physics(scene.model, stops=stops) if reference else None
         if reference:
             assert not scene.has_elements, name
         return physics, scene, scene.q0()
@@ -330,7 +395,7 @@ def cases() -> list[Case]:
         Case(
             "UR5 from a contorted pose",
             "far start",
-            _physics_case(Physics(ur5), [2.5, -2.0, 2.8, -2.5, 1.5, 1.0]),
+            _physics_case(Physics(ur5, stops=model_stops(ur5)), [2.5, -2.0, 2.8, -2.5, 1.5, 1.0]),
         )
     )
     # Exactly at an unstable equilibrium.
@@ -382,13 +447,16 @@ def run(case: Case, energy: str, kt: float) -> Outcome:
         if not result.converged:
             why = f"ended {result.status}"
         else:
-            root, uncertainty = newton(physics, result.q)
-            if not uncertainty <= 1e-3 * JOINT_TOLERANCE:
+            held, broken = pressed(physics, result.q)
+            root, uncertainty = newton(physics, result.q, held=held)
+            if broken:
+                why = broken
+            elif not uncertainty <= 1e-3 * JOINT_TOLERANCE:
                 why = f"reference Newton did not settle (last step {uncertainty:.1e})"
             else:
                 diff = pinocchio.difference(physics.model, root, result.q)
                 error = float(np.max(np.abs(diff)))
-                reference = stability(physics, root)
+                reference = stability(physics, root, held)
                 if not error <= JOINT_TOLERANCE:
                     why = f"{error:.1e} from the Newton root"
                 elif reference.verdict == "unstable":

@@ -105,3 +105,50 @@ def test_a_rest_on_a_saddle_fails_whatever_the_solver_says(monkeypatch):
     assert not outcome.passed
     assert "saddle" in outcome.why and outcome.reference_stability == "unstable"
     assert outcome.error <= stress.JOINT_TOLERANCE  # it is an equilibrium: only its kind fails
+
+
+def test_a_rest_at_a_stop_is_checked_by_the_conditions_of_a_stop(monkeypatch):
+    # A hanging pendulum with stops at 0.3 and 1.0 rad comes to rest on the lower one: gravity
+    # presses it there, the reference holds that joint and checks the sign of the force.
+    physics = stress.Physics(stress.chain([1.0], [1.0]), stops=[("j0", 0.3, 1.0)])
+    case = stress.Case("pendulum on a stop", "test", stress._physics_case(physics, [0.8]))
+    real = stress.run(case, "exact", 0.5)
+    assert real.passed, real.why
+    assert real.status == "converged"
+    held, broken = stress.pressed(physics, np.array([0.3]))
+    assert list(held) == [0] and broken == ""
+
+    def answer(q):
+        class Answer:
+            v = np.zeros(1)
+            status = "converged"
+            converged = True
+            stability = "stable"
+            steps = 0
+            residual = 0.0
+            dt_reductions = 0
+            scaled_modes = 0
+
+        Answer.q = np.array([q])
+        return lambda *args, **kwargs: Answer()
+
+    # Resting on the upper stop: gravity pulls it away, no stop can hold it there.
+    monkeypatch.setattr(stress.pinsettle, "solve", answer(1.0))
+    outcome = stress.run(case, "exact", 0.5)
+    assert not outcome.passed and "pulled away" in outcome.why
+    # Beyond a stop.
+    monkeypatch.setattr(stress.pinsettle, "solve", answer(1.2))
+    outcome = stress.run(case, "exact", 0.5)
+    assert not outcome.passed and "outside" in outcome.why
+    # Without the stops the reference finds that 0.3 rad is no equilibrium.
+    free = stress.Case(
+        "pendulum, no stop", "test", stress._physics_case(stress.Physics(physics.model), [0.8])
+    )
+    monkeypatch.setattr(stress.pinsettle, "solve", answer(0.3))
+    assert not stress.run(free, "exact", 0.5).passed
+
+
+def test_the_reference_reads_the_model_limits_as_pinsettle_does():
+    ur5 = stress.pinsettle.load_robot("ur5")
+    ours = {name: (lower, upper) for name, lower, upper in stress.model_stops(ur5)}
+    assert ours == stress.pinsettle._scene.model_stops(ur5)

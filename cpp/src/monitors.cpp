@@ -144,8 +144,9 @@ namespace pinsettle
     push_energy_ = push_energy;
     measure_ = measure;
     last_assessed_ = 0;
-    creeping_ = false;
+    creeping_ = stalled_ = false;
     report_ = StabilityReport();
+    report_q_.resize(0);
   }
 
   bool RestCheck::isDue(bool quiet, bool not_rising, bool exact_rest, std::int64_t step)
@@ -157,6 +158,7 @@ namespace pinsettle
   void RestCheck::record(
     const StabilityReport & report, const Eigen::VectorXd & q, std::int64_t step)
   {
+    stalled_ = creeping_ && report_q_.size() == q.size() && report_q_ == q;
     report_ = report;
     report_q_ = q;
     last_assessed_ = step;

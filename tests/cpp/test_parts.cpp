@@ -407,6 +407,19 @@ BOOST_AUTO_TEST_CASE(rest_check_assesses_when_the_signals_say_so)
   BOOST_CHECK(rest.accepts());
   BOOST_CHECK(rest.isAssessed(q));
   BOOST_CHECK(!rest.isAssessed(Eigen::VectorXd::Ones(1)));
+  // Creeping at a stable rest a window later with q unchanged, to the bit: a stall below the
+  // resolution of q, accepted; had q moved, the swing back is still to come.
+  pinsettle::RestCheck stall;
+  stall.start(100, 1e-11, pinsettle::EnergyMeasure::Exact);
+  BOOST_CHECK(stall.isDue(true, false, false, 100));
+  stall.record(stable, q, 100);
+  BOOST_CHECK(!stall.accepts());
+  BOOST_CHECK(stall.isDue(true, false, false, 200));
+  stall.record(stable, Eigen::VectorXd::Constant(1, 1e-300), 200);
+  BOOST_CHECK(!stall.accepts());
+  BOOST_CHECK(stall.isDue(true, false, false, 300));
+  stall.record(stable, Eigen::VectorXd::Constant(1, 1e-300), 300);
+  BOOST_CHECK(stall.accepts());
 }
 
 BOOST_AUTO_TEST_CASE(rest_check_pushes_an_upright_pendulum_with_the_push_energy)

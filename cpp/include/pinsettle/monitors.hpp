@@ -257,7 +257,10 @@ namespace pinsettle
   /// start on an equilibrium); quiet but still rising, once a window (creeping away from a
   /// saddle a round-off off). A neutral rest ends the run, creeping or not: a round-off force
   /// along its neutral direction (a joint about the vertical) raises the energy forever without
-  /// a peak. A stable rest ends it unless it was only creeping (it swings back: a peak comes);
+  /// a peak. A stable rest ends it unless it was only creeping (it swings back: a peak comes),
+  /// or creeping with q unchanged since the last assessment: steps below the resolution of q
+  /// (a fixed step of 2e-4 s at 1e-13 rad/s) leave q where it is while a round-off force
+  /// raises v for ever, and no swing back comes;
   /// an unstable one (a saddle, a maximum) is pushed along its most negative stiffness direction
   /// with a tiny energy, so that it falls away to where the mechanism would really stay.
   ///
@@ -281,7 +284,7 @@ namespace pinsettle
     bool accepts() const
     {
       return report_.verdict == Stability::Neutral
-             || (report_.verdict == Stability::Stable && !creeping_);
+             || (report_.verdict == Stability::Stable && (!creeping_ || stalled_));
     }
 
     /// \brief Whether the rest just assessed must be pushed off.
@@ -315,7 +318,7 @@ namespace pinsettle
     std::int64_t window_ = 1, last_assessed_ = 0;
     double push_energy_ = 0.;
     EnergyMeasure measure_ = EnergyMeasure::Exact;
-    bool creeping_ = false;
+    bool creeping_ = false, stalled_ = false;
     StabilityReport report_;
     Eigen::VectorXd report_q_;
   };

@@ -184,7 +184,7 @@ namespace
 
     pinocchio::Data data(model);
     const double moved = pinsettle::assembleLoops(model, data, loops, q0);
-    const double dt = 0.1 * pinsettle::Settings().dt_safety
+    const double dt = 0.1 * pinsettle::effectiveDtSafety(pinsettle::Settings())
                       * pinsettle::computeTimeScale(model, data, loops, q0).critical_step;
 
     std::vector<double> tree, bare, exact, simplified;

@@ -55,7 +55,7 @@ BASELINE_MAX_TIME = 5.0
 BASELINE_SIDE_TIME = 2.0
 #: Timed repeats stop once they took this long in all (s): long runs are timed fewer times.
 REPEAT_BUDGET = 2.0
-DT_SAFETY = pinsettle.Settings().dt_safety
+DT_SAFETY = pinsettle.Settings().effective_dt_safety
 
 # --- the baselines: their rules and the sweeps of their own parameters ----------------------
 
@@ -78,7 +78,7 @@ BASELINE_RULES = {
 }
 #: The sweeps: step safety and c (as a multiple of the rule's) of the viscous baselines; FIRE's
 #: dt_max (a multiple of the stability limit) and the metric of its velocity mixing.
-VISCOUS_SAFETIES = (0.2, 0.5, 0.8, 0.9)
+VISCOUS_SAFETIES = tuple(sorted({0.2, DT_SAFETY, 0.5, 0.8, 0.9}))  # the rule among them
 DAMPING_FACTORS = (0.0625, 0.25, 1.0, 4.0)
 FIRE_DT_MAXES = (0.5, 1.0, 1.5, 2.0)
 FIRE_METRICS = ("euclid", "mass")

@@ -1499,7 +1499,9 @@ def defaults_section(results: D.Results) -> str:
         )
     return (
         "### The default settings\n\n"
-        f"`pinsettle.solve(scene)` with nothing changed (kt = {s.kt:g}, `max_e = {s.max_e:g}`, "
+        f"`pinsettle.solve(scene)` with nothing changed (kt = {s.kt:g}, `dt_safety = "
+        f"{s.dt_safety}` ({s.effective_dt_safety:g}), `backtrack = {s.backtrack}`, "
+        f"`max_e = {s.max_e:g}`, "
         f"`polish = {s.polish}`, `energy = {s.energy}`): status, steps, wall time (median, "
         "min-max), the final residual relative to the force scale (independent physics), whether "
         f"it is at most {LEVEL:g} (goal 2 of issue 20), the polish's Newton iterations and where "

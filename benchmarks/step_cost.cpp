@@ -118,7 +118,7 @@ int main(int argc, char ** argv)
   pinocchio::Data data(model);
   const double dt = finiteBareStep(
     model, steps,
-    0.1 * pinsettle::Settings().dt_safety
+    0.1 * pinsettle::effectiveDtSafety(pinsettle::Settings())
       * pinsettle::computeTimeScale(model, data, start(model)).critical_step);
 
   pinsettle::ForceElements none(model), joint_springs(model), point_spring(model);

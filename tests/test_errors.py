@@ -14,7 +14,7 @@ NAN, INF = math.nan, math.inf
 # (override, message pattern naming the field); out of range -> ValueError when solving.
 OUT_OF_RANGE = [
     ({"dt": 0.0}, r"^dt must be 'auto' or a finite number > 0"),
-    ({"dt": "fast"}, r"^dt must be 'auto' or a number > 0 \(seconds\), got 'fast'"),
+    ({"dt": "fast"}, r"^dt must be 'auto' or a finite number > 0 \(seconds\), got 'fast'"),
     ({"dt": -1e-3}, r"^dt must be"),
     ({"dt": NAN}, r"^dt must be .*got nan"),
     ({"dt": INF}, r"^dt must be .*got inf"),
@@ -35,9 +35,10 @@ OUT_OF_RANGE = [
     ({"trace_every": -1}, r"^trace_every must be an integer >= 0"),
     ({"trace_capacity": 1}, r"^trace_capacity must be an integer >= 2"),
     ({"check_every": 0}, r"^check_every must be an integer >= 1"),
-    ({"dt_safety": 0.0}, r"^dt_safety must be in \(0, 1\], got 0"),
-    ({"dt_safety": 1.5}, r"^dt_safety must be in \(0, 1\], got 1.5"),
-    ({"dt_safety": NAN}, r"^dt_safety must be in \(0, 1\], got nan"),
+    ({"dt_safety": 0.0}, r"^dt_safety must be 'auto' or a number in \(0, 1\], got 0"),
+    ({"dt_safety": 1.5}, r"^dt_safety must be 'auto' or a number in \(0, 1\], got 1.5"),
+    ({"dt_safety": NAN}, r"^dt_safety must be 'auto' or a number in \(0, 1\], got nan"),
+    ({"dt_safety": "fast"}, r"^dt_safety must be 'auto' or a number in \(0, 1\], got 'fast'"),
 ]
 
 
@@ -45,8 +46,8 @@ OUT_OF_RANGE = [
 def test_setting_out_of_range(pendulum, override, pattern):
     with pytest.raises(ValueError, match=pattern):
         pinsettle.solve(pendulum, [1.0], **override)
-    if "dt" in override:
-        # dt is 'auto' or a step: refused when set, so that no number can mean 'auto'.
+    if "dt" in override or "dt_safety" in override:
+        # 'auto' or a number: refused when set, so that no number can mean 'auto'.
         with pytest.raises(ValueError, match=pattern):
             pinsettle.Settings(**override)
         return

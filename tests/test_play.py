@@ -323,8 +323,9 @@ def test_live_page_shows_the_robot(live, browser, tmp_path):
 
 
 def _pendulum_on_stops():
-    """The pendulum released at 0.45 rad between stops at -0.3 and 0.5 rad: it swings through
-    the bottom, hits the lower stop, and settles hanging down between them."""
+    """The pendulum released at 0.45 rad between stops at -0.3 and 0.5 rad: with kt = 0.9 (the
+    fixture) it swings through the bottom, hits the lower stop, and settles hanging down
+    between them (kt = 0, stopped dead at the bottom, never reaches a stop)."""
     scene = pinsettle.Scene.from_urdf(ROBOTS / "pendulum.urdf")
     return scene.set_limit("hinge", lower=-0.3, upper=0.5).set_start(hinge=0.45)
 
@@ -333,7 +334,7 @@ def _pendulum_on_stops():
 def impacts(tmp_path_factory):
     play = _play()
     scene = _pendulum_on_stops()
-    result = pinsettle.solve(scene, **play.TRACE_SETTINGS)
+    result = pinsettle.solve(scene, kt=0.9, **play.TRACE_SETTINGS)
     html = tmp_path_factory.mktemp("impacts") / "impacts.html"
     viz = play.play(scene, result, html=html, live=False)
     return scene, result, viz, html

@@ -465,7 +465,7 @@ CLI_ERRORS: dict[str, tuple[list[str], list[str]]] = {
 CLI_RUNS: dict[str, list[str]] = {
     **{f"json-{name}": ["solve", name, "--json"] for name in ["pendulum", "bistable_pendulum"]},
     "json-file": ["solve", str(ROBOTS / "slider_spring.toml"), "--json"],
-    "json-locked": ["solve", "panda_fingers_locked", "--json", "--max-steps", "300"],
+    "json-locked": ["solve", "panda_fingers_locked", "--json", "--max-steps", "100"],
     "torque-disk": ["solve", "torque_disk", "--json"],
     "torque-disk-text": ["solve", "torque_disk"],
     "max-steps-flag": ["solve", "pendulum", "--json", "--max-steps", "10"],
@@ -688,7 +688,7 @@ def test_cli_json_of_a_file_path(cli):
 
 def test_cli_json_of_a_locked_scene_has_the_full_q(cli):
     out = json_of(cli["run-json-locked"])
-    assert out["status"] == "max_steps" and out["steps"] == 300
+    assert out["status"] == "max_steps" and out["steps"] == 100
     assert len(out["q"]) == 9
     assert out["joints"]["panda_finger_joint1"] == out["joints"]["panda_finger_joint2"] == 0.02
     out = json_of(cli["run-start-flag-locked"])

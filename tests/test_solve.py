@@ -106,10 +106,16 @@ def test_pendulum_launched_from_rest_position(pendulum):
 def test_kt_scales_the_velocity_at_each_peak(pendulum):
     # With a trace of every step: the step right after a damping event re-evaluates the same
     # configuration with kt v, so its exact energy is kt^2 times the previous sample's, and the
-    # simulated time does not advance.
+    # simulated time does not advance (without backtracking, which moves the configuration).
     kt = 0.3
     result = pinsettle.solve(
-        pendulum, [1.0], kt=kt, trace_every=1, trace_capacity=10**6, max_e=1e-14
+        pendulum,
+        [1.0],
+        kt=kt,
+        trace_every=1,
+        trace_capacity=10**6,
+        max_e=1e-14,
+        backtrack=False,
     )
     assert result.converged
     trace = result.trace
@@ -323,7 +329,7 @@ def test_trace_every_10(pendulum):
     assert trace.step[0] == 0
     assert trace.step[-1] > result.steps - 1 - trace.stride  # covers the whole run
     assert np.all(trace.kinetic_energy >= 0) and np.all(trace.simplified_kinetic_energy >= 0)
-    assert np.all(np.diff(trace.time) >= 0)  # without backtracking time never goes back
+    assert np.all(np.diff(trace.time) >= 0)  # time never goes back, backtracking or not
     assert np.all(trace.time <= trace.step * result.settings.dt + 1e-12)
     # The first sample is the start state.
     exact0, simplified0 = pinsettle.kinetic_energies(pendulum, q0, v0)
@@ -457,7 +463,7 @@ def test_settings_defaults():
     s = pinsettle.Settings()
     assert s.to_dict() == {
         "dt": "auto",
-        "dt_safety": 0.2,
+        "dt_safety": "auto",
         "kt": 0.0,
         "err": 1e-12,
         "ds": 100,
@@ -465,7 +471,7 @@ def test_settings_defaults():
         "max_steps": 1_000_000,
         "max_time": float("inf"),
         "energy": "exact",
-        "backtrack": False,
+        "backtrack": True,
         "polish": True,
         "scale_stiff_modes": True,
         "trace_every": 0,
@@ -473,6 +479,20 @@ def test_settings_defaults():
         "trace_configurations": False,
         "check_every": 256,
     }
+
+
+def test_dt_safety_auto_is_the_measured_factor_of_the_other_settings(pendulum):
+    s = pinsettle.Settings()
+    assert s.dt_safety == "auto" and s.effective_dt_safety == 0.3  # backtracking, exact energy
+    assert pinsettle.Settings(backtrack=False).effective_dt_safety == 0.2
+    assert pinsettle.Settings(energy="simplified").effective_dt_safety == 0.2
+    assert pinsettle.Settings(dt_safety=0.25, backtrack=False).effective_dt_safety == 0.25
+    # The solver uses it: the same run, to the bit, as the factor given by hand.
+    for overrides, factor in (({}, 0.3), ({"backtrack": False}, 0.2)):
+        auto = pinsettle.solve(pendulum, [1.0], **overrides)
+        given = pinsettle.solve(pendulum, [1.0], dt_safety=factor, **overrides)
+        assert auto.steps == given.steps and np.array_equal(auto.q, given.q)
+        assert auto.settings.dt_safety == "auto" and given.settings.dt_safety == factor
 
 
 def test_trace_records_configurations_and_events_for_playback():

@@ -81,16 +81,10 @@ def test_the_reference_verdict_is_its_own():
     assert stress.stability(ur5, up).min_eigenvalue < -10.0
 
 
-def test_a_rest_on_a_saddle_fails_whatever_the_solver_says(monkeypatch):
-    # A solver that stops a pendulum exactly upright and calls it stable: the case must fail
-    # on the reference's own eigenvalues (Newton agrees the pose is an equilibrium).
-    physics = stress.Physics(stress.chain([1.0], [1.0]))
-    case = stress.Case(
-        "upright pendulum, wrongly stable", "test", stress._physics_case(physics, [math.pi])
-    )
+def answer_at(q: float):
+    """A stand-in for pinsettle.solve that says it converged to a stable rest at q (1 DoF)."""
 
-    class Upright:
-        q = np.array([math.pi])
+    class Answer:
         v = np.zeros(1)
         status = "converged"
         converged = True
@@ -100,7 +94,19 @@ def test_a_rest_on_a_saddle_fails_whatever_the_solver_says(monkeypatch):
         dt_reductions = 0
         scaled_modes = 0
 
-    monkeypatch.setattr(stress.pinsettle, "solve", lambda *args, **kwargs: Upright())
+    Answer.q = np.array([q])
+    return lambda *args, **kwargs: Answer()
+
+
+def test_a_rest_on_a_saddle_fails_whatever_the_solver_says(monkeypatch):
+    # A solver that stops a pendulum exactly upright and calls it stable: the case must fail
+    # on the reference's own eigenvalues (Newton agrees the pose is an equilibrium).
+    physics = stress.Physics(stress.chain([1.0], [1.0]))
+    case = stress.Case(
+        "upright pendulum, wrongly stable", "test", stress._physics_case(physics, [math.pi])
+    )
+
+    monkeypatch.setattr(stress.pinsettle, "solve", answer_at(math.pi))
     outcome = stress.run(case, "exact", 0.5)
     assert not outcome.passed
     assert "saddle" in outcome.why and outcome.reference_stability == "unstable"
@@ -118,33 +124,19 @@ def test_a_rest_at_a_stop_is_checked_by_the_conditions_of_a_stop(monkeypatch):
     held, broken = stress.pressed(physics, np.array([0.3]))
     assert list(held) == [0] and broken == ""
 
-    def answer(q):
-        class Answer:
-            v = np.zeros(1)
-            status = "converged"
-            converged = True
-            stability = "stable"
-            steps = 0
-            residual = 0.0
-            dt_reductions = 0
-            scaled_modes = 0
-
-        Answer.q = np.array([q])
-        return lambda *args, **kwargs: Answer()
-
     # Resting on the upper stop: gravity pulls it away, no stop can hold it there.
-    monkeypatch.setattr(stress.pinsettle, "solve", answer(1.0))
+    monkeypatch.setattr(stress.pinsettle, "solve", answer_at(1.0))
     outcome = stress.run(case, "exact", 0.5)
     assert not outcome.passed and "pulled away" in outcome.why
     # Beyond a stop.
-    monkeypatch.setattr(stress.pinsettle, "solve", answer(1.2))
+    monkeypatch.setattr(stress.pinsettle, "solve", answer_at(1.2))
     outcome = stress.run(case, "exact", 0.5)
     assert not outcome.passed and "outside" in outcome.why
     # Without the stops the reference finds that 0.3 rad is no equilibrium.
     free = stress.Case(
         "pendulum, no stop", "test", stress._physics_case(stress.Physics(physics.model), [0.8])
     )
-    monkeypatch.setattr(stress.pinsettle, "solve", answer(0.3))
+    monkeypatch.setattr(stress.pinsettle, "solve", answer_at(0.3))
     assert not stress.run(free, "exact", 0.5).passed
 
 

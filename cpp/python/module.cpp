@@ -31,6 +31,31 @@ using namespace pinsettle;
 
 namespace
 {
+  // A setting that is 'auto' (stored as 0) or a number.
+  py::object autoOrNumber(double value)
+  {
+    return value == 0. ? py::object(py::str("auto")) : py::object(py::float_(value));
+  }
+
+  // 'auto' as 0, or the number if it is one accepts takes; the error names the setting.
+  double parseAutoOrNumber(
+    const py::object & value,
+    const std::string & name,
+    const std::string & numbers,
+    bool (*accepts)(double))
+  {
+    const std::string expected = name + " must be 'auto' or " + numbers + ", got ";
+    if (py::isinstance<py::str>(value))
+    {
+      if (value.cast<std::string>() != "auto")
+        throw std::invalid_argument(expected + "'" + value.cast<std::string>() + "'");
+      return 0.;
+    }
+    const double x = value.cast<double>();
+    if (!accepts(x))
+      throw std::invalid_argument(expected + py::repr(value).cast<std::string>());
+    return x;
+  }
 
   const pinocchio::Model & modelFrom(const py::handle & obj, const char * name = "model")
   {
@@ -333,32 +358,24 @@ PYBIND11_MODULE(_core, m)
     .def(py::init<>())
     .def(py::init<const Settings &>(), py::arg("other"))
     .def_property(
-      "dt",
-      [](const Settings & s) -> py::object {
-        if (s.dt == 0.)
-          return py::str("auto");
-        return py::float_(s.dt);
-      },
+      "dt", [](const Settings & s) { return autoOrNumber(s.dt); },
       [](Settings & s, const py::object & value) {
-        if (py::isinstance<py::str>(value))
-        {
-          if (value.cast<std::string>() != "auto")
-            throw std::invalid_argument(
-              "dt must be 'auto' or a number > 0 (seconds), got '" + value.cast<std::string>()
-              + "'");
-          s.dt = 0.;
-          return;
-        }
-        const double dt = value.cast<double>();
-        if (!(std::isfinite(dt) && dt > 0.))
-          throw std::invalid_argument(
-            "dt must be 'auto' or a finite number > 0 (seconds), got "
-            + py::repr(value).cast<std::string>());
-        s.dt = dt;
+        s.dt = parseAutoOrNumber(value, "dt", "a finite number > 0 (seconds)", [](double x) {
+          return std::isfinite(x) && x > 0.;
+        });
       },
       "Time step (s) > 0, or 'auto' (the default): dt_safety * 2 / omega_max.")
-    .def_readwrite(
-      "dt_safety", &Settings::dt_safety, "Fraction of the stability limit used by dt='auto'.")
+    .def_property(
+      "dt_safety", [](const Settings & s) { return autoOrNumber(s.dt_safety); },
+      [](Settings & s, const py::object & value) {
+        s.dt_safety = parseAutoOrNumber(
+          value, "dt_safety", "a number in (0, 1]", [](double x) { return x > 0. && x <= 1.; });
+      },
+      "Fraction of the stability limit used by dt='auto', in (0, 1], or 'auto' (the default): "
+      "0.3 with backtrack and the exact energy, 0.2 otherwise (measured).")
+    .def_property_readonly(
+      "effective_dt_safety", &effectiveDtSafety,
+      "The fraction dt='auto' uses: dt_safety, or for 'auto' that of the backtrack setting.")
     .def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
     .def_readwrite(
       "scale_stiff_modes", &Settings::scale_stiff_modes,

@@ -78,8 +78,8 @@ namespace pinsettle
   {
     if (!(std::isfinite(s.dt) && s.dt >= 0.))
       fail("dt", "a finite number > 0 (seconds), or 0 for the automatic step", s.dt);
-    if (!(s.dt_safety > 0. && s.dt_safety <= 1.))
-      fail("dt_safety", "in (0, 1]", s.dt_safety);
+    if (!(s.dt_safety >= 0. && s.dt_safety <= 1.))
+      fail("dt_safety", "in (0, 1], or 0 for the measured default", s.dt_safety);
     if (!(s.kt >= 0. && s.kt < 1.))
       fail("kt", "in [0, 1)", s.kt);
     if (!(std::isfinite(s.err) && s.err >= 0.))

@@ -538,10 +538,13 @@ namespace pinsettle
   {
     ++result.peaks;
     trace_.event(step_, time_, EventKind::Damping);
-    if (settings_->backtrack)
-      backtrackToPeak(e.signal, e.exact + e.added);
+    double taken = e.exact + e.added;
+    // Moved back to the peak, the mechanism gives up the potential it lost since too: at least
+    // the kinetic energy of the peak sample is taken out (the runaway monitor counts it).
+    if (settings_->backtrack && backtrackToPeak(e.signal, e.exact + e.added))
+      taken = std::max(taken, exact_before_);
     v_ *= kt_;
-    runaway_.addRemoved((1. - kt_ * kt_) * (e.exact + e.added));
+    runaway_.addRemoved((1. - kt_ * kt_) * taken);
     peaks_.restart();
     guard_.keepIfClean(q_, v_, time_);
     reestimateStep();
@@ -554,13 +557,14 @@ namespace pinsettle
     exact_before_ = exact;
   }
 
-  void Solver::backtrackToPeak(double e, double exact)
+  bool Solver::backtrackToPeak(double e, double exact)
   {
-    // With kt > 0 the mechanism keeps going; moving it back then helps only if the exact energy
-    // is falling too: the simplified signal (masses left out) may peak where the real motion
-    // still gains speed, and moving back there would undo its progress at every such peak.
-    if (kt_ > 0. && !(exact < exact_before_))
-      return;
+    // Moving back helps only if the exact energy is falling too: the simplified signal (masses
+    // left out) may peak where the real motion still gains speed, and moving back there undoes
+    // its progress at every such peak (with kt = 0 a 1e8 mass ratio then cycled for ever). At
+    // a peak of the exact signal this always holds.
+    if (!(exact < exact_before_))
+      return false;
     // A sample pairs q_k with the velocity of the step into it, v_{k-1/2}: the energy's vertex,
     // stepsPastPeak samples back, lies half a step earlier along the path, between the two
     // configurations kept before this one (1 to 2 steps back).
@@ -568,13 +572,15 @@ namespace pinsettle
     pinocchio::interpolate(model_, q_before_, q_before2_, back - 1., q_);
     if (loops_ != nullptr)
       stepper_->project(data, q_, v_);
-    time_ -= back * step_control_.lastStep();
+    // The clock is not moved back: it counts the time integrated, and the trace, the progress
+    // reports and playback (keyframes in time order) need it to run forward.
+    return true;
   }
 
   bool Solver::integrate()
   {
     correctAcceleration();
-    const double h = step_control_.nextStep(v_);
+    const double h = step_control_.nextStep(v_, data.ddq);
     integrateSemiImplicitEuler(model_, q_, v_, data.ddq, h, dq_, q_next_);
     if (!q_next_.allFinite() || !v_.allFinite())
       return false;

@@ -41,7 +41,7 @@ namespace pinsettle
     forces_ = forces;
     automatic_ = settings.dt == 0.;
     scale_stiff_modes_ = settings.scale_stiff_modes;
-    dt_safety_ = settings.dt_safety;
+    dt_safety_ = effectiveDtSafety(settings);
     dt_ = settings.dt;
     h_ = dt_;
     step_scale_ = 1.;
@@ -150,14 +150,18 @@ namespace pinsettle
     data.ddq.noalias() -= stiff_y_ * stiff_z_;
   }
 
-  double StepController::nextStep(const Eigen::VectorXd & v)
+  double StepController::nextStep(const Eigen::VectorXd & v, const Eigen::VectorXd & a)
   {
     h_ = dt_;
     if (automatic_)
     {
+      // The step moves q by h (v + h a); |v + h a| <= V + h A, and h (V + h A) <= c holds up
+      // to the positive root of A h^2 + V h - c, written so that A = 0 gives c / V.
       const double speed = v.lpNorm<Eigen::Infinity>();
-      if (speed * h_ > dt_safety_)
-        h_ = dt_safety_ / speed;
+      const double pull = a.lpNorm<Eigen::Infinity>();
+      const double bound =
+        2. * dt_safety_ / (speed + std::sqrt(speed * speed + 4. * pull * dt_safety_));
+      h_ = std::min(h_, bound); // bound is inf at rest with no pull, NaN never (c > 0)
     }
     return h_;
   }

@@ -17,7 +17,7 @@ from ._checks import unknown_key_message
 #: Settings keys with the Python type each one takes (used for clear messages).
 SETTING_TYPES: dict[str, str] = {
     "dt": "float or 'auto'",
-    "dt_safety": "float",
+    "dt_safety": "float or 'auto'",
     "kt": "float",
     "err": "float",
     "ds": "int",
@@ -44,12 +44,14 @@ class Settings(_core.Settings):
 
     Fields: ``dt`` time step (s), or 'auto' (the default: ``dt_safety`` times the stability
     limit 2 / omega_max of the mechanism linearised where it is, re-estimated as it moves);
-    ``dt_safety`` in (0, 1]; ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the
-    rest get a larger effective mass, equilibria unchanged); ``polish`` (Newton steps after
-    convergence); ``kt`` velocity scale at each energy peak, in [0, 1); ``err`` relative peak
-    threshold; ``ds`` stopping window (steps); ``max_e`` bound on the sum of the last ``ds``
-    energy samples (J for the exact measure); ``max_steps``; ``max_time`` (s); ``energy``
-    ('exact' or 'simplified'); ``backtrack`` (back up to the interpolated peak before damping);
+    ``dt_safety`` in (0, 1], or 'auto' (the default: 0.3 with ``backtrack`` and the exact
+    energy, 0.2 otherwise, measured; ``effective_dt_safety`` gives the value in use);
+    ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the rest get a larger
+    effective mass, equilibria unchanged); ``polish`` (Newton steps after convergence); ``kt``
+    velocity scale at each energy peak, in [0, 1); ``err`` relative peak threshold; ``ds``
+    stopping window (steps); ``max_e`` bound on the sum of the last ``ds`` energy samples (J for
+    the exact measure); ``max_steps``; ``max_time`` (s); ``energy`` ('exact' or 'simplified');
+    ``backtrack`` (back up to the interpolated peak before damping; on by default);
     ``trace_every`` (0: no trace); ``trace_capacity``; ``trace_configurations`` (record q in the
     trace, for playback); ``check_every`` (steps between checks of the clock and Ctrl-C).
     """

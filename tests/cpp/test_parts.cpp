@@ -197,12 +197,43 @@ BOOST_AUTO_TEST_CASE(step_controller_fixed_step_is_the_setting)
   control.start(settings, nullptr);
   BOOST_CHECK(!control.isAutomatic());
   // A fixed step is never shortened, whatever the speed.
-  BOOST_CHECK_EQUAL(control.nextStep(Eigen::VectorXd::Constant(1, 1e3)), 2e-3);
+  BOOST_CHECK_EQUAL(
+    control.nextStep(Eigen::VectorXd::Constant(1, 1e3), Eigen::VectorXd::Constant(1, 1e6)), 2e-3);
   BOOST_CHECK(!control.isEstimateDue(Eigen::VectorXd::Constant(1, 3.), 1000000));
   pinocchio::Data data(model);
   Eigen::VectorXd q = Eigen::VectorXd::Zero(1), v = Eigen::VectorXd::Zero(1);
   BOOST_CHECK_EQUAL(control.halve(data, q, v, 0), 0.);
   BOOST_CHECK_EQUAL(control.dt(), 1e-3);
+}
+
+BOOST_AUTO_TEST_CASE(effective_dt_safety_follows_backtrack_unless_given)
+{
+  pinsettle::Settings settings; // dt_safety 0: the measured default
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtSafety(settings), 0.3);
+  settings.backtrack = false;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtSafety(settings), 0.2);
+  settings.backtrack = true;
+  settings.energy = pinsettle::EnergyMeasure::Simplified;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtSafety(settings), 0.2);
+  settings.energy = pinsettle::EnergyMeasure::Exact;
+  settings.backtrack = false;
+  settings.dt_safety = 0.25;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtSafety(settings), 0.25);
+  settings.backtrack = true;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtSafety(settings), 0.25);
+  // The automatic step of a pendulum without backtracking uses the smaller factor.
+  const pinocchio::Model model = pendulum(2., 0.5);
+  pinocchio::Data data(model);
+  pinsettle::StepController with(model, nullptr), without(model, nullptr);
+  pinsettle::Settings on, off;
+  off.backtrack = false;
+  with.start(on, nullptr);
+  without.start(off, nullptr);
+  const Eigen::VectorXd q = Eigen::VectorXd::Zero(1);
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(1);
+  with.estimate(data, q, v, 0);
+  without.estimate(data, q, v, 0);
+  BOOST_CHECK_CLOSE(with.dt(), 1.5 * without.dt(), 1e-12);
 }
 
 BOOST_AUTO_TEST_CASE(step_controller_automatic_step_of_a_pendulum)
@@ -220,12 +251,27 @@ BOOST_AUTO_TEST_CASE(step_controller_automatic_step_of_a_pendulum)
   BOOST_CHECK_EQUAL(control.estimate(data, q, v, 0), 0.);
   const double inertia = m * l * l + 1e-3;
   const double omega = std::sqrt(m * g * l / inertia);
-  BOOST_CHECK_CLOSE(control.dt(), settings.dt_safety * 2. / omega, 1e-6);
+  const double c = pinsettle::effectiveDtSafety(settings); // the default: backtracking's
+  BOOST_CHECK_EQUAL(c, pinsettle::kDtSafetyBacktrack);
+  BOOST_CHECK_CLOSE(control.dt(), c * 2. / omega, 1e-6);
   BOOST_CHECK_EQUAL(control.estimates(), 1);
   // Slow motion takes the whole step; fast motion turns at most dt_safety per step.
-  BOOST_CHECK_EQUAL(control.nextStep(Eigen::VectorXd::Constant(1, 1e-3)), control.dt());
-  BOOST_CHECK_CLOSE(control.nextStep(Eigen::VectorXd::Constant(1, -1e3)), 0.2 / 1e3, 1e-12);
-  BOOST_CHECK_EQUAL(control.lastStep(), 0.2 / 1e3);
+  const Eigen::VectorXd none = Eigen::VectorXd::Zero(1);
+  BOOST_CHECK_EQUAL(control.nextStep(Eigen::VectorXd::Constant(1, 1e-3), none), control.dt());
+  BOOST_CHECK_CLOSE(control.nextStep(Eigen::VectorXd::Constant(1, -1e3), none), c / 1e3, 1e-12);
+  BOOST_CHECK_EQUAL(control.lastStep(), c / 1e3);
+  // From rest under a strong pull the kick counts: h^2 a = c, the move of the step.
+  const double pull = 1e4;
+  const double h = control.nextStep(none, Eigen::VectorXd::Constant(1, pull));
+  BOOST_CHECK_CLOSE(h * h * pull, c, 1e-10);
+  // Moving against the pull: the move h |v + h a| stays within c (the bound takes |v| + h |a|).
+  for (const double v0 : {-3., 3., 30.})
+  {
+    const double hv =
+      control.nextStep(Eigen::VectorXd::Constant(1, v0), Eigen::VectorXd::Constant(1, -pull));
+    BOOST_CHECK_LE(hv * std::abs(v0 - hv * pull), c * (1. + 1e-12));
+    BOOST_CHECK_CLOSE(hv * (std::abs(v0) + hv * pull), c, 1e-10);
+  }
   // A new estimate is due once a window has passed and the pendulum moved beyond kFarMove.
   const Eigen::VectorXd near = Eigen::VectorXd::Constant(1, 0.05);
   const Eigen::VectorXd far = Eigen::VectorXd::Constant(1, 0.15);
@@ -261,7 +307,8 @@ BOOST_AUTO_TEST_CASE(step_controller_scales_a_stiff_mode_consistently)
   const Eigen::MatrixXd scaled =
     M + scale.stiff_momenta.transpose() * scale.stiff_masses.asDiagonal() * scale.stiff_momenta;
   // Its step follows the slow mode: far longer than the unscaled limit 2 / omega_unscaled.
-  BOOST_CHECK_GT(control.dt(), 100. * settings.dt_safety * 2. / scale.omega_unscaled);
+  BOOST_CHECK_GT(
+    control.dt(), 100. * pinsettle::effectiveDtSafety(settings) * 2. / scale.omega_unscaled);
   // The added energy is 1/2 v^T (scaled - M) v.
   const Eigen::VectorXd w = Eigen::VectorXd::Random(2);
   BOOST_CHECK_CLOSE(control.addedEnergy(w), 0.5 * w.dot((scaled - M) * w), 1e-9);

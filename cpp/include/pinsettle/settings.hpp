@@ -27,6 +27,18 @@ namespace pinsettle
   /// \brief Parse "exact" or "simplified"; throws std::invalid_argument otherwise.
   EnergyMeasure energyMeasureFromString(const std::string & name);
 
+  /// Safety factor of the automatic step with backtracking and the exact energy: the largest
+  /// that kept every basin of the bistable pendulum's releases (0.4 lost 4 of 540), well below
+  /// 0.7, the largest at which every run of the library's scenes converged (docs/method.md,
+  /// docs/robustness.md).
+  constexpr double kDtSafetyBacktrack = 0.3;
+  /// Otherwise. Without backtracking a peak is seen one step late and stopping dead there
+  /// (kt = 0) overshoots: a pendulum swings for ever between two such overshoots at 0.4, and at
+  /// 0.3 77 of the 540 releases ended in another basin (17 at 0.2). With the simplified energy
+  /// (masses left out) the light parts' peaks stop the heavy ones: a chain of masses 1e4 to
+  /// 1e-4 kg never settled at kt = 0 with 0.25 or 0.3.
+  constexpr double kDtSafetyDefault = 0.2;
+
   ///
   /// \brief Inputs of the kinetic-damping solver. The solver only reads them.
   ///
@@ -37,9 +49,9 @@ namespace pinsettle
     /// start and again whenever the state has moved far (computeTimeScale).
     double dt = 0.;
     /// Safety factor c of the automatic step, in (0, 1]: the fraction of the linearised
-    /// stability limit used (docs/benchmarks.md and docs/robustness.md show how the default was
-    /// measured).
-    double dt_safety = 0.2;
+    /// stability limit used; 0 (the default) for the measured one, kDtSafetyBacktrack with
+    /// backtrack and the exact energy, kDtSafetyDefault otherwise (effectiveDtSafety).
+    double dt_safety = 0.;
     /// With the automatic step: give modes far stiffer than the rest (kStiffGap) a larger
     /// effective mass, so that the step follows the slow modes (computeTimeScale). The
     /// equilibria are unchanged; only the stiff modes' motion is slowed.
@@ -63,8 +75,9 @@ namespace pinsettle
     /// Energy signal of the peak detector and the stopping rule.
     EnergyMeasure energy = EnergyMeasure::Exact;
     /// Move the configuration back to the parabola-interpolated peak before damping, along the
-    /// path of the last two steps (with kt > 0 only while the exact energy falls too).
-    bool backtrack = false;
+    /// path of the last two steps (only while the exact energy falls too). On by default: with
+    /// it a coarser step stays safe and keeps the basins (kDtSafetyBacktrack).
+    bool backtrack = true;
     /// Record a trace sample every trace_every steps; 0 disables the trace.
     std::int64_t trace_every = 0;
     /// Largest number of trace samples kept (>= 2); when full, every other sample is dropped
@@ -81,6 +94,18 @@ namespace pinsettle
     /// The wall clock and the abort callback are checked every check_every steps (>= 1).
     std::int64_t check_every = 256;
   };
+
+  ///
+  /// \brief The safety factor the automatic step uses: settings.dt_safety, or for 0 the measured
+  /// default, kDtSafetyBacktrack with backtrack and the exact energy, kDtSafetyDefault otherwise.
+  ///
+  inline double effectiveDtSafety(const Settings & settings)
+  {
+    if (settings.dt_safety != 0.)
+      return settings.dt_safety;
+    return settings.backtrack && settings.energy == EnergyMeasure::Exact ? kDtSafetyBacktrack
+                                                                         : kDtSafetyDefault;
+  }
 
   ///
   /// \brief Check every field of the settings.

@@ -192,9 +192,9 @@ namespace pinsettle
     void pushOff(Result & result);
     void damp(const StepEnergies & e, Result & result);
     // With backtracking: the configurations of the last two samples, and the move back to the
-    // peak between them.
+    // peak between them (false: not moved, the exact energy was still rising).
     void keepConfiguration(double exact);
-    void backtrackToPeak(double e, double exact);
+    bool backtrackToPeak(double e, double exact);
     bool integrate();
     double residualAt(const Eigen::VectorXd & q, const ForceModel * forces);
     double residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau);

@@ -131,9 +131,16 @@ namespace pinsettle
     ///
     void correctAcceleration(pinocchio::Data & data, const Eigen::VectorXd & q);
 
-    /// \brief The length of the next step at the velocity v (s): dt, shortened so that no
-    /// joint turns more than dt_safety with the automatic step.
-    double nextStep(const Eigen::VectorXd & v);
+    ///
+    /// \brief The length of the next step (s): dt, shortened with the automatic step so that no
+    /// joint moves more than dt_safety (rad or m) in it. The step moves q by h (v + h a): the
+    /// velocity after the kick counts, since a step estimated where the mechanism is soft (on a
+    /// hump, K < 0) may take it in one stride into a stiff region and across the next hump.
+    ///
+    /// \param[in] v The velocity before the step (dim model.nv).
+    /// \param[in] a The acceleration of the step (dim model.nv).
+    ///
+    double nextStep(const Eigen::VectorXd & v, const Eigen::VectorXd & a);
 
     /// \brief The length of the step taken last (s).
     double lastStep() const

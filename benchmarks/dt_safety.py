@@ -14,7 +14,7 @@ import time
 
 import pinsettle
 
-FACTORS = [0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5, 0.8, 1.0]
+FACTORS = [0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 1.0]
 KTS = [0.0, 0.5, 0.9]
 NO_EQUILIBRIUM = {"torque_disk", "free_fall", "overloaded_pendulum"}
 

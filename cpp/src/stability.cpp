@@ -301,8 +301,20 @@ namespace pinsettle
         scale.stiff_masses[j] = std::abs(lambda[k]) / target - 1.;
         modal[k] *= target / std::abs(lambda[k]); // the scaled modes' share of their pull
       }
-      scale.stiff_momenta = (L * U_s).transpose();
-      omega2 = std::max(target, jointPull(U * modal));
+      const double scaled = std::max(target, jointPull(U * modal));
+      // The correction costs every step an nv x nv inverse mass matrix and its product with
+      // the r modes (pinocchio::aba alone is O(nv)): keep the scaling only where the longer
+      // step it allows pays for that.
+      const double gain = std::sqrt(omega2 / scaled);
+      const double cost =
+        1. + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
+      if (gain > cost)
+      {
+        scale.stiff_momenta = (L * U_s).transpose();
+        omega2 = scaled;
+      }
+      else
+        scale.stiff_masses.resize(0);
     }
     scale.omega_max = std::sqrt(omega2);
     if (damping != nullptr)

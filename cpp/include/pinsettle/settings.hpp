@@ -54,7 +54,8 @@ namespace pinsettle
     double dt_safety = 0.;
     /// With the automatic step: give modes far stiffer than the rest (kStiffGap) a larger
     /// effective mass, so that the step follows the slow modes (computeTimeScale). The
-    /// equilibria are unchanged; only the stiff modes' motion is slowed.
+    /// equilibria are unchanged; only the stiff modes' motion is slowed. Applied only where the
+    /// longer step pays for the costlier one (kStiffCostScale).
     bool scale_stiff_modes = true;
     /// Velocity scale applied at each detected energy peak, in [0, 1). 0 (the default, the
     /// fewest steps measured: docs/benchmarks.md) stops the mechanism dead at each peak.

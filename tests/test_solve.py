@@ -618,3 +618,20 @@ def test_without_gravity_converges_at_once_as_neutral(ur5):
     assert result.stability == "neutral"
     assert result.neutral_directions == model.nv
     assert result.pushes == 0
+    # A step from rest that changes neither v nor q, to the bit, repeats for ever: the rest is
+    # assessed at the next step, not after a window of ds steps of zero energy.
+    assert result.steps == 2
+
+
+def test_an_exact_saddle_start_is_pushed_off_at_once():
+    # The double pendulum's neutral pose is upright, its gravity exactly zero there: stationary
+    # from the first step, assessed at the second, unstable, pushed off; then it hangs down.
+    model = pinsettle.load_robot("double_pendulum_simple")
+    q0 = pinocchio.neutral(model)
+    assert not np.any(pinocchio.computeGeneralizedGravity(model, model.createData(), q0))
+    result = pinsettle.solve(model, q0, trace_every=1)
+    pushes = [s for s, k in zip(result.trace.event_step, result.trace.event_kind) if k == "push"]
+    assert pushes[:1] == [1], (pushes, list(result.trace.event_kind))
+    assert result.converged and result.stability == "stable" and result.pushes == 1
+    g = pinocchio.computeGeneralizedGravity(model, model.createData(), result.q)
+    assert np.abs(g).max() < 1e-9

@@ -253,16 +253,16 @@ namespace pinsettle
   /// \brief Rest check: when the energy signals call for a stability assessment, whether the
   /// assessed rest ends the run, and the push off an unstable one.
   ///
-  /// The signals: quiet and not rising (the stopping rule); a whole window at exact rest (a
-  /// start on an equilibrium); quiet but still rising, once a window (creeping away from a
-  /// saddle a round-off off). A neutral rest ends the run, creeping or not: a round-off force
-  /// along its neutral direction (a joint about the vertical) raises the energy forever without
-  /// a peak. A stable rest ends it unless it was only creeping (it swings back: a peak comes),
-  /// or creeping with q unchanged since the last assessment: steps below the resolution of q
-  /// (a fixed step of 2e-4 s at 1e-13 rad/s) leave q where it is while a round-off force
-  /// raises v for ever, and no swing back comes;
-  /// an unstable one (a saddle, a maximum) is pushed along its most negative stiffness direction
-  /// with a tiny energy, so that it falls away to where the mechanism would really stay.
+  /// The signals: quiet and not rising (the stopping rule); exact rest (a start on an
+  /// equilibrium: a step from rest that moved nothing, or a whole window at zero energy); quiet but
+  /// still rising, once a window (creeping away from a saddle a round-off off). A neutral rest ends
+  /// the run, creeping or not: a round-off force along its neutral direction (a joint about the
+  /// vertical) raises the energy forever without a peak. A stable rest ends it unless it was only
+  /// creeping (it swings back: a peak comes), or creeping with q unchanged since the last
+  /// assessment: steps below the resolution of q (a fixed step of 2e-4 s at 1e-13 rad/s) leave q
+  /// where it is while a round-off force raises v for ever, and no swing back comes; an unstable
+  /// one (a saddle, a maximum) is pushed along its most negative stiffness direction with a tiny
+  /// energy, so that it falls away to where the mechanism would really stay.
   ///
   class RestCheck
   {

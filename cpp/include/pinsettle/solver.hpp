@@ -230,6 +230,8 @@ namespace pinsettle
     std::int64_t step_ = 0;
     double time_ = 0.;
     int impacts_ = 0; // steps in a row with a joint past a stop
+    // The last step started and ended at rest on the same q: an exact rest, no window needed.
+    bool stationary_ = false;
 
     // Workspace, sized once for the model.
     Eigen::VectorXd q_, v_, dq_, q_next_, tau_;

@@ -630,7 +630,8 @@ def test_an_exact_saddle_start_is_pushed_off_at_once():
     q0 = pinocchio.neutral(model)
     assert not np.any(pinocchio.computeGeneralizedGravity(model, model.createData(), q0))
     result = pinsettle.solve(model, q0, trace_every=1)
-    pushes = [s for s, k in zip(result.trace.event_step, result.trace.event_kind) if k == "push"]
+    events = zip(result.trace.event_step, result.trace.event_kind, strict=True)
+    pushes = [step for step, kind in events if kind == "push"]
     assert pushes[:1] == [1], (pushes, list(result.trace.event_kind))
     assert result.converged and result.stability == "stable" and result.pushes == 1
     g = pinocchio.computeGeneralizedGravity(model, model.createData(), result.q)

@@ -7,6 +7,8 @@ session-scoped models below are shared; a test that needs to change a model work
 
 from __future__ import annotations
 
+import importlib.util
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -85,3 +87,13 @@ def make_chain(n: int, massless: tuple[int, ...] = ()) -> pinocchio.Model:
 def chain_with_massless_link() -> pinocchio.Model:
     """Three links, the middle one massless: the simplified energy must skip it."""
     return make_chain(3, massless=(1,))
+
+
+@pytest.fixture(scope="session")
+def chain_urdf() -> Callable[[int], str]:
+    """robots/make_chain.py's ``chain_urdf(n)``: the URDF text of an n-link hanging chain."""
+    path = Path(__file__).parents[1] / "robots" / "make_chain.py"
+    spec = importlib.util.spec_from_file_location("make_chain", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.chain_urdf

@@ -219,12 +219,7 @@ def test_a_1000_link_chain_is_refused_before_it_takes_memory():
         assert what["peak_growth"] < 32 << 20, (name, what)
 
 
-def test_a_1000_link_chain_file_is_refused_by_the_cli_with_one_line(tmp_path):
-    sys.path.insert(0, str(ROBOTS))
-    try:
-        from make_chain import chain_urdf
-    finally:
-        sys.path.remove(str(ROBOTS))
+def test_a_1000_link_chain_file_is_refused_by_the_cli_with_one_line(tmp_path, chain_urdf):
     path = tmp_path / "chain1000.urdf"
     path.write_text(chain_urdf(1000))
     proc = subprocess.run(

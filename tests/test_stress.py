@@ -148,23 +148,12 @@ def test_the_reference_reads_the_model_limits_as_pinsettle_does():
     assert ours == stress.pinsettle._scene.model_stops(ur5)
 
 
-def _chain_from_file(n: int) -> pinocchio.Model:
-    """robots/make_chain.py's n-link chain."""
-    robots = _PATH.parents[1] / "robots"
-    sys.path.insert(0, str(robots))
-    try:
-        from make_chain import chain_urdf
-    finally:
-        sys.path.remove(str(robots))
-    return pinocchio.buildModelFromXML(chain_urdf(n))
-
-
-def test_stiff_mode_scaling_is_used_only_where_it_pays():
+def test_stiff_mode_scaling_is_used_only_where_it_pays(chain_urdf):
     """Scaling r modes costs every step an nv x nv inverse mass matrix: on a uniform 200-link
     chain (its modes spread past the 1000x cap in some poses, a few times at most) it took 29
     modes, 6 % more steps and 2.4 times the time of the unscaled run; on a 9-link chain of
     1e-4 to 1e4 kg and 1 mm to 100 m links it saves nine steps in ten."""
-    chain = _chain_from_file(200)
+    chain = pinocchio.buildModelFromXML(chain_urdf(200))
     q0 = np.zeros(chain.nq)
     q0[0] = np.pi / 2
     default = pinsettle.solve(chain, q0, limits=False)

@@ -291,16 +291,12 @@ namespace pinsettle
     if (split < order.size())
     {
       const Eigen::Index r = n - static_cast<Eigen::Index>(split);
-      Eigen::MatrixXd U_s(n, r);
-      scale.stiff_masses.resize(r);
+      const auto stiffMode = [&](Eigen::Index j) {
+        return order[split + static_cast<std::size_t>(j)];
+      };
       Eigen::VectorXd modal = f;
-      for (Eigen::Index j = 0; j < r; ++j)
-      {
-        const Eigen::Index k = order[split + static_cast<std::size_t>(j)];
-        U_s.col(j) = U.col(k);
-        scale.stiff_masses[j] = std::abs(lambda[k]) / target - 1.;
-        modal[k] *= target / std::abs(lambda[k]); // the scaled modes' share of their pull
-      }
+      for (Eigen::Index j = 0; j < r; ++j) // the scaled modes' share of their pull
+        modal[stiffMode(j)] *= target / std::abs(lambda[stiffMode(j)]);
       const double scaled = std::max(target, jointPull(U * modal));
       // The correction costs every step an nv x nv inverse mass matrix and its product with
       // the r modes (pinocchio::aba alone is O(nv)): keep the scaling only where the longer
@@ -310,11 +306,16 @@ namespace pinsettle
         1. + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
       if (gain > cost)
       {
+        Eigen::MatrixXd U_s(n, r);
+        scale.stiff_masses.resize(r);
+        for (Eigen::Index j = 0; j < r; ++j)
+        {
+          U_s.col(j) = U.col(stiffMode(j));
+          scale.stiff_masses[j] = std::abs(lambda[stiffMode(j)]) / target - 1.;
+        }
         scale.stiff_momenta = (L * U_s).transpose();
         omega2 = scaled;
       }
-      else
-        scale.stiff_masses.resize(0);
     }
     scale.omega_max = std::sqrt(omega2);
     if (damping != nullptr)

@@ -333,21 +333,7 @@ FALLING_TREE = [
 ]  # fmt: skip
 
 
-@pytest.mark.parametrize(
-    "scale",
-    [
-        pytest.param(
-            True,
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="C++ (reported): stiff-mode scaling blows up the energy of this falling "
-                "tree (at kt = 0.5 diverged after 30 halvings, at kt = 0 six halvings before the "
-                "runaway test ends it) where the unscaled run finds no_equilibrium cleanly",
-            ),
-        ),
-        False,
-    ],
-)
+@pytest.mark.parametrize("scale", [True, False])
 def test_a_falling_tree_is_no_equilibrium_not_a_blow_up(scale):
     model = pinocchio.Model()
     for kind, parent, rpy, xyz, mass, com, diagonal in FALLING_TREE:
@@ -357,8 +343,12 @@ def test_a_falling_tree_is_no_equilibrium_not_a_blow_up(scale):
         model.appendBodyToJoint(joint, inertia, pinocchio.SE3.Identity())
     result = pinsettle.solve(model, limits=False, scale_stiff_modes=scale)
     assert result.status == "no_equilibrium", (result.status, result.reason)
-    # Not a blow-up caught late: the scaled run at kt = 0 also ends no_equilibrium, but only
-    # after its energy exploded (6 halvings of the step, 1e81 J "released").
+    # Not a blow-up caught late. With an earlier rule (modes 1e6 times above the softest, kept
+    # when the frequency dropped by more than the step's cost) this tree's modes were scaled
+    # and its energy exploded (at kt = 0.5 diverged after 30 halvings, at kt = 0 six halvings
+    # before the runaway test); today's rule scales none of them here. Why scaled dynamics blew
+    # up in this fast fall is still open.
+    assert result.scaled_modes == 0
     assert result.dt_reductions == 0, result.reason
 
 

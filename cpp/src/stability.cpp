@@ -300,11 +300,12 @@ namespace pinsettle
       const double scaled = std::max(target, jointPull(U * modal));
       // The correction costs every step an nv x nv inverse mass matrix and its product with
       // the r modes (pinocchio::aba alone is O(nv)): keep the scaling only where the longer
-      // step it allows pays for that.
+      // step it allows pays for that. The steps fall by about the square root of the step's
+      // gain (the slow modes, not the step, set how many it takes), hence the square.
       const double gain = std::sqrt(omega2 / scaled);
       const double cost =
-        1. + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
-      if (gain > cost)
+        1. + kStiffCostBase + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
+      if (gain > cost * cost)
       {
         Eigen::MatrixXd U_s(n, r);
         scale.stiff_masses.resize(r);

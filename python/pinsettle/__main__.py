@@ -44,7 +44,7 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
         "--scale-stiff-modes",
         action=argparse.BooleanOptionalAction,
         default=None,
-        help="with dt auto, slow modes over 100x faster than the rest (default: on)",
+        help="with dt auto, slow modes far faster than the rest (default: on)",
     )
     group.add_argument("--err", type=float, help="relative peak threshold")
     group.add_argument("--ds", type=int, help="stopping window (steps)")

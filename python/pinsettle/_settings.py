@@ -46,8 +46,9 @@ class Settings(_core.Settings):
     limit 2 / omega_max of the mechanism linearised where it is, re-estimated as it moves);
     ``dt_safety`` in (0, 1], or 'auto' (the default: 0.3 with ``backtrack`` and the exact
     energy, 0.2 otherwise, measured; ``effective_dt_safety`` gives the value in use);
-    ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the rest get a larger
-    effective mass, equilibria unchanged, where the longer step pays for the costlier one);
+    ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the rest, or 30x faster
+    than the slowest, get a larger effective mass, equilibria unchanged, where the longer step
+    pays for the costlier one);
     ``polish`` (Newton steps after convergence); ``kt``
     velocity scale at each energy peak, in [0, 1); ``err`` relative peak threshold; ``ds``
     stopping window (steps); ``max_e`` bound on the sum of the last ``ds`` energy samples (J for

@@ -52,10 +52,10 @@ namespace pinsettle
     /// stability limit used; 0 (the default) for the measured one, kDtSafetyBacktrack with
     /// backtrack and the exact energy, kDtSafetyDefault otherwise (effectiveDtSafety).
     double dt_safety = 0.;
-    /// With the automatic step: give modes far stiffer than the rest (kStiffGap) a larger
-    /// effective mass, so that the step follows the slow modes (computeTimeScale). The
+    /// With the automatic step: give modes far stiffer than the rest (kStiffGap, kStiffSpread)
+    /// a larger effective mass, so that the step follows the slow modes (computeTimeScale). The
     /// equilibria are unchanged; only the stiff modes' motion is slowed. Applied only where the
-    /// longer step pays for the costlier one (kStiffCostScale).
+    /// longer step pays for the costlier one (kStiffCostBase, kStiffCostScale).
     bool scale_stiff_modes = true;
     /// Velocity scale applied at each detected energy peak, in [0, 1). 0 (the default, the
     /// fewest steps measured: docs/benchmarks.md) stops the mechanism dead at each peak.

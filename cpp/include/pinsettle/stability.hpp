@@ -134,13 +134,17 @@ namespace pinsettle
   /// \brief Two clusters of modes count as apart when their eig(M^-1 K) differ by more than
   /// this factor (100x in frequency).
   constexpr double kStiffGap = 1e4;
-  /// \brief Modes more than this factor above the softest one (1000x in frequency) are scaled
-  /// down to it even without a gap: it bounds the steps per period of the slowest motion.
-  constexpr double kStiffSpread = 1e6;
-  /// \brief Scaling r stiff modes makes a step cost about 1 + nv (1 + r) / kStiffCostScale times
-  /// an unscaled one (an O(nv^2 (1 + r)) correction on top of an O(nv) pinocchio::aba;
-  /// measured on chains of 200 and 300 links): modes are scaled only when the highest frequency
-  /// drops by more than that factor.
+  /// \brief Modes more than this factor above the softest one (about 30x in frequency) are
+  /// scaled down to it even without a gap: a spread of masses or lengths (a light gripper at
+  /// the end of an arm) bounds the steps per period of the slowest motion.
+  constexpr double kStiffSpread = 1e3;
+  /// \brief Scaling r stiff modes makes a step cost about
+  /// 1 + kStiffCostBase + nv (1 + r) / kStiffCostScale times an unscaled one (the Woodbury
+  /// correction's fixed cost, then an O(nv^2 (1 + r)) product on top of an O(nv)
+  /// pinocchio::aba; measured on arms of 6 and 7 joints and chains of 50 to 300 links). The
+  /// steps fall by about the square root of the step's gain, so modes are scaled only when
+  /// the highest frequency drops by more than the square of that cost.
+  constexpr double kStiffCostBase = 0.5;
   constexpr double kStiffCostScale = 2500.;
 
   ///

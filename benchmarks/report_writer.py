@@ -1500,7 +1500,8 @@ def defaults_section(results: D.Results) -> str:
     return (
         "### The default settings\n\n"
         f"`pinsettle.solve(scene)` with nothing changed (kt = {s.kt:g}, `dt_safety = "
-        f"{s.dt_safety}` ({s.effective_dt_safety:g}), `backtrack = {s.backtrack}`, "
+        f"{s.dt_safety}` ({s.effective_dt_safety:g}), `dt_growth = {s.dt_growth}` "
+        f"({s.effective_dt_growth:g}), `backtrack = {s.backtrack}`, "
         f"`max_e = {s.max_e:g}`, "
         f"`polish = {s.polish}`, `energy = {s.energy}`): status, steps, wall time (median, "
         "min-max), the final residual relative to the force scale (independent physics), whether "

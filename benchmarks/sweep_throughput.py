@@ -224,12 +224,13 @@ def section(data: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write(text: str, path: Path = DOC) -> None:
-    """Put the section into the file: in place of the old one, or at the end."""
+def write(text: str, path: Path = DOC, begin: str = BEGIN, end: str = END) -> None:
+    """Put the section (delimited by begin and end) into the file: in place of the old one, or
+    at the end."""
     old = path.read_text(encoding="utf-8")
-    if BEGIN in old and END in old:
-        head, rest = old.split(BEGIN, 1)
-        tail = rest.split(END, 1)[1]
+    if begin in old and end in old:
+        head, rest = old.split(begin, 1)
+        tail = rest.split(end, 1)[1]
         new = head + text.rstrip("\n") + tail
     else:
         new = old.rstrip("\n") + "\n\n" + text

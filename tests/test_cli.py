@@ -78,6 +78,7 @@ def test_demo_flags_reach_the_solver():
     [
         (["--dt", "2e-3"], {"dt": 2e-3}),
         (["--dt-safety", "0.1"], {"dt_safety": 0.1}),
+        (["--dt-growth", "1.5"], {"dt_growth": 1.5}),
         (["--polish"], {"polish": True}),
         (["--no-polish"], {"polish": False}),
         (["--no-backtrack"], {"backtrack": False}),

@@ -35,6 +35,11 @@ OUT_OF_RANGE = [
     ({"trace_every": -1}, r"^trace_every must be an integer >= 0"),
     ({"trace_capacity": 1}, r"^trace_capacity must be an integer >= 2"),
     ({"check_every": 0}, r"^check_every must be an integer >= 1"),
+    ({"dt_growth": 0.5}, r"^dt_growth must be 'auto' or a finite number >= 1, got 0.5"),
+    ({"dt_growth": 0.0}, r"^dt_growth must be 'auto' or a finite number >= 1, got 0"),
+    ({"dt_growth": NAN}, r"^dt_growth must be 'auto' or a finite number >= 1, got nan"),
+    ({"dt_growth": INF}, r"^dt_growth must be 'auto' or a finite number >= 1, got inf"),
+    ({"dt_growth": "fast"}, r"^dt_growth must be 'auto' or a finite number >= 1, got 'fast'"),
     ({"dt_safety": 0.0}, r"^dt_safety must be 'auto' or a number in \(0, 1\], got 0"),
     ({"dt_safety": 1.5}, r"^dt_safety must be 'auto' or a number in \(0, 1\], got 1.5"),
     ({"dt_safety": NAN}, r"^dt_safety must be 'auto' or a number in \(0, 1\], got nan"),
@@ -46,7 +51,7 @@ OUT_OF_RANGE = [
 def test_setting_out_of_range(pendulum, override, pattern):
     with pytest.raises(ValueError, match=pattern):
         pinsettle.solve(pendulum, [1.0], **override)
-    if "dt" in override or "dt_safety" in override:
+    if "dt" in override or "dt_safety" in override or "dt_growth" in override:
         # 'auto' or a number: refused when set, so that no number can mean 'auto'.
         with pytest.raises(ValueError, match=pattern):
             pinsettle.Settings(**override)

@@ -141,6 +141,7 @@ def solver_settings(draw) -> dict:
         "backtrack": draw(st.booleans()),
         "polish": draw(st.booleans()),
         "scale_stiff_modes": draw(st.booleans()),
+        "dt_growth": draw(st.one_of(st.just("auto"), st.floats(1.0, 4.0, **finite))),
         "dt_safety": draw(st.floats(0.0, 1.0, exclude_min=True, **finite)),
         "err": draw(st.sampled_from([0.0, 1e-12, 1e-9, 1e-6])),
         "ds": draw(st.integers(1, 200)),
@@ -359,6 +360,7 @@ OUT_OF_RANGE = {
     "dt_safety": st.one_of(
         st.floats(max_value=0.0), st.floats(min_value=1.0, exclude_min=True), st.just(math.nan)
     ),
+    "dt_growth": st.one_of(st.floats(max_value=1.0, exclude_max=True), st.just(math.nan)),
     "kt": st.one_of(st.floats(max_value=-1e-300), st.floats(min_value=1.0), st.just(math.nan)),
     "err": st.one_of(st.floats(max_value=-1e-300), st.just(math.nan), st.just(math.inf)),
     "ds": st.integers(max_value=0),

@@ -474,6 +474,7 @@ def test_settings_defaults():
         "backtrack": True,
         "polish": True,
         "scale_stiff_modes": True,
+        "dt_growth": "auto",
         "trace_every": 0,
         "trace_capacity": 10_000,
         "trace_configurations": False,
@@ -493,6 +494,38 @@ def test_dt_safety_auto_is_the_measured_factor_of_the_other_settings(pendulum):
         given = pinsettle.solve(pendulum, [1.0], dt_safety=factor, **overrides)
         assert auto.steps == given.steps and np.array_equal(auto.q, given.q)
         assert auto.settings.dt_safety == "auto" and given.settings.dt_safety == factor
+
+
+def test_dt_growth_auto_is_the_measured_growth_of_the_other_settings(pendulum):
+    s = pinsettle.Settings()
+    assert s.dt_growth == "auto" and s.effective_dt_growth == 2.5  # backtracking, exact energy
+    assert pinsettle.Settings(backtrack=False).effective_dt_growth == 1.0
+    assert pinsettle.Settings(energy="simplified").effective_dt_growth == 1.0
+    assert pinsettle.Settings(scale_stiff_modes=False).effective_dt_growth == 1.0
+    assert pinsettle.Settings(dt_growth=1.5, backtrack=False).effective_dt_growth == 1.5
+    for overrides, growth in (({}, 2.5), ({"energy": "simplified"}, 1.0)):
+        auto = pinsettle.solve(pendulum, [1.0], **overrides)
+        given = pinsettle.solve(pendulum, [1.0], dt_growth=growth, **overrides)
+        assert auto.steps == given.steps and np.array_equal(auto.q, given.q)
+
+
+def test_a_step_grown_between_peaks_settles_a_chain_in_fewer_steps_at_the_same_rest(chain_urdf):
+    """The 20-link chain released horizontal: 1,457 steps with the step fixed between
+    estimates, 903 with the default growth (2.5), at the same rest, hanging straight down (a
+    zero of Pinocchio's own gravity torque)."""
+    chain = pinocchio.buildModelFromXML(chain_urdf(20))
+    q0 = np.zeros(chain.nq)
+    q0[0] = np.pi / 2
+    grown = pinsettle.solve(chain, q0, limits=False)
+    fixed = pinsettle.solve(chain, q0, limits=False, dt_growth=1)
+    assert grown.converged and fixed.converged
+    assert grown.steps < 0.7 * fixed.steps, (grown.steps, fixed.steps)
+    assert grown.dt_reductions == 0 and grown.stability == "stable"
+    assert np.abs(grown.q - fixed.q).max() < 1e-8
+    data = chain.createData()
+    scale = np.abs(pinocchio.computeGeneralizedGravity(chain, data, q0)).max()
+    gravity = pinocchio.computeGeneralizedGravity(chain, data, grown.q)
+    assert np.abs(gravity).max() < 1e-10 * scale
 
 
 def test_trace_records_configurations_and_events_for_playback():

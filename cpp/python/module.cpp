@@ -376,6 +376,19 @@ PYBIND11_MODULE(_core, m)
     .def_property_readonly(
       "effective_dt_safety", &effectiveDtSafety,
       "The fraction dt='auto' uses: dt_safety, or for 'auto' that of the backtrack setting.")
+    .def_property(
+      "dt_growth", [](const Settings & s) { return autoOrNumber(s.dt_growth); },
+      [](Settings & s, const py::object & value) {
+        s.dt_growth = parseAutoOrNumber(value, "dt_growth", "a finite number >= 1", [](double x) {
+          return std::isfinite(x) && x >= 1.;
+        });
+      },
+      "Largest factor dt='auto' grows by between damping events, >= 1 (1: fixed), or 'auto' "
+      "(the default): 2.5 with backtrack, the exact energy and scale_stiff_modes, 1 otherwise "
+      "(measured).")
+    .def_property_readonly(
+      "effective_dt_growth", &effectiveDtGrowth,
+      "The growth dt='auto' uses: dt_growth, or for 'auto' that of the other settings.")
     .def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
     .def_readwrite(
       "scale_stiff_modes", &Settings::scale_stiff_modes,

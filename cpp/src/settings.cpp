@@ -80,6 +80,8 @@ namespace pinsettle
       fail("dt", "a finite number > 0 (seconds), or 0 for the automatic step", s.dt);
     if (!(s.dt_safety >= 0. && s.dt_safety <= 1.))
       fail("dt_safety", "in (0, 1], or 0 for the measured default", s.dt_safety);
+    if (!(s.dt_growth == 0. || (std::isfinite(s.dt_growth) && s.dt_growth >= 1.)))
+      fail("dt_growth", "a finite number >= 1, or 0 for the measured default", s.dt_growth);
     if (!(s.kt >= 0. && s.kt < 1.))
       fail("kt", "in [0, 1)", s.kt);
     if (!(std::isfinite(s.err) && s.err >= 0.))

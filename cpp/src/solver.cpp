@@ -533,6 +533,7 @@ namespace pinsettle
     ++result.pushes;
     trace_.event(step_, time_, EventKind::Push);
     guard_.keep(q_, v_, time_);
+    step_control_.restartGrowth();
     restartStretch();
     runaway_.reset(step_, 0.);
   }
@@ -550,6 +551,7 @@ namespace pinsettle
     runaway_.addRemoved((1. - kt_ * kt_) * taken);
     peaks_.restart();
     guard_.keepIfClean(q_, v_, time_);
+    step_control_.restartGrowth();
     reestimateStep();
   }
 

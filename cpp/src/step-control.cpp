@@ -44,6 +44,8 @@ namespace pinsettle
     dt_safety_ = effectiveDtSafety(settings);
     dt_ = settings.dt;
     h_ = dt_;
+    growth_ = 1.;
+    max_growth_ = std::max(1., std::min(effectiveDtGrowth(settings), 1. / dt_safety_));
     step_scale_ = 1.;
     estimated_at_ = 0;
     estimate_spacing_ =
@@ -116,6 +118,7 @@ namespace pinsettle
   {
     step_scale_ *= 0.5;
     dt_ *= 0.5;
+    growth_ = 1.;
     if (!automatic_)
       return 0.;
     // The modes of the good state, and no longer a step than the halved one.
@@ -155,6 +158,10 @@ namespace pinsettle
     h_ = dt_;
     if (automatic_)
     {
+      // Between damping events the motion runs downhill and the step grows, as FIRE's does;
+      // a damping event starts it again from the estimate (restartGrowth).
+      h_ *= growth_;
+      growth_ = std::min(growth_ * kStepGrowthRate, max_growth_);
       // The step moves q by h (v + h a); |v + h a| <= V + h A, and h (V + h A) <= c holds up
       // to the positive root of A h^2 + V h - c, written so that A = 0 gives c / V.
       const double speed = v.lpNorm<Eigen::Infinity>();

@@ -35,6 +35,9 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--dt", type=_step, help="time step (s), or 'auto' (the default)")
     group.add_argument("--dt-safety", type=float, help="fraction of the stable step (dt auto)")
     group.add_argument(
+        "--dt-growth", type=float, help="largest growth of the step between peaks (dt auto)"
+    )
+    group.add_argument(
         "--polish",
         action=argparse.BooleanOptionalAction,
         default=None,
@@ -129,7 +132,8 @@ def _rest_check(model: pinocchio.Model, q: np.ndarray, limits: bool) -> float:
 
 
 def _setting_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    keys = ["energy", "kt", "dt", "dt_safety", "err", "ds", "max_e", "max_steps", "max_time"]
+    keys = ["energy", "kt", "dt", "dt_safety", "dt_growth", "err", "ds", "max_e", "max_steps"]
+    keys += ["max_time"]
     keys += ["backtrack", "polish", "scale_stiff_modes"]
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 

@@ -28,6 +28,7 @@ SETTING_TYPES: dict[str, str] = {
     "backtrack": "bool",
     "polish": "bool",
     "scale_stiff_modes": "bool",
+    "dt_growth": "float or 'auto'",
     "trace_every": "int",
     "trace_capacity": "int",
     "trace_configurations": "bool",
@@ -46,6 +47,10 @@ class Settings(_core.Settings):
     limit 2 / omega_max of the mechanism linearised where it is, re-estimated as it moves);
     ``dt_safety`` in (0, 1], or 'auto' (the default: 0.3 with ``backtrack`` and the exact
     energy, 0.2 otherwise, measured; ``effective_dt_safety`` gives the value in use);
+    ``dt_growth`` >= 1, or 'auto' (the default: 2.5 with ``backtrack``, the exact energy and
+    ``scale_stiff_modes``, 1 otherwise, measured): the largest factor the automatic step grows
+    to between damping events, 5 % a step, never past the stability limit
+    (``effective_dt_growth``);
     ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the rest, or 30x faster
     than the slowest, get a larger effective mass, equilibria unchanged, where the longer step
     pays for the costlier one);

@@ -285,6 +285,71 @@ BOOST_AUTO_TEST_CASE(step_controller_automatic_step_of_a_pendulum)
   BOOST_CHECK_EQUAL(control.estimates(), 2);
 }
 
+BOOST_AUTO_TEST_CASE(step_controller_grows_between_damping_events)
+{
+  const pinocchio::Model model = pendulum(2., 0.5);
+  pinocchio::Data data(model);
+  const Eigen::VectorXd slow = Eigen::VectorXd::Constant(1, 1e-6), none = Eigen::VectorXd::Zero(1);
+  Eigen::VectorXd q = Eigen::VectorXd::Zero(1), v = Eigen::VectorXd::Zero(1);
+  const auto stepsAfter = [&](pinsettle::StepController & control, int n) {
+    double h = 0.;
+    for (int i = 0; i < n; ++i)
+      h = control.nextStep(slow, none);
+    return h;
+  };
+
+  pinsettle::Settings settings; // dt_growth 0: the measured default
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtGrowth(settings), pinsettle::kDtGrowthBacktrack);
+  pinsettle::StepController control(model, nullptr);
+  control.start(settings, nullptr);
+  control.estimate(data, q, v, 0);
+  const double dt = control.dt();
+  // 5 % a step from the estimate, up to dt_growth times it.
+  BOOST_CHECK_EQUAL(control.nextStep(slow, none), dt);
+  BOOST_CHECK_CLOSE(
+    control.nextStep(slow, none), dt * pinsettle::StepController::kStepGrowthRate, 1e-12);
+  BOOST_CHECK_CLOSE(stepsAfter(control, 100), pinsettle::kDtGrowthBacktrack * dt, 1e-12);
+  BOOST_CHECK_EQUAL(control.dt(), dt); // the estimate itself is unchanged
+  // A damping event starts it again; so does a halving, from the halved step.
+  control.restartGrowth();
+  BOOST_CHECK_EQUAL(control.nextStep(slow, none), dt);
+  stepsAfter(control, 100);
+  control.halve(data, q, v, 1);
+  BOOST_CHECK_CLOSE(control.nextStep(slow, none), 0.5 * dt, 1e-12);
+  // The turn bound still holds on the grown step.
+  stepsAfter(control, 100);
+  const double c = pinsettle::effectiveDtSafety(settings);
+  BOOST_CHECK_CLOSE(control.nextStep(Eigen::VectorXd::Constant(1, 1e3), none), c / 1e3, 1e-12);
+
+  // Never past the stability limit: dt_safety 0.5 grows at most twofold, to 2 / omega.
+  settings.dt_safety = 0.5;
+  settings.dt_growth = 3.;
+  control.start(settings, nullptr);
+  control.estimate(data, q, v, 0);
+  BOOST_CHECK_CLOSE(stepsAfter(control, 100), 2. * control.dt(), 1e-12);
+  BOOST_CHECK_CLOSE(2. * control.dt(), control.timeScale().critical_step, 1e-12);
+  // 1 keeps it fixed, and so does the default without backtracking or with the simplified
+  // energy.
+  settings = pinsettle::Settings();
+  settings.dt_growth = 1.;
+  control.start(settings, nullptr);
+  control.estimate(data, q, v, 0);
+  BOOST_CHECK_EQUAL(stepsAfter(control, 100), control.dt());
+  settings = pinsettle::Settings();
+  settings.energy = pinsettle::EnergyMeasure::Simplified;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtGrowth(settings), 1.);
+  settings.energy = pinsettle::EnergyMeasure::Exact;
+  settings.backtrack = false;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtGrowth(settings), 1.);
+  settings.backtrack = true;
+  settings.scale_stiff_modes = false;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtGrowth(settings), 1.);
+  settings.dt_growth = 1.5;
+  BOOST_CHECK_EQUAL(pinsettle::effectiveDtGrowth(settings), 1.5);
+  settings.dt_growth = 0.5;
+  BOOST_CHECK_THROW(pinsettle::checkSettings(settings), std::invalid_argument);
+}
+
 BOOST_AUTO_TEST_CASE(step_controller_scales_a_stiff_mode_consistently)
 {
   const pinocchio::Model model = pendulumWithStiffSlider();

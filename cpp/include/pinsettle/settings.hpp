@@ -38,6 +38,14 @@ namespace pinsettle
   /// (masses left out) the light parts' peaks stop the heavy ones: a chain of masses 1e4 to
   /// 1e-4 kg never settled at kt = 0 with 0.25 or 0.3.
   constexpr double kDtSafetyDefault = 0.2;
+  /// \brief The measured growth of the automatic step between damping events with backtracking,
+  /// the exact energy and stiff-mode scaling (fewest steps over the robots, chains and scenes of
+  /// benchmarks/dt_growth.py); without any of them it stays fixed. With the simplified energy
+  /// the stress suite's chain of 1e4 to 1e-4 kg never settled at kt = 0 (light links' peaks
+  /// stop the heavy ones, as above 0.2 of the limit); without stiff-mode scaling its chain of
+  /// 1e-4 to 1e4 kg and 100 m to 1 mm links never settled from 2 up (at 1.5: 61,590 steps,
+  /// fixed: 91,885).
+  constexpr double kDtGrowthBacktrack = 2.5;
 
   ///
   /// \brief Inputs of the kinetic-damping solver. The solver only reads them.
@@ -52,6 +60,12 @@ namespace pinsettle
     /// stability limit used; 0 (the default) for the measured one, kDtSafetyBacktrack with
     /// backtrack and the exact energy, kDtSafetyDefault otherwise (effectiveDtSafety).
     double dt_safety = 0.;
+    /// With the automatic step: the largest factor it grows to between two damping events
+    /// (>= 1; 1 keeps it fixed), or 0 (the default) for the measured one, kDtGrowthBacktrack
+    /// with backtrack, the exact energy and scale_stiff_modes, 1 otherwise (effectiveDtGrowth).
+    /// From each damping event, push or roll-back the step starts at the estimate and grows by
+    /// StepController::kStepGrowthRate per step, never past the stability limit.
+    double dt_growth = 0.;
     /// With the automatic step: give modes far stiffer than the rest (kStiffGap, kStiffSpread)
     /// a larger effective mass, so that the step follows the slow modes (computeTimeScale). The
     /// equilibria are unchanged; only the stiff modes' motion is slowed. Applied only where the
@@ -106,6 +120,20 @@ namespace pinsettle
       return settings.dt_safety;
     return settings.backtrack && settings.energy == EnergyMeasure::Exact ? kDtSafetyBacktrack
                                                                          : kDtSafetyDefault;
+  }
+
+  ///
+  /// \brief The growth the automatic step uses: settings.dt_growth, or for 0 the measured
+  /// default, kDtGrowthBacktrack with backtrack, the exact energy and stiff-mode scaling, 1
+  /// otherwise.
+  ///
+  inline double effectiveDtGrowth(const Settings & settings)
+  {
+    if (settings.dt_growth != 0.)
+      return settings.dt_growth;
+    const bool measured =
+      settings.backtrack && settings.energy == EnergyMeasure::Exact && settings.scale_stiff_modes;
+    return measured ? kDtGrowthBacktrack : 1.;
   }
 
   ///

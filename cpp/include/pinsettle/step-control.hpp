@@ -59,6 +59,8 @@ namespace pinsettle
     static constexpr double kFarMove = 0.1;
     /// Automatic step when nothing pulls, pushes or damps (its value does not matter then).
     static constexpr double kRestStep = 1e-3;
+    /// Growth of the automatic step per step between damping events (Settings::dt_growth).
+    static constexpr double kStepGrowthRate = 1.05;
 
     /// \param[in] loops Loop closures of the model (they must outlive the controller), or
     ///            nullptr.
@@ -132,15 +134,23 @@ namespace pinsettle
     void correctAcceleration(pinocchio::Data & data, const Eigen::VectorXd & q);
 
     ///
-    /// \brief The length of the next step (s): dt, shortened with the automatic step so that no
-    /// joint moves more than dt_safety (rad or m) in it. The step moves q by h (v + h a): the
-    /// velocity after the kick counts, since a step estimated where the mechanism is soft (on a
-    /// hump, K < 0) may take it in one stride into a stiff region and across the next hump.
+    /// \brief The length of the next step (s): dt, with the automatic step grown since the last
+    /// restartGrowth and shortened so that no joint moves more than dt_safety (rad or m) in it. The
+    /// step moves q by h (v + h a): the velocity after the kick counts, since a step estimated
+    /// where the mechanism is soft (on a hump, K < 0) may take it in one stride into a stiff region
+    /// and across the next hump.
     ///
     /// \param[in] v The velocity before the step (dim model.nv).
     /// \param[in] a The acceleration of the step (dim model.nv).
     ///
     double nextStep(const Eigen::VectorXd & v, const Eigen::VectorXd & a);
+
+    /// \brief Start the automatic step's growth again from the estimate: after a damping
+    /// event, a push or a roll-back the motion starts anew, and its fast modes with it.
+    void restartGrowth()
+    {
+      growth_ = 1.;
+    }
 
     /// \brief The length of the step taken last (s).
     double lastStep() const
@@ -170,6 +180,8 @@ namespace pinsettle
     const ForceModel * forces_ = nullptr;
     bool automatic_ = false, scale_stiff_modes_ = false;
     double dt_safety_ = 0., dt_ = 0., h_ = 0., step_scale_ = 1.;
+    // The factor on dt_ of the next automatic step, and its largest value.
+    double growth_ = 1., max_growth_ = 1.;
     std::int64_t estimated_at_ = 0, estimate_spacing_ = 1;
     int estimates_ = 0, scaled_modes_ = 0;
     // The last estimate (its stiff-mode scaling applies to every step) and where it was made.

@@ -19,7 +19,6 @@ import argparse
 import datetime
 import math
 import os
-import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -29,9 +28,11 @@ import pinocchio
 import pinsettle
 from sweep_throughput import write
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "robots"))
+from make_chain import chain_urdf  # noqa: E402  (robots/make_chain.py)
+
 GROWTHS = [1.0, 1.5, 2.0, 2.5, 3.0, 4.0]
 CHAINS = [5, 10, 20, 50, 100]
-MAKE_CHAIN = Path(__file__).resolve().parents[1] / "robots" / "make_chain.py"
 BEGIN = "<!-- step:growth (written by benchmarks/dt_growth.py) -->"
 END = "<!-- /step:growth -->"
 SHOWN = ("chain20", "chain100", "so_arm100", "kinova", "ur5", "xarm7", "pendulum_upright")
@@ -43,10 +44,7 @@ def problems() -> list[tuple[str, Callable[..., pinsettle.Result]]]:
         model = pinsettle.load_robot(name, floating=False)
         out.append((name, lambda m=model, **kw: pinsettle.solve(m, **kw)))
     for n in CHAINS:
-        urdf = subprocess.run(
-            [sys.executable, str(MAKE_CHAIN), str(n)], capture_output=True, text=True, check=True
-        ).stdout
-        model = pinocchio.buildModelFromXML(urdf)
+        model = pinocchio.buildModelFromXML(chain_urdf(n))
         q0 = np.zeros(model.nq)
         q0[0] = np.pi / 2
         out.append(

@@ -45,7 +45,7 @@ namespace pinsettle
     dt_ = settings.dt;
     h_ = dt_;
     growth_ = 1.;
-    max_growth_ = std::max(1., std::min(effectiveDtGrowth(settings), 1. / dt_safety_));
+    max_growth_ = std::min(effectiveDtGrowth(settings), 1. / dt_safety_); // both >= 1
     step_scale_ = 1.;
     estimated_at_ = 0;
     estimate_spacing_ =

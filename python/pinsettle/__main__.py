@@ -17,6 +17,7 @@ import pinocchio
 
 import pinsettle
 from pinsettle._progress import StatusLine, status_line
+from pinsettle._settings import SETTING_TYPES
 
 
 def _step(text: str) -> float | str:
@@ -132,10 +133,8 @@ def _rest_check(model: pinocchio.Model, q: np.ndarray, limits: bool) -> float:
 
 
 def _setting_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    keys = ["energy", "kt", "dt", "dt_safety", "dt_growth", "err", "ds", "max_e", "max_steps"]
-    keys += ["max_time"]
-    keys += ["backtrack", "polish", "scale_stiff_modes"]
-    return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
+    # Every setting that has a flag (the flags' names are the settings' own).
+    return {k: getattr(args, k) for k in SETTING_TYPES if getattr(args, k, None) is not None}
 
 
 def _demo(args: argparse.Namespace) -> int:

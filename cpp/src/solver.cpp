@@ -54,6 +54,8 @@ namespace pinsettle
         throw std::invalid_argument(msg.str());
       }
     }
+    if (pinocchio::isNormalized(model, q, 1e-6))
+      return;
     // Test each joint's unit-norm part (quaternion, cos/sin pair) alone, inside a neutral
     // configuration, so that the message names the joint at fault.
     const Eigen::VectorXd neutral = pinocchio::neutral(model);
@@ -84,6 +86,9 @@ namespace pinsettle
 
   void checkVelocity(const pinocchio::Model & model, const Eigen::VectorXd & v, const char * name)
   {
+    // The message is built only on an error: a stream costs more than a small solve's step.
+    if (v.size() == model.nv && v.allFinite())
+      return;
     std::ostringstream msg;
     if (v.size() != model.nv)
       msg << name << " must have model.nv = " << model.nv << " entries, got " << v.size();
@@ -91,8 +96,7 @@ namespace pinsettle
       for (Eigen::Index k = 0; k < v.size() && msg.tellp() == 0; ++k)
         if (!std::isfinite(v[k]))
           msg << name << "[" << k << "] is " << v[k] << "; every entry must be finite";
-    if (msg.tellp() > 0)
-      throw std::invalid_argument(msg.str());
+    throw std::invalid_argument(msg.str());
   }
 
   void checkMassMatrix(
@@ -634,11 +638,12 @@ namespace pinsettle
     trace_.finish(result);
     result.q = q_;
     result.v = v_;
-    result.residual = residualAt(q_, forces_);
+    Eigen::VectorXd tau = staticForce(q_, forces_); // at result.q, polished or not
+    result.residual = residualOf(q_, tau);
     result.residual_before_polish = result.residual;
     StabilityReport report = rest_.isAssessed(q_) ? rest_.report() : assess(q_, forces_);
     if (settings_->polish && status == Status::Converged)
-      polish(report, forces_, result);
+      polish(report, forces_, tau, result);
     const std::pair<double, double> energies = computeKineticEnergies(model_, data, result.q, v_);
     result.kinetic_energy = energies.first;
     result.simplified_kinetic_energy = energies.second;
@@ -649,11 +654,9 @@ namespace pinsettle
       result.constraint_error =
         computeLoopError(model_, data, *loops_, result.q).lpNorm<Eigen::Infinity>();
     if (stops_ != nullptr && loops_ != nullptr)
-      result.stop_contacts =
-        balanceStops(model_, data, *loops_, *stops_, result.q, staticForce(result.q, forces_))
-          .contacts;
+      result.stop_contacts = balanceStops(model_, data, *loops_, *stops_, result.q, tau).contacts;
     else if (stops_ != nullptr)
-      result.stop_contacts = computeStopContacts(*stops_, result.q, staticForce(result.q, forces_));
+      result.stop_contacts = computeStopContacts(*stops_, result.q, tau);
     settings_ = nullptr;
     forces_ = nullptr;
   }
@@ -667,12 +670,8 @@ namespace pinsettle
     return tau.lpNorm<Eigen::Infinity>();
   }
 
-  double Solver::residualAt(const Eigen::VectorXd & q, const ForceModel * forces)
-  {
-    return residualOf(q, staticForce(q, forces));
-  }
-
-  void Solver::polish(StabilityReport & report, const ForceModel * forces, Result & result)
+  void Solver::polish(
+    StabilityReport & report, const ForceModel * forces, Eigen::VectorXd & tau_q, Result & result)
   {
     const pinocchio::Model & model = model_;
     // The correction a rest in a basin needs is about residual / (smallest stiffness): allow ten
@@ -689,8 +688,8 @@ namespace pinsettle
     const double reach = 10. * result.residual / softest;
 
     Eigen::VectorXd q = result.q, q_next(model.nq);
-    Eigen::VectorXd tau = staticForce(q, forces);
-    double residual = residualOf(q, tau);
+    Eigen::VectorXd tau = tau_q;
+    double residual = result.residual;
     // Loops and stops restrict the motions Newton may take (the report's basis).
     const bool restricted = loops_ != nullptr || stops_ != nullptr;
     int iterations = 0;
@@ -736,6 +735,7 @@ namespace pinsettle
     result.q = q;
     result.residual = residual;
     result.polished = true;
+    tau_q = tau;
     report = after;
   }
 

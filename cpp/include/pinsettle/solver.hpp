@@ -196,15 +196,15 @@ namespace pinsettle
     void keepConfiguration(double exact);
     bool backtrackToPeak(double e, double exact);
     bool integrate();
-    double residualAt(const Eigen::VectorXd & q, const ForceModel * forces);
     double residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau);
     void finish(Status status, Result & result);
     void measureProgress(double energy, const Result & result, RunProgress & progress);
     double progressResidual();
 
-    // Newton steps from the converged result.q; keeps them only if the rest stays of the same
-    // kind (report) and close.
-    void polish(StabilityReport & report, const ForceModel * forces, Result & result);
+    // Newton steps from the converged result.q, whose static force is tau; keeps them only if
+    // the rest stays of the same kind (report) and close, and then tau is that of the new q.
+    void polish(
+      StabilityReport & report, const ForceModel * forces, Eigen::VectorXd & tau, Result & result);
 
     // Static force, stiffness report and projections of the closed mechanism (loops or not).
     Eigen::VectorXd staticForce(const Eigen::VectorXd & q, const ForceModel * forces);

@@ -2050,30 +2050,117 @@ def gallery_section(results: D.Results, figures: str) -> str:
     return text
 
 
+def fastest_baseline_run(d: D.SceneData, family: str) -> D.Run | None:
+    """A baseline at its best: the faster to LEVEL of its rule run and the run at the sweep's
+    best setting (each timed in its own runs; the rule can win where the sweep's short runs
+    ranked another setting first); None when neither got there."""
+    runs = [d.runs[f"{family}_{k}"] for k in ("rule", "best")]
+    done = [r for r in runs if time_to(r) is not None]
+    return min(done, key=time_to, default=None)
+
+
+#: A behind scene (of more than one degree of freedom) whose KD run damps more often than once
+#: in this many steps, or whose set-up is more than this share of KD's time, gets the matching
+#: reason in the goal 1 line.
+FREQUENT_DAMPING = 15
+SETUP_HEAVY = 0.2
+
+
+def goal1_reasons(frequent: list[str], setup_heavy: list[str]) -> str:
+    """Why KD is behind where goal 1 is not met, in plain words, from what was measured."""
+    text = ""
+    if frequent:
+        text += (
+            f" Why, on {', '.join(frequent)}: KD damps every few steps there, and each damping "
+            "event (kt = 0) stops the slow swing of the whole mechanism together with the fast "
+            "modes whose energy peaked, so the motion starts again from rest; viscous damping "
+            "removes energy without stopping the motion, and FIRE mixes its velocity toward "
+            "the force, which keeps its power positive for longer between resets."
+        )
+    if setup_heavy:
+        text += (
+            f" Why, on {', '.join(setup_heavy)}: the whole run takes microseconds, and KD's "
+            "set-up (the checks of the model and the start, the first estimate of the "
+            "stability limit and of the stiff modes) is a large share of it."
+        )
+    return text
+
+
+def goal3_reasons(gallery: list[dict], both: dict[str, float]) -> str:
+    """Why pinsettle is less than 100 times faster than MuJoCo on a robot, from what was
+    measured: MuJoCo stopped on a saddle (another answer), or pinsettle's run is a few steps
+    against MuJoCo's shortest settle (the still window it must pass)."""
+    rows = {r["name"]: r for r in gallery if r["name"] in both and both[r["name"]] < 100}
+    saddle = [n for n, r in rows.items() if r["mujoco"].get("stability") == "unstable"]
+    short = [n for n in rows if n not in saddle]
+    text = ""
+    if saddle:
+        fair = [x for n, x in both.items() if n not in saddle and not unstable_rest(gallery, n)]
+        text += (
+            f" Why, on {', '.join(saddle)}: MuJoCo's settle ends on a saddle it did not leave and "
+            "pinsettle goes on to a stable rest, so the two times are of different answers"
+            + (
+                f" (over the {len(fair)} robots where both come to a rest that is not unstable "
+                f"the median is {statistics.median(fair):.0f})"
+                if fair
+                else ""
+            )
+            + "."
+        )
+    if short:
+        text += (
+            f" Why, on {', '.join(short)}: "
+            + "; ".join(
+                f"pinsettle's whole run is {rows[n]['steps']:,} steps in "
+                f"{fmt_time(statistics.median(rows[n]['seconds']))}, and MuJoCo's is the "
+                f"{rows[n]['mujoco']['sim_time']:g} s it simulates to see the robot stay still"
+                for n in short
+            )
+            + "."
+        )
+    return text
+
+
+def unstable_rest(gallery: list[dict], name: str) -> bool:
+    """Whether MuJoCo's settle of the robot ended on an unstable rest."""
+    return any(r["name"] == name and r["mujoco"].get("stability") == "unstable" for r in gallery)
+
+
 def goals_section(results: D.Results) -> str:
     """The goals of issues 18 and 20, each measured in this run: met or not, in plain words."""
     lines = []
     names = compared(results)
     if names:
-        behind = []
+        behind, frequent, setup_heavy = [], [], []
         for name in names:
             d = results.scenes[name]
             tk = kd_time(d)
-            bests = {
-                f: time_to(d.runs[f"{f}_best"])
-                for f in BASELINES
-                if time_to(d.runs[f"{f}_best"]) is not None
-            }
+            bests = {f: fastest_baseline_run(d, f) for f in BASELINES}
+            bests = {f: r for f, r in bests.items() if r is not None}
             if tk is None:
                 behind.append(f"{name} (KD did not reach it)")
                 continue
-            faster = {f: t for f, t in bests.items() if t < tk}
+            faster = {f: time_to(r) for f, r in bests.items() if time_to(r) < tk}
             if faster:
                 f = min(faster, key=faster.get)
+                kd = d.runs[kd_key()]
+                every = kd.steps / kd.peaks if kd.peaks else math.inf
+                share = kd.setup / time_to(kd)  # of the same run, set-up included
+                resets = bests[f].extra.get("resets") if f.startswith("fire") else None
                 behind.append(
                     f"{name} ({D.BASELINE_LABELS[f]} {fmt_time(faster[f])} against KD's "
-                    f"{fmt_time(tk)})"
+                    f"{fmt_time(tk)}; KD damps once every {every:.0f} steps"
+                    + (
+                        f" ({kd.peaks:,} times), {D.BASELINE_LABELS[f]} resets {resets:,} times"
+                        if resets is not None
+                        else ""
+                    )
+                    + f"; KD's set-up {fmt_time(kd.setup)} is {share:.0%} of its time)"
                 )
+                if every < FREQUENT_DAMPING and d.nv > 1:  # one mode: no slow swing to stop
+                    frequent.append(name)
+                if share > SETUP_HEAVY:
+                    setup_heavy.append(name)
         fire_fails = [
             n
             for n in results.scenes
@@ -2096,6 +2183,7 @@ def goals_section(results: D.Results) -> str:
                 else ". FIRE at its rule fails none"
             )
             + " (the whole comparison, per scene, in the Scenes part)."
+            + goal1_reasons(frequent, setup_heavy)
         )
         defaults = [
             (n, d.runs["kd_default"]) for n, d in results.scenes.items() if "kd_default" in d.runs
@@ -2121,6 +2209,7 @@ def goals_section(results: D.Results) -> str:
                 f"over {len(values)} robots"
                 + (f"; below 100: {', '.join(below)}" if below else "")
                 + (": met." if not below and statistics.median(values) >= 300 else ": **not met**.")
+                + goal3_reasons(results.gallery, both)
             )
     rows = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
     rows = rows or overhead_rows(results)  # a quick run: the scenes it has

@@ -8,6 +8,7 @@ PINSETTLE_BENCH_BUILD names a build folder to keep between runs (like PINSETTLE_
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import math
 import os
@@ -100,6 +101,44 @@ def test_the_report_and_its_figures_are_written(quick):
                 if not row.startswith("|"):
                     break
                 assert row.count("|") == width, row
+
+
+def test_goal_1_says_which_baseline_is_faster_and_why(quick):
+    # The quick run's KD made 1,000 times slower and each baseline's sweep-best run 10 times
+    # slower than its rule run: the goal line must say "not met", name the fastest run (the rule,
+    # faster than the sweep's best) with its time, and give the measured reasons.
+    results, _, _ = quick
+    name = report_writer.compared(results)[0]
+    d = dataclasses.replace(results.scenes[name], runs=dict(results.scenes[name].runs))
+    slowed = dataclasses.replace(results, scenes={**results.scenes, name: d})
+
+    def slower(run, factor):
+        return dataclasses.replace(
+            run, seconds=[s * factor for s in run.seconds], setup=run.setup * factor
+        )
+
+    for key in (report_writer.kd_key(), "kd_default"):
+        d.runs[key] = slower(d.runs[key], 1000.0)
+    for family in report_data.BASELINES:
+        d.runs[f"{family}_best"] = slower(d.runs[f"{family}_rule"], 10.0)
+    fastest = {
+        f: report_writer.time_to(d.runs[f"{f}_rule"])
+        for f in report_data.BASELINES
+        if report_writer.time_to(d.runs[f"{f}_rule"]) is not None
+    }
+    assert fastest
+    family = min(fastest, key=fastest.get)
+    assert report_writer.fastest_baseline_run(d, family) is d.runs[f"{family}_rule"]
+    line = next(x for x in report_writer.goals_section(slowed).splitlines() if "**Goal 1**" in x)
+    assert "**not met**" in line
+    assert (
+        f"{name} ({report_data.BASELINE_LABELS[family]} "
+        f"{report_writer.fmt_time(fastest[family])} against KD's"
+    ) in line
+    assert "KD damps once every" in line and "set-up" in line
+    kd = d.runs[report_writer.kd_key()]
+    if kd.setup / report_writer.time_to(kd) > report_writer.SETUP_HEAVY:
+        assert f"Why, on {name}" in line
 
 
 def test_the_report_keeps_what_it_did_not_write(quick):

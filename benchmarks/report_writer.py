@@ -2050,13 +2050,24 @@ def gallery_section(results: D.Results, figures: str) -> str:
     return text
 
 
-def fastest_baseline_run(d: D.SceneData, family: str) -> D.Run | None:
-    """A baseline at its best: the faster to LEVEL of its rule run and the run at the sweep's
-    best setting (each timed in its own runs; the rule can win where the sweep's short runs
-    ranked another setting first); None when neither got there."""
-    runs = [d.runs[f"{family}_{k}"] for k in ("rule", "best")]
-    done = [r for r in runs if time_to(r) is not None]
-    return min(done, key=time_to, default=None)
+def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None] | None:
+    """A baseline at its best: the shortest time to LEVEL (s) among its rule run, the run at the
+    sweep's best setting and the sweep's own runs (each timed in its own repeats; a full run may
+    be slower than its sweep point when it stalled past the level and was retried with the steps
+    halved), with that run's velocity resets (None for the viscous baselines); None when none
+    got there."""
+    fire = family.startswith("fire")
+    found = [
+        (time_to(run), run.extra.get("resets") if fire else None)
+        for run in (d.runs[f"{family}_rule"], d.runs[f"{family}_best"])
+        if time_to(run) is not None
+    ]
+    found += [
+        (p.time_to, p.resets if fire else None)
+        for p in d.baseline_sweep.get(family, [])
+        if p.time_to is not None
+    ]
+    return min(found, key=lambda found: found[0], default=None)
 
 
 #: A behind scene (of more than one degree of freedom) whose KD run damps more often than once
@@ -2135,18 +2146,18 @@ def goals_section(results: D.Results) -> str:
         for name in names:
             d = results.scenes[name]
             tk = kd_time(d)
-            bests = {f: fastest_baseline_run(d, f) for f in BASELINES}
-            bests = {f: r for f, r in bests.items() if r is not None}
+            bests = {f: fastest_baseline(d, f) for f in BASELINES}
+            bests = {f: b for f, b in bests.items() if b is not None}
             if tk is None:
                 behind.append(f"{name} (KD did not reach it)")
                 continue
-            faster = {f: time_to(r) for f, r in bests.items() if time_to(r) < tk}
+            faster = {f: t for f, (t, _) in bests.items() if t < tk}
             if faster:
                 f = min(faster, key=faster.get)
                 kd = d.runs[kd_key()]
                 every = kd.steps / kd.peaks if kd.peaks else math.inf
                 share = kd.setup / time_to(kd)  # of the same run, set-up included
-                resets = bests[f].extra.get("resets") if f.startswith("fire") else None
+                resets = bests[f][1]
                 behind.append(
                     f"{name} ({D.BASELINE_LABELS[f]} {fmt_time(faster[f])} against KD's "
                     f"{fmt_time(tk)}; KD damps once every {every:.0f} steps"
@@ -2170,7 +2181,9 @@ def goals_section(results: D.Results) -> str:
         kd_ok = [n for n in fire_fails if kd_time(results.scenes[n]) is not None]
         lines.append(
             f"- **Goal 1** (KD with the default settings at least as fast to a residual of "
-            f"{LEVEL:g} as every baseline at its best, on every tree scene): "
+            f"{LEVEL:g} as every baseline at its best, on every tree scene; a baseline's best is "
+            "its fastest run to that level: its rule, a point of its sweep or the sweep's best "
+            "setting run in full): "
             + (
                 f"met on {len(names) - len(behind)} of {len(names)}; **not met** on "
                 + "; ".join(behind)

@@ -105,8 +105,9 @@ def test_the_report_and_its_figures_are_written(quick):
 
 def test_goal_1_says_which_baseline_is_faster_and_why(quick):
     # The quick run's KD made 1,000 times slower and each baseline's sweep-best run 10 times
-    # slower than its rule run: the goal line must say "not met", name the fastest run (the rule,
-    # faster than the sweep's best) with its time, and give the measured reasons.
+    # slower than its rule run: the goal line must say "not met", name the baseline's fastest
+    # time (its rule run or a sweep point, not the slowed best run) and give the measured
+    # reasons.
     results, _, _ = quick
     name = report_writer.compared(results)[0]
     d = dataclasses.replace(results.scenes[name], runs=dict(results.scenes[name].runs))
@@ -121,14 +122,16 @@ def test_goal_1_says_which_baseline_is_faster_and_why(quick):
         d.runs[key] = slower(d.runs[key], 1000.0)
     for family in report_data.BASELINES:
         d.runs[f"{family}_best"] = slower(d.runs[f"{family}_rule"], 10.0)
-    fastest = {
-        f: report_writer.time_to(d.runs[f"{f}_rule"])
-        for f in report_data.BASELINES
-        if report_writer.time_to(d.runs[f"{f}_rule"]) is not None
-    }
+    fastest = {}
+    for f in report_data.BASELINES:
+        times = [report_writer.time_to(d.runs[f"{f}_rule"])]
+        times += [p.time_to for p in d.baseline_sweep[f]]
+        times = [t for t in times if t is not None]
+        if times:
+            fastest[f] = min(times)
+            assert report_writer.fastest_baseline(d, f)[0] == fastest[f]
     assert fastest
     family = min(fastest, key=fastest.get)
-    assert report_writer.fastest_baseline_run(d, family) is d.runs[f"{family}_rule"]
     line = next(x for x in report_writer.goals_section(slowed).splitlines() if "**Goal 1**" in x)
     assert "**not met**" in line
     assert (

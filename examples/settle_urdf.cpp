@@ -25,7 +25,7 @@ int main(int argc, char ** argv)
     const pinocchio::Model model = pinsettle::buildModelFromUrdf(argv[1]);
 
     pinsettle::Settings settings;
-    settings.max_e = 1e-16; // J summed over the last ds = 100 steps
+    settings.max_e = 1e-16; // J summed over the last ds = 10 steps
     if (argc > 2)
       settings.kt = std::atof(argv[2]);
 

@@ -136,8 +136,8 @@ def _solves(scene: pinsettle.Scene, check: Callable[[pinsettle.Result], None], *
 def test_memory_flat_over_10000_solves_with_tracing(libc, name, loops):
     scene = pinsettle.load_scene(ROBOTS / f"{name}.toml")
     # The callback polled every 20 steps (check_every also paces the step's re-estimates: the
-    # same for every solve here).
-    settings = {"trace_every": 1, "trace_configurations": True, "check_every": 20}
+    # same for every solve here); a stopping window of 100 steps, so that a solve is long.
+    settings = {"trace_every": 1, "trace_configurations": True, "check_every": 20, "ds": 100}
     first = pinsettle.solve(scene, **settings)
     assert first.converged and first.loops == loops and first.steps >= 100
     assert first.trace is not None and len(first.trace.step) > 100

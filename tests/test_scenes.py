@@ -687,13 +687,23 @@ def test_each_energy_measure_and_kt(energy, kt, bistable_theta):
         )
 
 
+def test_the_runaway_verdict_does_not_depend_on_the_stopping_window():
+    # The runaway test samples on its own span (100 steps from a reset), not every ds steps: a
+    # short stopping window must not call a slow swing's first quarter a runaway sooner.
+    scene = pinsettle.load_scene(pinsettle.scene_path("torque_disk"))
+    runs = [pinsettle.solve(scene, ds=ds) for ds in (2, 10, 100, 300)]
+    assert all(r.status == "no_equilibrium" for r in runs)
+    assert len({r.steps for r in runs}) == 1
+    assert runs[0].steps > 100 * 2**8
+
+
 def test_torque_disk_has_no_equilibrium(solved):
     scene, result, ref = solved("torque_disk")
     assert result.status == "no_equilibrium" and not result.converged
     assert "falls without bound" in result.reason
     # Decided by the runaway test, well before any step limit: two runs of at most nine
-    # doublings of ds = 100 steps (eight growths of the release per doubling; the first
-    # comparison is of two spans of ds), the second after damping went to kt = 0.
+    # doublings of its first span of 100 steps (eight growths of the release per doubling;
+    # the first comparison is of two spans), the second after damping went to kt = 0.
     assert result.steps <= 2 * 100 * 2**9 + 1 < scene.settings.max_steps
     assert result.peaks == 0  # the energy never stops growing
     # Balanced: gravity does nothing, the net static force is the effort, everywhere.
@@ -717,8 +727,9 @@ def test_no_equilibrium_scenes_are_decided_in_bounded_time(name, solved):
     scene, result, ref = solved(name)
     assert result.status == "no_equilibrium" and not result.converged
     assert "falls without bound" in result.reason
-    # By the runaway test (at most two runs of nine doublings of ds), not by the step limit.
-    assert result.steps <= 2 * scene.settings.ds * 2**9 + 1 < scene.settings.max_steps
+    # By the runaway test (at most two runs of nine doublings of its first span, 100 steps:
+    # RunawayMonitor::kFirstSample), not by the step limit.
+    assert result.steps <= 2 * 100 * 2**9 + 1 < scene.settings.max_steps
     assert result.dt_reductions == 0 and np.all(np.isfinite(result.q))
     # Far from rest: the net static force stays of the size of the loads.
     assert ref.residual(result.q) == pytest.approx(result.residual, rel=1e-9)

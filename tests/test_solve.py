@@ -376,8 +376,9 @@ def test_callback_true_aborts(ur5):
 
 def test_callback_is_called_every_check_every_steps(pendulum):
     calls = []
+    # A stopping window of 100 steps: the pendulum does not settle within the 100-step budget.
     result = pinsettle.solve(
-        pendulum, [1.0], max_steps=100, check_every=10, callback=lambda: calls.append(None)
+        pendulum, [1.0], max_steps=100, ds=100, check_every=10, callback=lambda: calls.append(None)
     )
     assert result.status == "max_steps"
     assert len(calls) == 9  # at steps 10, 20, ..., 90 (returning None means go on)
@@ -466,7 +467,7 @@ def test_settings_defaults():
         "dt_safety": "auto",
         "kt": 0.0,
         "err": 1e-12,
-        "ds": 100,
+        "ds": 10,
         "max_e": 1e-12,
         "max_steps": 1_000_000,
         "max_time": float("inf"),

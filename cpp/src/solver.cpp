@@ -375,9 +375,11 @@ namespace pinsettle
 
     peaks_ = PeakDetector(settings.err);
     window_ = StoppingWindow(settings.ds, settings.max_e);
-    rest_.start(settings.ds, std::max(10. * settings.max_e, 1e-30), settings.energy);
+    rest_.start(
+      std::max<std::int64_t>(settings.ds, model_.nv), std::max(10. * settings.max_e, 1e-30),
+      settings.energy);
     trace_.start(settings);
-    runaway_.start(model_.nv, settings.ds, std::max(10. * settings.max_e, 1e-30));
+    runaway_.start(model_.nv, RunawayMonitor::kFirstSample, std::max(10. * settings.max_e, 1e-30));
     step_control_.start(settings, forces);
     if (step_control_.isAutomatic())
       runaway_.addSwitchLoss(step_control_.estimate(data, q_, v_, step_));
@@ -527,6 +529,10 @@ namespace pinsettle
     const bool exact_rest = stationary_ || window_.isExactRest();
     if (!rest_.isDue(quiet, peaks_.isNotRising(e.signal), exact_rest, step_))
       return false;
+    // Where the mechanism is drifting (its velocity, or from rest its acceleration): a push off
+    // an unstable rest goes that way, as the mechanism would fall, not along whichever sign
+    // the eigen-solver gave the softest direction.
+    drift_ = v_.isZero(0.) ? data.ddq : v_;
     rest_.record(assess(q_, forces_), q_, step_);
     return true;
   }
@@ -534,6 +540,8 @@ namespace pinsettle
   void Solver::pushOff(Result & result)
   {
     rest_.push(model_, data, q_, v_);
+    if (v_.dot(drift_) < 0.)
+      v_ = -v_;
     ++result.pushes;
     trace_.event(step_, time_, EventKind::Push);
     guard_.keep(q_, v_, time_);

@@ -381,7 +381,10 @@ BOOST_AUTO_TEST_CASE(non_finite_values_stop_with_diverged)
   const pinocchio::Model model = pendulum();
   const PoisonAfter poison(50);
   pinsettle::Solver solver(model);
-  const pinsettle::Result result = solver.solve(Eigen::VectorXd::Constant(1, 1.), tight(), &poison);
+  pinsettle::Settings settings = tight();
+  settings.ds = 100; // a run longer than the poison's 50 evaluations
+  const pinsettle::Result result =
+    solver.solve(Eigen::VectorXd::Constant(1, 1.), settings, &poison);
   // Every evaluation after the 50th is NaN: each roll-back to the start with half the step meets
   // it again, and after 30 halvings the run is declared diverged with the last good state.
   BOOST_CHECK(result.status == pinsettle::Status::Diverged);
@@ -644,6 +647,7 @@ BOOST_AUTO_TEST_CASE(newton_polish_brings_the_residual_to_round_off_and_keeps_th
   pinsettle::Settings settings;
   settings.polish = true;
   settings.max_e = 1e-3; // a loose stopping bound: the run leaves the polish work to do
+  settings.ds = 100;     // near the rest: with the default window of 10 the run stops 0.04 rad off
   const pinsettle::Result result = solver.solve(pinocchio::neutral(model), settings);
   BOOST_CHECK(result.status == pinsettle::Status::Converged);
   BOOST_CHECK(result.polished);

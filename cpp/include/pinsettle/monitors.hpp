@@ -171,11 +171,14 @@ namespace pinsettle
   public:
     static constexpr double kRunawayRatio = 1.5;
     static constexpr int kRunawayDoublings = 8;
+    /// Steps from a reset to the first sample: its own span, not the stopping window's (a
+    /// shorter one would call a slow swing's first quarter a runaway sooner).
+    static constexpr std::int64_t kFirstSample = 100;
 
     ///
     /// \brief Start a run: sizes the memory of the net motion.
     /// \param[in] nv Tangent dimension (model.nv).
-    /// \param[in] first_sample Steps from a reset to the first sample (Settings::ds).
+    /// \param[in] first_sample Steps from a reset to the first sample (kFirstSample).
     /// \param[in] floor Energy (J) a doubling must release to count at all: round-off creep
     ///            along a neutral direction releases ever more of almost nothing.
     ///
@@ -268,7 +271,8 @@ namespace pinsettle
   {
   public:
     ///
-    /// \param[in] window Steps between two assessments of a creeping rest (Settings::ds).
+    /// \param[in] window Steps between two assessments of a creeping rest (Settings::ds, at
+    ///            least model.nv: an assessment costs O(nv^3), a step O(nv)).
     /// \param[in] push_energy Energy of a push (unit of the energy signal).
     /// \param[in] measure The energy signal.
     ///

@@ -235,6 +235,7 @@ namespace pinsettle
 
     // Workspace, sized once for the model.
     Eigen::VectorXd q_, v_, dq_, q_next_, tau_;
+    Eigen::VectorXd drift_; // v, or from rest the acceleration, at the last rest assessment
     // q one and two samples back, and the exact energy (with added inertia) one back
     Eigen::VectorXd q_before_, q_before2_;
     double exact_before_ = 0.;

@@ -2137,6 +2137,27 @@ def unstable_rest(gallery: list[dict], name: str) -> bool:
     return any(r["name"] == name and r["mujoco"].get("stability") == "unstable" for r in gallery)
 
 
+def goal5_reasons(
+    results: D.Results, n: list[int], steps: list[int], per: list[float], wall: list[float]
+) -> str:
+    """Why the chains' time grows faster than n^2, or why the longest are missing, from what
+    was measured: the growth of the steps and of a step, and the solver's own refusal."""
+    text = ""
+    if slope(n, wall) > 2:
+        text += (
+            f" Why: the steps grow as n^{slope(n, steps):.2f} (a longer chain's slowest swing "
+            f"takes more of them) and a step as n^{slope(n, per):.2f}."
+        )
+    refused = [row for row in results.scaling if "refused" in row]
+    if refused:
+        text += (
+            f" {', '.join(str(row['n']) for row in refused)} links are refused: "
+            + refused[0]["refused"].strip().splitlines()[-1]
+            + "."
+        )
+    return text
+
+
 def goals_section(results: D.Results) -> str:
     """The goals of issues 18 and 20, each measured in this run: met or not, in plain words."""
     lines = []
@@ -2255,6 +2276,7 @@ def goals_section(results: D.Results) -> str:
                 if unfinished
                 else (": met." if slope(n, wall) <= 2 else ": **not met**.")
             )
+            + goal5_reasons(results, n, [r["profile"]["steps"] for r in done], per, wall)
         )
     if results.step_cost:
         ratios = {n: stops_ratio(results, n) for n in ("ur5", "panda") if n in results.step_cost}

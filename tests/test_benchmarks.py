@@ -14,6 +14,7 @@ import math
 import os
 import statistics
 import sys
+import types
 from pathlib import Path
 
 import numpy as np
@@ -142,6 +143,23 @@ def test_goal_1_says_which_baseline_is_faster_and_why(quick):
     kd = d.runs[report_writer.kd_key()]
     if kd.setup / report_writer.time_to(kd) > report_writer.SETUP_HEAVY:
         assert f"Why, on {name}" in line
+
+
+def test_goal_5_says_why_from_the_measured_growth():
+    # Steps growing as n^1.5 and a step as n^1: the time grows as n^2.5, and the line says
+    # which part grows; a refused length is named with the solver's own reason.
+    n = [5, 10, 20, 40]
+    steps = [100 * k**1.5 for k in n]
+    per = [1e-6 * k for k in n]
+    wall = [s * p for s, p in zip(steps, per, strict=True)]
+    results = types.SimpleNamespace(scaling=[{"n": 400, "refused": "model: nv = 400 is too big"}])
+    text = report_writer.goal5_reasons(results, n, steps, per, wall)
+    assert "the steps grow as n^1.50" in text and "a step as n^1.00" in text
+    assert "400 links are refused: model: nv = 400 is too big." in text
+    quadratic = [s / k**0.5 for s, k in zip(wall, n, strict=True)]
+    assert "Why" not in report_writer.goal5_reasons(
+        types.SimpleNamespace(scaling=[]), n, steps, per, quadratic
+    )
 
 
 def test_the_report_keeps_what_it_did_not_write(quick):

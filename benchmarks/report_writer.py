@@ -1244,8 +1244,13 @@ def measured_chains(results: D.Results) -> list[dict]:
     return [row for row in results.scaling if "refused" not in row]
 
 
+def refused_chains(results: D.Results) -> list[dict]:
+    """The chains of the scaling section that pinsettle refused (their rows hold its message)."""
+    return [row for row in results.scaling if "refused" in row]
+
+
 def refusals(results: D.Results) -> str:
-    refused = [row for row in results.scaling if "refused" in row]
+    refused = refused_chains(results)
     if not refused:
         return ""
     return (
@@ -1995,11 +2000,7 @@ def gallery_section(results: D.Results, figures: str) -> str:
     )
     if failed:
         text += " MuJoCo cannot load " + "; ".join(failed) + "."
-    unstable = [
-        r["name"]
-        for r in results.gallery
-        if r["name"] in both and r["mujoco"].get("stability") == "unstable"
-    ]
+    unstable = mujoco_saddle_stops(results.gallery, both)
     if unstable:
         text += (
             f" MuJoCo's settle ends on an unstable rest (a saddle its damped motion did not "
@@ -2067,7 +2068,7 @@ def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None] | 
         for p in d.baseline_sweep.get(family, [])
         if p.time_to is not None
     ]
-    return min(found, key=lambda found: found[0], default=None)
+    return min(found, key=lambda item: item[0], default=None)
 
 
 #: A behind scene (of more than one degree of freedom) whose KD run damps more often than once
@@ -2102,11 +2103,12 @@ def goal3_reasons(gallery: list[dict], both: dict[str, float]) -> str:
     measured: MuJoCo stopped on a saddle (another answer), or pinsettle's run is a few steps
     against MuJoCo's shortest settle (the still window it must pass)."""
     rows = {r["name"]: r for r in gallery if r["name"] in both and both[r["name"]] < 100}
-    saddle = [n for n, r in rows.items() if r["mujoco"].get("stability") == "unstable"]
+    unstable = mujoco_saddle_stops(gallery, both)
+    saddle = [n for n in rows if n in unstable]
     short = [n for n in rows if n not in saddle]
     text = ""
     if saddle:
-        fair = [x for n, x in both.items() if n not in saddle and not unstable_rest(gallery, n)]
+        fair = [x for n, x in both.items() if n not in unstable]
         text += (
             f" Why, on {', '.join(saddle)}: MuJoCo's settle ends on a saddle it did not leave and "
             "pinsettle goes on to a stable rest, so the two times are of different answers"
@@ -2132,9 +2134,13 @@ def goal3_reasons(gallery: list[dict], both: dict[str, float]) -> str:
     return text
 
 
-def unstable_rest(gallery: list[dict], name: str) -> bool:
-    """Whether MuJoCo's settle of the robot ended on an unstable rest."""
-    return any(r["name"] == name and r["mujoco"].get("stability") == "unstable" for r in gallery)
+def mujoco_saddle_stops(gallery: list[dict], both: dict[str, float]) -> list[str]:
+    """The robots both settle (``both``) where MuJoCo's settle ended on an unstable rest."""
+    return [
+        r["name"]
+        for r in gallery
+        if r["name"] in both and r["mujoco"].get("stability") == "unstable"
+    ]
 
 
 def goal5_reasons(
@@ -2148,7 +2154,7 @@ def goal5_reasons(
             f" Why: the steps grow as n^{slope(n, steps):.2f} (a longer chain's slowest swing "
             f"takes more of them) and a step as n^{slope(n, per):.2f}."
         )
-    refused = [row for row in results.scaling if "refused" in row]
+    refused = refused_chains(results)
     if refused:
         text += (
             f" {', '.join(str(row['n']) for row in refused)} links are refused: "

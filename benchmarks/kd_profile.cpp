@@ -24,7 +24,7 @@
 //
 // Prints one JSON object: the solve's status, steps, residual and final q, and per repeat its
 // wall time, set-up, estimates and assessments (s), and a bare step's time (s); with polish 1
-// the same solve with polish = true.
+// the same solve with polish = true (its times, Newton iterations, residual and final q).
 //
 
 #include "bare-step.hpp"
@@ -267,7 +267,8 @@ int main(int argc, char ** argv)
                 << ", \"polish_iterations\": " << polished.result.polish_iterations
                 << ", \"polished\": " << (polished.result.polished ? "true" : "false")
                 << ", \"polish_steps\": " << polished.result.steps
-                << ", \"polish_residual\": " << bench::number(polished.result.residual);
+                << ", \"polish_residual\": " << bench::number(polished.result.residual)
+                << ", \"polish_q\": " << bench::jsonVector(polished.result.q);
     std::cout << "}\n";
   }
   catch (const std::exception & e)

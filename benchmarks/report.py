@@ -931,8 +931,8 @@ def overhead_tasks(config: Config, results: Results, programs: Path, work: Path)
 
 def scaling_tasks(config: Config, results: Results, programs: Path, work: Path) -> list[Task]:
     """Chains of config.chain_lengths: the default solve profiled (benchmarks/kd_profile, within
-    config.scaling_max_time), the bare step, and up to config.deep_chain_max links a run to
-    round-off and the whole step cost."""
+    config.scaling_max_time; timed whole with its polish, in parts without), the bare step, and up
+    to config.deep_chain_max links a run to round-off and the whole step cost."""
     tasks: list[Task] = []
     for n in config.chain_lengths:
 
@@ -949,15 +949,16 @@ def scaling_tasks(config: Config, results: Results, programs: Path, work: Path) 
             if not (residual <= 1e-14 and verdict == "stable"):
                 raise RuntimeError(f"chain{n}: straight down is not a stable rest ({verdict})")
             long_chain = n > config.deep_chain_max
+            # The default solve, polish included: the stopping rule leaves the last digits to it.
             profile = run_kd_profile(
                 programs / "kd_profile",
                 statics,
                 work,
                 1 if long_chain else config.sweep_repeats,
-                False,
+                True,
                 max_time=config.scaling_max_time,
             )
-            q_final = statics.compiled.full_q(np.array(profile["q"]))
+            q_final = statics.compiled.full_q(np.array(profile["polish_q"]))
             row = {
                 "n": n,
                 "profile": profile,

@@ -25,7 +25,7 @@ DISTANCE_LEVELS = (1e-3, 1e-6, 1e-9)
 KTS = (0.0, 0.25, 0.5, 0.75, 0.9)
 ERRS = (0.0, 1e-12, 1e-8, 1e-4, 1e-2)
 DSS = (10, 30, 100, 300, 1000)
-MAX_ES = (1e-8, 1e-12, 1e-16, 1e-20, 1e-24)
+MAX_ES = (1e-4, 1e-6, 1e-8, 1e-12, 1e-16, 1e-20)
 #: Chain lengths of the scaling section, and the longest that also gets a run to round-off
 #: (its curve) and the whole step-cost table.
 CHAIN_LENGTHS = (5, 10, 20, 50, 100, 200, 300, 400, 1000)

@@ -353,8 +353,8 @@ def cases() -> list[Case]:
     for name, group, ms, ls in spans:
         settings = {}
         if name.startswith("masses 1e4"):
-            # The stopping rule bounds energy (J): a 0.1 g tip link 1.6e-6 rad off stores far
-            # less than the default max_e = 1e-12 J, so 1e-6 rad needs a smaller bound.
+            # The stopping rule bounds energy (J): a 0.1 g tip link 1.6e-6 rad off stores less
+            # than 1e-12 J, far below the default max_e, so 1e-6 rad needs a smaller bound.
             settings = {"max_e": 1e-16}
         out.append(
             Case(

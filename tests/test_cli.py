@@ -111,7 +111,7 @@ def test_scale_stiff_modes_flag(tmp_path):
     assert scaled["scaled_modes"] == 1 and plain["scaled_modes"] == 0
     assert scaled["dt"] > 100 * plain["dt"] and scaled["steps"] < plain["steps"]
     # The same rest either way.
-    assert scaled["q"] == pytest.approx(plain["q"], abs=1e-4)  # both at max_e = 1e-12 J
+    assert scaled["q"] == pytest.approx(plain["q"], abs=1e-4)  # both polished from max_e = 1e-6 J
 
 
 def test_demo_text_output():

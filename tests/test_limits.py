@@ -35,12 +35,10 @@ SLIDER = ROBOTS / "slider.urdf"
 DISK = ROBOTS / "torque_disk.urdf"
 
 # The residual the tests accept at a converged rest, relative to the largest gravity torque of
-# the mechanism at its start (the scale of the loads): the default settings (max_e = 1e-12 J
-# over a window of 100 steps) leave a residual of the order of sqrt(2 K max_e / ds), about
-# 1e-7 N m for a stiffness K of 1 to 100 N m/rad, that is 1e-9 to 1e-6 of a gravity torque of
-# 1 to 100 N m. 1e-6 of the largest torque (at least 1e-6 N m) bounds it with the robots'
-# stiffness-to-load ratios (1 to 10 rad^-1), and is far below any reaction that decides which
-# side of a stop a joint is on.
+# the mechanism at its start (the scale of the loads). The default run stops at max_e = 1e-6 J
+# and its Newton polish takes the residual to round-off; 1e-6 of the largest torque (at least
+# 1e-6 N m) is far above round-off and far below any reaction that decides which side of a stop
+# a joint is on.
 RELATIVE_TOLERANCE = 1e-6
 
 

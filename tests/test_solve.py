@@ -468,7 +468,7 @@ def test_settings_defaults():
         "kt": 0.0,
         "err": 1e-12,
         "ds": 10,
-        "max_e": 1e-12,
+        "max_e": 1e-6,
         "max_steps": 1_000_000,
         "max_time": float("inf"),
         "energy": "exact",

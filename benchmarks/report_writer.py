@@ -1341,7 +1341,8 @@ def scaling_section(results: D.Results, figures: str) -> str:
         f"{results.config.sweep_repeats}): status, steps, wall time (the polish included), time "
         "per step, a bare `aba` + `integrate` step and the ratio, the set-up, the step estimates "
         "and stability assessments (count: share of the same solve's time without the polish), "
-        "the final residual (relative, independent physics); up to {results.config.deep_chain_max} links also the steps and time to a "
+        "the final residual (relative, independent physics); up to "
+        f"{results.config.deep_chain_max} links also the steps and time to a "
         f"residual of {LEVEL:g} (`max_e = {D.DEEP_MAX_E:g}`).\n\n"
         + table(
             [

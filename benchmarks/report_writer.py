@@ -1416,6 +1416,16 @@ def kd_time(d: D.SceneData) -> float | None:
     return t
 
 
+def kd_steps(d: D.SceneData) -> int | None:
+    """KD's steps to the level, of the run kd_time takes its time from."""
+    run, default = d.runs[kd_key()], d.runs.get("kd_default")
+    t = time_to(run)
+    if default is not None and default.residual <= LEVEL and (t is None or default.time < t):
+        return default.steps
+    steps = steps_to(run)
+    return None if steps is None else int(steps)
+
+
 def ratio_to_kd(d: D.SceneData, key: str) -> float | None:
     """A baseline's time to the level over KD's (defaults); None when either did not get
     there."""
@@ -2059,20 +2069,20 @@ def gallery_section(results: D.Results, figures: str) -> str:
     return text
 
 
-def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None] | None:
+def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None, int] | None:
     """A baseline at its best: the shortest time to LEVEL (s) among its rule run, the run at the
     sweep's best setting and the sweep's own runs (each timed in its own repeats; a full run may
     be slower than its sweep point when it stalled past the level and was retried with the steps
-    halved), with that run's velocity resets (None for the viscous baselines); None when none
-    got there."""
+    halved), with that run's velocity resets (None for the viscous baselines) and its steps to
+    the level; None when none got there."""
     fire = family.startswith("fire")
     found = [
-        (time_to(run), run.extra.get("resets") if fire else None)
+        (time_to(run), run.extra.get("resets") if fire else None, int(steps_to(run)))
         for run in (d.runs[f"{family}_rule"], d.runs[f"{family}_best"])
         if time_to(run) is not None
     ]
     found += [
-        (p.time_to, p.resets if fire else None)
+        (p.time_to, p.resets if fire else None, p.steps)
         for p in d.baseline_sweep.get(family, [])
         if p.time_to is not None
     ]
@@ -2086,9 +2096,31 @@ FREQUENT_DAMPING = 15
 SETUP_HEAVY = 0.2
 
 
-def goal1_reasons(frequent: list[str], setup_heavy: list[str]) -> str:
-    """Why KD is behind where goal 1 is not met, in plain words, from what was measured."""
+def goal1_reasons(
+    frequent: list[str],
+    setup_heavy: list[str],
+    single: list[tuple[str, str, int, float, int, float]],
+) -> str:
+    """Why KD is behind where goal 1 is not met, in plain words, from what was measured.
+    ``single``: the one-degree-of-freedom scenes behind, each (name, the faster baseline, its
+    steps and time to the level, KD's steps and time to the level)."""
     text = ""
+    if single:
+        fewer = all(steps_b <= steps_k for _, _, steps_b, _, steps_k, _ in single)
+        text += (
+            f" Why, on {', '.join(n for n, *_ in single)} (one degree of freedom): "
+            + "; ".join(
+                f"{n}: {label} {steps_b:,} steps in {fmt_time(t_b)} "
+                f"({fmt_time(t_b / steps_b)} a step, set-up included), KD {steps_k:,} in "
+                f"{fmt_time(t_k)} ({fmt_time(t_k / steps_k)})"
+                for n, label, steps_b, t_b, steps_k, t_k in single
+            )
+            + ". A single mode has no slower swing for KD's stops to save, and a damper tuned to "
+            "it (its sweep's best) brings it down "
+            + ("in as few steps or fewer" if fewer else "in about as many steps")
+            + "; each KD step also computes both energies, tests for a peak and controls the "
+            "step."
+        )
     if frequent:
         text += (
             f" Why, on {', '.join(frequent)}: KD damps every few steps there, and each damping "
@@ -2178,6 +2210,7 @@ def goals_section(results: D.Results) -> str:
     names = compared(results)
     if names:
         behind, frequent, setup_heavy = [], [], []
+        single: list[tuple[str, str, int, float, int, float]] = []
         for name in names:
             d = results.scenes[name]
             tk = kd_time(d)
@@ -2186,7 +2219,7 @@ def goals_section(results: D.Results) -> str:
             if tk is None:
                 behind.append(f"{name} (KD did not reach it)")
                 continue
-            faster = {f: t for f, (t, _) in bests.items() if t < tk}
+            faster = {f: t for f, (t, _, _) in bests.items() if t < tk}
             if faster:
                 f = min(faster, key=faster.get)
                 kd = d.runs[kd_key()]
@@ -2205,6 +2238,10 @@ def goals_section(results: D.Results) -> str:
                 )
                 if every < FREQUENT_DAMPING and d.nv > 1:  # one mode: no slow swing to stop
                     frequent.append(name)
+                steps_k = kd_steps(d)
+                if d.nv == 1 and steps_k:
+                    label = D.BASELINE_LABELS[f]
+                    single.append((name, label, bests[f][2], faster[f], steps_k, tk))
                 if share > SETUP_HEAVY:
                     setup_heavy.append(name)
         fire_fails = [
@@ -2231,7 +2268,7 @@ def goals_section(results: D.Results) -> str:
                 else ". FIRE at its rule fails none"
             )
             + " (the whole comparison, per scene, in the Scenes part)."
-            + goal1_reasons(frequent, setup_heavy)
+            + goal1_reasons(frequent, setup_heavy, single)
         )
         defaults = [
             (n, d.runs["kd_default"]) for n, d in results.scenes.items() if "kd_default" in d.runs

@@ -1405,25 +1405,28 @@ def apart_scenes(results: D.Results) -> list[str]:
     return [n for n, d in results.scenes.items() if d.baseline_sweep and d.apart]
 
 
-def kd_time(d: D.SceneData) -> float | None:
-    """KD's time to the level with the default settings: from the curve of the run that goes on
-    to round-off (the same trajectory as the default run up to where that stops), or the whole
-    default run when it ends below the level (its polish, after the trajectory, gets there)."""
-    t = time_to(d.runs[kd_key()])
+def kd_reach(d: D.SceneData) -> tuple[float, int] | None:
+    """KD's time (s) and steps to the level with the default settings: from the curve of the run
+    that goes on to round-off (the same trajectory as the default run up to where that stops), or
+    the whole default run when it ends below the level sooner (its polish, after the trajectory,
+    gets there)."""
+    hit = d.runs[kd_key()].reach("residual", LEVEL)
     default = d.runs.get("kd_default")
-    if default is not None and default.residual <= LEVEL:
-        t = default.time if t is None else min(t, default.time)
-    return t
+    if default is not None and default.residual <= LEVEL and (hit is None or default.time < hit[1]):
+        return default.time, default.steps
+    return None if hit is None else (hit[1], int(hit[0]))
+
+
+def kd_time(d: D.SceneData) -> float | None:
+    """KD's time to the level with the default settings (kd_reach)."""
+    reach = kd_reach(d)
+    return None if reach is None else reach[0]
 
 
 def kd_steps(d: D.SceneData) -> int | None:
-    """KD's steps to the level, of the run kd_time takes its time from."""
-    run, default = d.runs[kd_key()], d.runs.get("kd_default")
-    t = time_to(run)
-    if default is not None and default.residual <= LEVEL and (t is None or default.time < t):
-        return default.steps
-    steps = steps_to(run)
-    return None if steps is None else int(steps)
+    """KD's steps to the level with the default settings (kd_reach)."""
+    reach = kd_reach(d)
+    return None if reach is None else reach[1]
 
 
 def ratio_to_kd(d: D.SceneData, key: str) -> float | None:

@@ -1242,8 +1242,7 @@ def cost_section(results: D.Results) -> str:
 def solve_time(row: dict) -> float:
     """A scaling chain's default solve, timed whole with its polish (median of the repeats; the
     profile's parts are timed in the same solve without it)."""
-    m = row["profile"]["median"]
-    return m.get("polish_wall", m["wall"])
+    return float(row["profile"]["median"]["polish_wall"])
 
 
 def measured_chains(results: D.Results) -> list[dict]:
@@ -1421,12 +1420,6 @@ def kd_time(d: D.SceneData) -> float | None:
     """KD's time to the level with the default settings (kd_reach)."""
     reach = kd_reach(d)
     return None if reach is None else reach[0]
-
-
-def kd_steps(d: D.SceneData) -> int | None:
-    """KD's steps to the level with the default settings (kd_reach)."""
-    reach = kd_reach(d)
-    return None if reach is None else reach[1]
 
 
 def ratio_to_kd(d: D.SceneData, key: str) -> float | None:
@@ -2216,12 +2209,13 @@ def goals_section(results: D.Results) -> str:
         single: list[tuple[str, str, int, float, int, float]] = []
         for name in names:
             d = results.scenes[name]
-            tk = kd_time(d)
+            reach = kd_reach(d)
             bests = {f: fastest_baseline(d, f) for f in BASELINES}
             bests = {f: b for f, b in bests.items() if b is not None}
-            if tk is None:
+            if reach is None:
                 behind.append(f"{name} (KD did not reach it)")
                 continue
+            tk, steps_k = reach
             faster = {f: t for f, (t, _, _) in bests.items() if t < tk}
             if faster:
                 f = min(faster, key=faster.get)
@@ -2241,7 +2235,6 @@ def goals_section(results: D.Results) -> str:
                 )
                 if every < FREQUENT_DAMPING and d.nv > 1:  # one mode: no slow swing to stop
                     frequent.append(name)
-                steps_k = kd_steps(d)
                 if d.nv == 1 and steps_k:
                     label = D.BASELINE_LABELS[f]
                     single.append((name, label, bests[f][2], faster[f], steps_k, tk))

@@ -678,6 +678,16 @@ namespace pinsettle
     return tau.lpNorm<Eigen::Infinity>();
   }
 
+  bool Solver::isAtRoundOff(double step, double last_step, const Eigen::VectorXd & q)
+  {
+    // The next step would be about step * (step / last_step) (linear convergence at the last
+    // rate; Newton's quadratic one only falls faster): once that is below the round-off of q,
+    // a further iteration cannot move the answer, only chase the residual into denormals (a
+    // chain hanging straight down, whose gravity torques are exactly sin(q) ~ q).
+    const double next = last_step > 0. ? step * std::min(1., step / last_step) : step;
+    return next <= kRoundOffStep * std::max(1., q.lpNorm<Eigen::Infinity>());
+  }
+
   void Solver::polish(
     StabilityReport & report, const ForceModel * forces, Eigen::VectorXd & tau_q, Result & result)
   {
@@ -701,6 +711,7 @@ namespace pinsettle
     // Loops and stops restrict the motions Newton may take (the report's basis).
     const bool restricted = loops_ != nullptr || stops_ != nullptr;
     int iterations = 0;
+    double last_step = 0.; // |dq|_inf of the step taken before
     for (; iterations < 10 && residual > 0.; ++iterations)
     {
       // Newton on the allowed motions (all of them without loops or stops): K ds = -B^T tau,
@@ -732,6 +743,12 @@ namespace pinsettle
       q.swap(q_next);
       tau = tau_next;
       residual = residual_next;
+      if (isAtRoundOff(dq.lpNorm<Eigen::Infinity>(), last_step, q))
+      {
+        ++iterations;
+        break;
+      }
+      last_step = dq.lpNorm<Eigen::Infinity>();
     }
     result.polish_iterations = iterations;
     if (iterations == 0)

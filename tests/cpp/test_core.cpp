@@ -12,6 +12,7 @@
 #include <pinocchio/algorithm/energy.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea-derivatives.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
 #include <Eigen/Eigenvalues>
@@ -119,6 +120,25 @@ namespace
       model.addJoint(0, pinocchio::JointModelRY(), pinocchio::SE3::Identity(), "hinge");
     model.appendBodyToJoint(
       j, pinocchio::Inertia(m, Eigen::Vector3d(0., 0., -l), Eigen::Matrix3d::Identity() * 1e-3));
+    return model;
+  }
+
+  // A planar chain of n links (hinges about y, 0.1 kg, 0.1 m each) hanging straight down at
+  // q = 0, where every gravity torque is exactly zero.
+  pinocchio::Model chain(int n)
+  {
+    pinocchio::Model model;
+    pinocchio::JointIndex parent = 0;
+    for (int k = 0; k < n; ++k)
+    {
+      const pinocchio::SE3 placement(
+        Eigen::Matrix3d::Identity(), Eigen::Vector3d(0., 0., k == 0 ? 0. : -0.1));
+      parent = model.addJoint(
+        parent, pinocchio::JointModelRY(), placement, "joint" + std::to_string(k + 1));
+      model.appendBodyToJoint(
+        parent, pinocchio::Inertia(
+                  0.1, Eigen::Vector3d(0., 0., -0.05), Eigen::Matrix3d::Identity() * 1e-4));
+    }
     return model;
   }
 
@@ -637,6 +657,36 @@ BOOST_AUTO_TEST_CASE(constant_torque_on_a_free_wheel_has_no_equilibrium)
   BOOST_CHECK(result.status == pinsettle::Status::NoEquilibrium);
   BOOST_CHECK(result.reason.find("falls without bound") != std::string::npos);
   BOOST_CHECK_LE(result.steps, 2 * 100 * 1024 + 1);
+}
+
+BOOST_AUTO_TEST_CASE(newton_polish_stops_once_a_step_moves_q_by_its_round_off_only)
+{
+  // Hanging straight down, a chain's gravity torques are about its angles themselves, with no
+  // round-off floor: a polish that iterates while the residual falls chases it into denormals
+  // (10 iterations on 20 links). Once the next step would be below q's round-off it must stop.
+  const pinocchio::Model model = chain(8);
+  Eigen::VectorXd q0 = Eigen::VectorXd::Zero(model.nq);
+  q0[0] = 0.5 * M_PI; // horizontal
+  pinsettle::Solver solver(model);
+  const pinsettle::Result result = solver.solve(q0, pinsettle::Settings());
+  BOOST_REQUIRE(result.status == pinsettle::Status::Converged);
+  BOOST_CHECK(result.polished);
+  BOOST_CHECK_GE(result.polish_iterations, 1);
+  BOOST_CHECK_LE(result.polish_iterations, 4);
+  // The answer is at round-off: recomputed outside the solver, the residual is a tiny share of
+  // the start's force, and a further Newton step would not move q by more than its round-off.
+  pinocchio::Data data(model);
+  const double start_force =
+    pinocchio::computeGeneralizedGravity(model, data, q0).lpNorm<Eigen::Infinity>();
+  const Eigen::VectorXd g = pinocchio::computeGeneralizedGravity(model, data, result.q);
+  BOOST_CHECK_LT(g.lpNorm<Eigen::Infinity>(), 1e-13 * start_force);
+  Eigen::MatrixXd K = Eigen::MatrixXd::Zero(model.nv, model.nv);
+  pinocchio::computeGeneralizedGravityDerivatives(model, data, result.q, K);
+  const Eigen::VectorXd next = K.fullPivLu().solve(-g);
+  BOOST_CHECK_LT(next.lpNorm<Eigen::Infinity>(), 1e-14);
+  BOOST_CHECK(result.stability == pinsettle::Stability::Stable);
+  for (Eigen::Index k = 0; k < model.nq; ++k) // straight down (up to whole turns)
+    BOOST_CHECK_LT(std::abs(std::remainder(result.q[k], 2. * M_PI)), 1e-9);
 }
 
 BOOST_AUTO_TEST_CASE(newton_polish_brings_the_residual_to_round_off_and_keeps_the_rest)

@@ -201,6 +201,12 @@ namespace pinsettle
     void measureProgress(double energy, const Result & result, RunProgress & progress);
     double progressResidual();
 
+    // Whether the polish is at round-off after a Newton step of |dq|_inf = step (rad or m) that
+    // followed one of last_step (0 for the first), at q.
+    static bool isAtRoundOff(double step, double last_step, const Eigen::VectorXd & q);
+    // Below this (times max(1, |q|_inf)) a Newton step moves q by its round-off only.
+    static constexpr double kRoundOffStep = 1e-15;
+
     // Newton steps from the converged result.q, whose static force is tau; keeps them only if
     // the rest stays of the same kind (report) and close, and then tau is that of the new q.
     void polish(

@@ -605,6 +605,22 @@ def run_kd_profile(
     return out
 
 
+def time_in_cpp(run: Run, profile: dict) -> None:
+    """The default run's times from benchmarks/kd_profile's polished solves (C++, a fresh solver
+    each repeat, as benchmarks/baselines.cpp times each baseline run); those from
+    ``pinsettle.solve`` are kept in ``extra["python_seconds"]``. The two must be the same run."""
+    if profile["polish_steps"] != run.steps or profile["polish_iterations"] != run.extra.get(
+        "polish_iterations"
+    ):
+        raise RuntimeError(
+            f"{run.scene}: kd_profile's default solve took {profile['polish_steps']} steps and "
+            f"{profile['polish_iterations']} Newton iterations, pinsettle.solve {run.steps} and "
+            f"{run.extra.get('polish_iterations')}: not the same run"
+        )
+    run.extra["python_seconds"] = run.seconds
+    run.seconds = list(profile["polish_wall"])
+
+
 def run_newton(statics: Statics, ref: Reference, line_search: bool) -> Run:
     """Newton from the start (Python: its wall time is not comparable with the C++ loops')."""
     q, residuals, times, poses = newton_from_start(statics, statics.q0.copy(), line_search)
@@ -751,8 +767,8 @@ def scene_tasks(config: Config, results: Results, programs: Path, work: Path) ->
                 statics.mobility,
             )
             d.apart = name in APART
-            if not d.loops:  # the solver's set-up, charged to KD's time to a level
-                d.profile = run_kd_profile(programs / "kd_profile", statics, work, reps, False)
+            if not d.loops:  # the solver's set-up, and the default solve timed in C++
+                d.profile = run_kd_profile(programs / "kd_profile", statics, work, reps, True)
             results.scenes[name] = d
 
         tasks.append((f"{name}: reference equilibrium, the solver's set-up", setup))
@@ -769,6 +785,8 @@ def scene_tasks(config: Config, results: Results, programs: Path, work: Path) ->
             d.runs["kd_default"] = run_kd(
                 s, ref, {}, reps, curve=False, label="KD defaults", setup=setup
             )
+            if d.profile:
+                time_in_cpp(d.runs["kd_default"], d.profile)
 
         tasks.append((f"{name}: kinetic damping, both energy measures, defaults", main_runs))
 

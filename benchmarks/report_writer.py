@@ -408,7 +408,13 @@ stiffness, and checked by one more independent Newton step (`check step` below: 
 **Curves and time.** Kinetic damping (KD) runs with the default settings (kt = {s.kt:g},
 `dt = "auto"`, `err`, `ds`, `polish = {s.polish}`) but `max_e = {D.DEEP_MAX_E:g}`, so that the run
 goes on down to round-off and the curve shows how the error falls (up to where the default run
-stops, its trajectory is the same); the default run itself is in its own table. The curve comes
+stops, its trajectory is the same); the default run itself is in its own table. On trees the
+default run is timed in C++ as the baselines are (`benchmarks/kd_profile.cpp`: a fresh solver
+each repeat after one untimed solve, as `benchmarks/baselines.cpp` makes a fresh workspace for
+each run; checked to take the same steps and Newton iterations as `pinsettle.solve`), and KD's
+time to a level is that run's when its polish gets there before the curve does: timed from
+Python, between calls that leave the caches to the interpreter, a microsecond-long solve takes
+longer (the default run's table gives both). The curve comes
 from a run with `trace_every = 1` and `trace_configurations = True` (at most
 {D.CURVE_SAMPLES} samples: the trace halves its samples when full); its trajectory is checked
 identical to the timed runs', which trace nothing. **Time to a level is the set-up plus the steps
@@ -1510,6 +1516,7 @@ def defaults_section(results: D.Results) -> str:
                 run.status,
                 f"{run.steps:,}",
                 fmt_spread(run.seconds),
+                fmt_spread(run.extra["python_seconds"]) if "python_seconds" in run.extra else "-",
                 fmt_e(run.residual),
                 "yes" if run.residual <= LEVEL else "**no**",
                 str(run.extra.get("polish_iterations", 0)),
@@ -1523,7 +1530,9 @@ def defaults_section(results: D.Results) -> str:
         f"({s.effective_dt_growth:g}), `backtrack = {s.backtrack}`, "
         f"`max_e = {s.max_e:g}`, "
         f"`polish = {s.polish}`, `energy = {s.energy}`): status, steps, wall time (median, "
-        "min-max), the final residual relative to the force scale (independent physics), whether "
+        "min-max; on trees timed in C++ as the baselines are, `benchmarks/kd_profile.cpp`, and "
+        "from Python too, `pinsettle.solve`'s own `wall_time`; with loops from Python only), the "
+        "final residual relative to the force scale (independent physics), whether "
         f"it is at most {LEVEL:g} (goal 2 of issue 20), the polish's Newton iterations and where "
         "it rests.\n\n"
         + table(
@@ -1532,13 +1541,14 @@ def defaults_section(results: D.Results) -> str:
                 "status",
                 "steps",
                 "time",
+                "from Python",
                 "final residual",
                 f"<= {LEVEL:g}",
                 "polish iterations",
                 "rests",
             ],
             rows,
-            right=(2, 3, 4, 6),
+            right=(2, 3, 4, 5, 7),
         )
         + "\n"
     )

@@ -296,6 +296,20 @@ def test_every_method_rests_at_the_pendulums_equilibrium(quick):
         assert run.landing.from_reference <= 1e-9, key
 
 
+def test_the_default_run_is_timed_in_cpp_like_the_baselines(quick):
+    # On a tree the default run's times are kd_profile's polished solves (the same run:
+    # report.time_in_cpp checks its steps and Newton iterations), pinsettle.solve's kept apart.
+    results, _, _ = quick
+    d = results.scenes["pendulum"]
+    run = d.runs["kd_default"]
+    assert run.seconds == d.profile["polish_wall"]
+    assert run.extra["python_seconds"] and all(s > 0 for s in run.extra["python_seconds"])
+    assert d.profile["polish_steps"] == run.steps
+    bad = dict(d.profile, polish_steps=run.steps + 1)
+    with pytest.raises(RuntimeError, match="not the same run"):
+        report.time_in_cpp(run, bad)
+
+
 def test_the_baselines_take_the_start_only_and_are_swept(quick):
     results, _, _ = quick
     config = results.config

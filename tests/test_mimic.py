@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import loop_reference  # tests/loop_reference.py (pytest puts tests/ on sys.path)
@@ -237,6 +238,25 @@ def test_urdf_scene_with_mimic_false_ignores_the_tags_and_says_so(arm_urdf: Path
     assert result.converged
     tau = pinocchio.computeGeneralizedGravity(scene.model, scene.model.createData(), result.q)
     assert np.max(np.abs(tau)) < 1e-8  # each joint at rest on its own
+
+
+def test_load_urdf_warns_that_it_leaves_the_mimic_tags_out(arm_urdf: Path) -> None:
+    # The plain model (each joint free, pinocchio.buildModelFromUrdf's default) is what
+    # load_urdf returns: not silently, the warning names the follower and what couples it.
+    with pytest.warns(UserWarning, match=r"'follower' \(follows 'joint1'\).*Scene\.from_urdf"):
+        model = pinsettle.load_urdf(arm_urdf)
+    assert model.nv == 2
+    with pytest.warns(UserWarning, match=r"'panda_finger_joint2'.*Scene\.from_robot\('panda'\)"):
+        pinsettle.load_robot("panda")
+
+
+def test_what_couples_the_mimic_tags_or_has_none_does_not_warn(arm_urdf: Path) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Scene.from_urdf(arm_urdf, limits=False)
+        Scene.from_robot("panda")
+        pinsettle.load_robot("ur5")
+        pinsettle.load_urdf(ROBOTS / "pendulum.urdf")
 
 
 def _scene_file(tmp: Path, urdf: Path, mimic_line: str) -> Path:

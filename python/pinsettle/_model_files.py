@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pinocchio
 
-from .robots import load_urdf, robots_dir
+from .robots import build_urdf_model, robots_dir
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -90,7 +90,7 @@ def file_kind(path: Path) -> str:
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
             reasons.append(f"as a scene (TOML): {_first_reason(error)}")
     try:
-        load_urdf(path)  # urdfdom's XML reader is more lenient than ElementTree
+        build_urdf_model(path)  # urdfdom's XML reader is more lenient than ElementTree
         return "urdf"
     except (ValueError, RuntimeError) as error:
         reasons.append(f"as a URDF (urdfdom): {_first_reason(error).split('does not parse: ')[-1]}")

@@ -24,7 +24,7 @@ from ._mjcf import MjcfError, load_mjcf
 from ._model_files import file_kind, load_srdf_poses, robot_srdf
 from ._settings import SETTING_TYPES, Settings, make_settings, set_setting
 from ._urdf_mimic import urdf_mimic_tags
-from .robots import load_robot, load_urdf, robot_urdf
+from .robots import build_robot_model, build_urdf_model, robot_urdf
 from .scenes import scene_path
 
 if sys.version_info >= (3, 11):
@@ -318,7 +318,7 @@ class Scene:
         ``<mimic>`` tags are joint couplings (True, the default when it has any) or ignored as
         ``pinocchio.buildModelFromUrdf`` does by default (False, each joint then moves on its
         own); a line of ``notes`` says which."""
-        scene = cls(load_urdf(path, floating=floating), **kwargs)
+        scene = cls(build_urdf_model(path, floating=floating), **kwargs)
         scene.urdf = Path(path)
         scene.apply_urdf_mimic(Path(path), mimic)
         return scene
@@ -329,7 +329,7 @@ class Scene:
     ) -> Scene:
         """A scene of a robot shipped by example-robot-data (see ``pinsettle.robot_names()``);
         ``mimic`` as for ``from_urdf``."""
-        scene = cls(load_robot(name, floating=floating), **kwargs)
+        scene = cls(build_robot_model(name, floating=floating), **kwargs)
         scene.urdf = robot_urdf(name)
         scene.apply_urdf_mimic(scene.urdf, mimic)
         return scene
@@ -1290,7 +1290,7 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
             raise SceneError(f"[model] urdf must be a path (str), got {urdf!r}")
         urdf_path = path.parent / urdf
         try:
-            model = load_urdf(urdf_path, floating=floating)
+            model = build_urdf_model(urdf_path, floating=floating)
         except (FileNotFoundError, ValueError) as error:
             raise SceneError(f"[model] urdf: {error}") from None
     elif "mjcf" in m:
@@ -1307,7 +1307,7 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         if not isinstance(robot, str):
             raise SceneError(f"[model] robot must be a name (str), got {robot!r}")
         try:
-            model = load_robot(robot, floating=floating)
+            model = build_robot_model(robot, floating=floating)
             urdf_path = robot_urdf(robot)
         except (KeyError, ValueError, FileNotFoundError) as error:
             message = error.args[0] if error.args else str(error)

@@ -9,11 +9,13 @@ import os
 import site
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import pinocchio
 
 from ._checks import unknown_key_message
+from ._urdf_mimic import urdf_mimic_tags
 
 # name -> (URDF path below example-robot-data/robots, root attached by a free-flyer joint)
 ROBOTS: dict[str, tuple[str, bool]] = {
@@ -77,21 +79,58 @@ def load_robot(name: str, floating: bool | None = None) -> pinocchio.Model:
     """The ``pinocchio.Model`` of a robot of example-robot-data (no meshes loaded).
 
     ``floating`` overrides whether the root gets a free-flyer joint (legged robots and
-    humanoids have one by default).
+    humanoids have one by default). Its URDF's ``<mimic>`` tags are left out, with a warning,
+    as :func:`load_urdf` does.
     """
+    model = build_robot_model(name, floating)
+    warn_of_mimic_tags(robot_urdf(name), f"pinsettle.Scene.from_robot({name!r})")
+    return model
+
+
+def build_robot_model(name: str, floating: bool | None = None) -> pinocchio.Model:
+    """:func:`load_robot` without the warning (for callers that apply the tags)."""
     path = robot_urdf(name)
     if floating is None:
         floating = ROBOTS[name][1]
-    return load_urdf(path, floating=floating)
+    return build_urdf_model(path, floating=floating)
 
 
 def load_urdf(path: str | Path, floating: bool = False) -> pinocchio.Model:
     """The ``pinocchio.Model`` of a URDF file (meshes are not loaded).
 
+    Like ``pinocchio.buildModelFromUrdf`` by default, it leaves the file's ``<mimic>`` tags out
+    (each joint moves on its own) and warns when there are any: ``pinsettle.Scene.from_urdf``
+    couples them.
+
     Raises:
         FileNotFoundError: no such file.
         ValueError: the URDF does not parse; the message names the file and the parser's reason.
     """
+    model = build_urdf_model(path, floating)
+    warn_of_mimic_tags(Path(path), f"pinsettle.Scene.from_urdf('{path}')")
+    return model
+
+
+def warn_of_mimic_tags(path: Path, instead: str) -> None:
+    """A UserWarning naming the joints of the URDF's ``<mimic>`` tags, which the model just
+    built leaves uncoupled, and ``instead``, the call that couples them."""
+    try:
+        tags = [tag for tag in urdf_mimic_tags(path) if tag.follower_type != "fixed"]
+    except ValueError:  # not XML to ElementTree (urdfdom is more lenient): nothing to say
+        return
+    if tags:
+        joints = ", ".join(f"'{tag.follower}' (follows '{tag.leader}')" for tag in tags)
+        warnings.warn(
+            f"{path}: <mimic> tags left out, as pinocchio.buildModelFromUrdf does by default: "
+            f"{joints} move{'s' if len(tags) == 1 else ''} on "
+            f"{'its' if len(tags) == 1 else 'their'} own in this model; {instead} couples them",
+            UserWarning,
+            stacklevel=3,
+        )
+
+
+def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Model:
+    """:func:`load_urdf` without the warning (for callers that apply the tags)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"URDF file not found: {path}")

@@ -34,6 +34,7 @@ import pinocchio
 import pinsettle
 from independent import VERDICT_TOLERANCE, CachedReference
 from report_data import (
+    GALLERY_KD_REPEATS,
     GALLERY_MAX_TIME,
     MUJOCO_CHUNK,
     MUJOCO_DAMPING,
@@ -67,7 +68,9 @@ def is_floating(name: str) -> bool:
 
 
 def _solves(model: pinocchio.Model, repeats: int) -> list:
-    """Up to ``repeats`` default solves (no more once they took REPEAT_BUDGET)."""
+    """Up to max(repeats, GALLERY_KD_REPEATS) default solves (no more once they took
+    REPEAT_BUDGET)."""
+    repeats = max(repeats, GALLERY_KD_REPEATS)
     solves = [pinsettle.solve(model, max_time=GALLERY_MAX_TIME)]
     while len(solves) < repeats and sum(r.wall_time for r in solves) < REPEAT_BUDGET:
         solves.append(pinsettle.solve(model, max_time=GALLERY_MAX_TIME))

@@ -1876,8 +1876,8 @@ def overhead_section(results: D.Results) -> str:
         "(the same solve with `polish = True`: its Newton iterations and the time of its "
         "stiffness matrices and of the assessments it adds; its static-force evaluations, O(n) "
         "each, are left out) with the sum of all four as a fraction of the solve with the "
-        "polish. Medians of "
-        f"interleaved repeats."
+        "polish. Medians of repeats (those with the polish made one after the other, after "
+        "those without)."
         + verdict
         + "\n\n"
         + table(
@@ -1967,7 +1967,8 @@ def gallery_section(results: D.Results, figures: str) -> str:
         "from neutral with the default settings (`pinsettle.solve(model)`, joint stops from the "
         "URDF: issue 18), side by side with MuJoCo's damped settle of the same URDF in the same "
         f"run (MuJoCo {results.mujoco.get('version', '-')}). pinsettle: status, steps, wall "
-        "time (median of the repeats), the joints resting on a stop and its stability verdict "
+        f"time (median of up to {D.GALLERY_KD_REPEATS} repeats), the joints resting on a stop and "
+        "its stability verdict "
         "(in brackets the independent one); then **independently** (tests/scene_reference.py's "
         "physics and stops, Pinocchio's generalized gravity): the residual of a rest against "
         "the stops relative to the force scale at the start (absolute, N m, where that is 0), "

@@ -743,12 +743,13 @@ namespace pinsettle
       q.swap(q_next);
       tau = tau_next;
       residual = residual_next;
-      if (isAtRoundOff(dq.lpNorm<Eigen::Infinity>(), last_step, q))
+      const double step = dq.lpNorm<Eigen::Infinity>();
+      if (isAtRoundOff(step, last_step, q))
       {
         ++iterations;
         break;
       }
-      last_step = dq.lpNorm<Eigen::Infinity>();
+      last_step = step;
     }
     result.polish_iterations = iterations;
     if (iterations == 0)

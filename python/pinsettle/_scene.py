@@ -348,7 +348,6 @@ class Scene:
             tags = urdf_mimic_tags(path)
         except ValueError as error:
             raise SceneError(str(error)) from None
-        tags = [tag for tag in tags if tag.follower_type != "fixed"]  # a fixed joint: no motion
         if not tags:
             return
         if mimic is not None and not mimic:

@@ -34,7 +34,8 @@ def _number(text: str | None, default: float, where: str) -> float:
 
 
 def urdf_mimic_tags(path: str | Path) -> list[MimicTag]:
-    """Every ``<mimic>`` tag of the URDF file, in file order.
+    """Every ``<mimic>`` tag of the URDF file whose joint moves, in file order (a fixed joint's
+    tag couples no motion; it is still checked).
 
     Raises:
         ValueError: the file is not XML (naming it), or a tag without its ``joint`` attribute
@@ -63,4 +64,4 @@ def urdf_mimic_tags(path: str | Path) -> list[MimicTag]:
                 joint.get("type", ""),
             )
         )
-    return tags
+    return [tag for tag in tags if tag.follower_type != "fixed"]

@@ -115,7 +115,7 @@ def warn_of_mimic_tags(path: Path, instead: str) -> None:
     """A UserWarning naming the joints of the URDF's ``<mimic>`` tags, which the model just
     built leaves uncoupled, and ``instead``, the call that couples them."""
     try:
-        tags = [tag for tag in urdf_mimic_tags(path) if tag.follower_type != "fixed"]
+        tags = urdf_mimic_tags(path)
     except ValueError:  # not XML to ElementTree (urdfdom is more lenient): nothing to say
         return
     if tags:

@@ -82,6 +82,7 @@ def test_demo_flags_reach_the_solver():
         (["--polish"], {"polish": True}),
         (["--no-polish"], {"polish": False}),
         (["--no-backtrack"], {"backtrack": False}),
+        (["--scale-joint-inertia"], {"scale_joint_inertia": True}),
     ],
 )
 def test_demo_step_flags_reach_the_solver(flags, settings):

@@ -74,6 +74,7 @@ WRONG_TYPE = [
     ("max_steps", 1e3),
     ("energy", 1),
     ("backtrack", "yes"),
+    ("scale_joint_inertia", 1),
     ("trace_every", [1]),
 ]
 

@@ -198,17 +198,23 @@ def box_minimum(ref: Reference, q_start: np.ndarray) -> np.ndarray:
     return found.x
 
 
+@pytest.mark.parametrize("joint_inertia", [False, True], ids=["", "joint_inertia"])
 @pytest.mark.parametrize("spring", [False, True], ids=["gravity", "spring"])
 @pytest.mark.parametrize(
     "start", [(1.0, -0.5, 0.5), (0.6, -0.9, -1.0), (1.1, -0.35, 2.5), (0.5, -0.6, 0.0)]
 )
-def test_planar_arm_rests_at_a_minimum_of_the_box_constrained_potential(start, spring, tmp_path):
+def test_planar_arm_rests_at_a_minimum_of_the_box_constrained_potential(
+    start, spring, joint_inertia, tmp_path
+):
     path = planar_scene_file(tmp_path, spring)
     scene = pinsettle.load_scene(path)
     ref = Reference.from_toml(path)
     scene.set_start(dict(zip(["joint1", "joint2", "joint3"], start, strict=True)))
-    result = pinsettle.solve(scene)
+    # The fictitious joint inertia (held and locked joints included) changes the path, not the
+    # conditions of the rest it ends at.
+    result = pinsettle.solve(scene, scale_joint_inertia=joint_inertia)
     assert result.converged, result.summary()
+    assert (result.scaled_joints > 0) == joint_inertia
     contacts = check_rest(ref, result, 1e-6)
     assert contacts  # the stops are in the way of hanging straight down
     # A local minimum of the potential with the stops as bounds: L-BFGS-B from the start and

@@ -475,6 +475,7 @@ def test_settings_defaults():
         "backtrack": True,
         "polish": True,
         "scale_stiff_modes": True,
+        "scale_joint_inertia": False,
         "dt_growth": "auto",
         "trace_every": 0,
         "trace_capacity": 10_000,

@@ -224,6 +224,7 @@ namespace
     out["dt_estimates"] = r.dt_estimates;
     out["dt_reductions"] = r.dt_reductions;
     out["scaled_modes"] = r.scaled_modes;
+    out["scaled_joints"] = r.scaled_joints;
     out["mobility"] = r.mobility;
     out["assembly_distance"] = r.assembly_distance;
     out["constraint_error"] = r.constraint_error;
@@ -393,6 +394,10 @@ PYBIND11_MODULE(_core, m)
     .def_readwrite(
       "scale_stiff_modes", &Settings::scale_stiff_modes,
       "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).")
+    .def_readwrite(
+      "scale_joint_inertia", &Settings::scale_joint_inertia,
+      "With dt='auto', on a tree (no loops): a fictitious inertia per joint that brings "
+      "every joint's frequency down to the slowest one's (equilibria unchanged).")
     .def_readwrite("kt", &Settings::kt, "Velocity scale at each energy peak, in [0, 1).")
     .def_readwrite("err", &Settings::err, "Relative peak threshold, >= 0.")
     .def_readwrite("ds", &Settings::ds, "Stopping window length (steps), >= 1.")

@@ -421,8 +421,10 @@ namespace pinsettle
       forces_->computeForces(model_, data, q_, v_, tau_, fext_);
     }
     // Joints held on their stops at the last step stay locked while they rest: one ABA.
+    if (hold_ != nullptr)
+      hold_->useDynamicsModel(step_control_.dynamicsModel(), step_control_.estimates());
     locked_ = hold_ != nullptr ? hold_->lockedModel(q_, v_, &step_control_.timeScale()) : nullptr;
-    computeAcceleration(locked_ != nullptr ? *locked_ : model_);
+    computeAcceleration(locked_ != nullptr ? *locked_ : step_control_.dynamicsModel());
     // Both measures every step, from the body velocities the dynamics just computed. With stiff
     // modes scaled, the exact signal includes their added inertia: it is the energy the scaled
     // system exchanges with its potential.
@@ -461,7 +463,7 @@ namespace pinsettle
             return;
         }
       }
-      computeAcceleration(model_); // from the free motion: hold() decides
+      computeAcceleration(step_control_.dynamicsModel()); // the free motion: hold() decides
     }
     // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
     step_control_.correctAcceleration(data, q_);
@@ -643,6 +645,7 @@ namespace pinsettle
     result.dt_estimates = step_control_.estimates();
     result.dt_reductions = guard_.reductions();
     result.scaled_modes = step_control_.scaledModes();
+    result.scaled_joints = step_control_.scaledJoints();
     trace_.finish(result);
     result.q = q_;
     result.v = v_;

@@ -3,12 +3,15 @@
 //
 
 #include "pinsettle/step-control.hpp"
+#include "pinsettle/solver.hpp" // computeStaticForce
 
 #include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace pinsettle
 {
@@ -27,6 +30,30 @@ namespace pinsettle
     pinocchio::integrate(model, q, dq, q_next);
   }
 
+  Eigen::VectorXd computeJointInertia(
+    const Eigen::MatrixXd & K, const Eigen::VectorXd & mass_diagonal, const Eigen::VectorXd & tau)
+  {
+    const Eigen::Index n = mass_diagonal.size();
+    Eigen::VectorXd added = Eigen::VectorXd::Zero(n);
+    const Eigen::VectorXd rate = K.diagonal().cwiseAbs().cwiseMax(tau.cwiseAbs());
+    const double floor = kJointRateFloor * rate.maxCoeff();
+    const auto counts = [&](Eigen::Index i) { return rate[i] > floor && mass_diagonal[i] > 0.; };
+    double slowest = std::numeric_limits<double>::infinity(), fastest = 0.;
+    for (Eigen::Index i = 0; i < n; ++i)
+      if (counts(i))
+      {
+        slowest = std::min(slowest, rate[i] / mass_diagonal[i]);
+        fastest = std::max(fastest, rate[i] / mass_diagonal[i]);
+      }
+    if (!(fastest > 0.))
+      return added; // nothing pulls or holds: no rate to match
+    const double target = std::max(slowest, fastest / kJointInertiaSpread);
+    for (Eigen::Index i = 0; i < n; ++i)
+      if (counts(i))
+        added[i] = std::max(rate[i] / target - mass_diagonal[i], 0.);
+    return added;
+  }
+
   StepController::StepController(const pinocchio::Model & model, const LoopConstraints * loops)
   : model_(model)
   , loops_(loops)
@@ -38,6 +65,17 @@ namespace pinsettle
 
   void StepController::start(const Settings & settings, const ForceModel * forces)
   {
+    // One joint has no other to be slowed to; the simplified energy does not see the added
+    // inertia, so its peaks would not be those of the scaled motion.
+    scale_joint_inertia_ = settings.scale_joint_inertia && loops_ == nullptr && settings.dt == 0.
+                           && settings.energy == EnergyMeasure::Exact && model_.nv > 1;
+    inertia_active_ = false;
+    scaled_model_current_ = false;
+    scaled_joints_ = 0;
+    if (scale_joint_inertia_)
+      joint_inertia_.setZero(model_.nv);
+    else
+      joint_inertia_.resize(0);
     forces_ = forces;
     automatic_ = settings.dt == 0.;
     scale_stiff_modes_ = settings.scale_stiff_modes;
@@ -58,26 +96,54 @@ namespace pinsettle
   double StepController::kineticEnergyOfAdded(
     const TimeScale & scale, const Eigen::VectorXd & v) const
   {
-    if (scale.stiff_masses.size() == 0)
-      return 0.;
-    return 0.5 * (scale.stiff_momenta * v).cwiseAbs2().dot(scale.stiff_masses);
+    double e = inertia_active_ ? 0.5 * v.cwiseAbs2().dot(joint_inertia_) : 0.;
+    if (scale.stiff_masses.size() > 0)
+      e += 0.5 * (scale.stiff_momenta * v).cwiseAbs2().dot(scale.stiff_masses);
+    return e;
+  }
+
+  TimeScale StepController::estimateTimeScale(pinocchio::Data & data, const Eigen::VectorXd & q)
+  {
+    if (loops_ != nullptr)
+      return computeTimeScale(model_, data, *loops_, q, forces_);
+    if (!scale_joint_inertia_)
+      return computeTimeScale(model_, data, q, forces_, scale_stiff_modes_);
+    // The added inertia from the mechanism as it is at q (its own armature included), then the
+    // time scale of the mechanism that carries it.
+    const Eigen::MatrixXd K = computeStiffnessMatrix(model_, data, q, forces_);
+    const Eigen::VectorXd tau = computeStaticForce(model_, data, q, forces_);
+    pinocchio::crba(model_, data, q);
+    joint_inertia_ = computeJointInertia(K, data.M.diagonal(), tau);
+    const int scaled = static_cast<int>((joint_inertia_.array() > 0.).count());
+    scaled_joints_ = std::max(scaled_joints_, scaled);
+    inertia_active_ = scaled > 0;
+    if (inertia_active_)
+    {
+      if (!scaled_model_current_) // once per run: the model may have changed since the last
+      {
+        scaled_model_ = model_;
+        scaled_model_current_ = true;
+      }
+      scaled_model_.armature = model_.armature + joint_inertia_;
+    }
+    return computeTimeScale(dynamicsModel(), data, q, forces_, scale_stiff_modes_, &K);
   }
 
   double StepController::estimate(
     pinocchio::Data & data, const Eigen::VectorXd & q, Eigen::VectorXd & v, std::int64_t step)
   {
     const double added_before = kineticEnergyOfAdded(time_scale_, v);
-    time_scale_ = loops_ != nullptr
-                    ? computeTimeScale(model_, data, *loops_, q, forces_)
-                    : computeTimeScale(model_, data, q, forces_, scale_stiff_modes_);
+    time_scale_ = estimateTimeScale(data, q);
     const TimeScale & scale = time_scale_;
     const Eigen::Index stiff = scale.stiff_masses.size();
-    // data.M is fresh from computeTimeScale's crba.
     const double added_after = kineticEnergyOfAdded(scale, v);
     double loss;
     if (added_after > added_before)
     {
-      const double real = 0.5 * v.dot(data.M.selfadjointView<Eigen::Upper>() * v);
+      // data.M is fresh from computeTimeScale's crba, the joints' added inertia included.
+      double real = 0.5 * v.dot(data.M.selfadjointView<Eigen::Upper>() * v);
+      if (inertia_active_)
+        real -= 0.5 * v.cwiseAbs2().dot(joint_inertia_);
       const double ratio = (real + added_before) / (real + added_after);
       v *= std::sqrt(ratio);
       loss = (1. - ratio) * (real + added_after);
@@ -130,10 +196,11 @@ namespace pinsettle
 
   double StepController::addedEnergy(const Eigen::VectorXd & v)
   {
+    double e = inertia_active_ ? 0.5 * v.cwiseAbs2().dot(joint_inertia_) : 0.;
     if (stiffModes() == 0)
-      return 0.;
+      return e;
     stiff_p_.noalias() = time_scale_.stiff_momenta * v;
-    return 0.5 * stiff_p_.cwiseAbs2().dot(time_scale_.stiff_masses);
+    return e + 0.5 * stiff_p_.cwiseAbs2().dot(time_scale_.stiff_masses);
   }
 
   void StepController::correctAcceleration(pinocchio::Data & data, const Eigen::VectorXd & q)
@@ -142,7 +209,7 @@ namespace pinsettle
       return;
     const Eigen::MatrixXd & W = time_scale_.stiff_momenta;
     a_ = data.ddq; // kept aside from computeMinverse's passes
-    pinocchio::computeMinverse(model_, data, q);
+    pinocchio::computeMinverse(dynamicsModel(), data, q);
     stiff_y_.noalias() = data.Minv.selfadjointView<Eigen::Upper>() * W.transpose();
     stiff_s_.noalias() = W * stiff_y_;
     stiff_s_.diagonal() += time_scale_.stiff_masses.cwiseInverse();

@@ -239,6 +239,7 @@ namespace pinsettle
   StopHold::StopHold(const JointStops & stops, const LoopConstraints * loops)
   : stops_(stops)
   , loops_(loops)
+  , dynamics_(&stops.model())
   {
     if (loops_ != nullptr)
       return;
@@ -246,6 +247,16 @@ namespace pinsettle
     locked_side_.assign(stops_.stops().size(), 0.);
     side_ = locked_side_;
     lock_mass_ = locked_side_;
+  }
+
+  void StopHold::useDynamicsModel(const pinocchio::Model & model, int version)
+  {
+    if (&model == dynamics_ && version == dynamics_version_)
+      return;
+    dynamics_ = &model;
+    dynamics_version_ = version;
+    // Lock again, from the new armature, at the next lockedModel().
+    std::fill(locked_side_.begin(), locked_side_.end(), 0.);
   }
 
   double StopHold::restingSide(const JointStops::Stop & s, const Eigen::VectorXd & q, double v)
@@ -283,7 +294,7 @@ namespace pinsettle
     if (!into)
       return false;
 
-    const pinocchio::Model & model = stops_.model();
+    const pinocchio::Model & model = *dynamics_;
     free_acceleration_ = data.ddq;
     if (loops_ != nullptr)
       motions_ = computeLoopMotion(model, data, *loops_, q).basis;
@@ -333,7 +344,7 @@ namespace pinsettle
 
   void StopHold::lock()
   {
-    locked_.armature = stops_.model().armature;
+    locked_.armature = dynamics_->armature;
     for (std::size_t k = 0; k < side_.size(); ++k)
       if (side_[k] != 0.)
         locked_.armature[stops_.stops()[k].iv] += kLockArmature * lock_mass_[k];

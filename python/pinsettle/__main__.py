@@ -50,6 +50,13 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="with dt auto, slow modes far faster than the rest (default: on)",
     )
+    group.add_argument(
+        "--scale-joint-inertia",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="with dt auto, raise each joint's inertia towards the slowest joint's rate "
+        "(default: off)",
+    )
     group.add_argument("--err", type=float, help="relative peak threshold")
     group.add_argument("--ds", type=int, help="stopping window (steps)")
     group.add_argument("--max-e", type=float, help="bound on the energy summed over the window")

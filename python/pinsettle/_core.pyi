@@ -28,6 +28,7 @@ class Settings:
     backtrack: bool
     polish: bool
     scale_stiff_modes: bool
+    scale_joint_inertia: bool
     trace_every: int
     trace_capacity: int
     trace_configurations: bool

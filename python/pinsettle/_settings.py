@@ -28,6 +28,7 @@ SETTING_TYPES: dict[str, str] = {
     "backtrack": "bool",
     "polish": "bool",
     "scale_stiff_modes": "bool",
+    "scale_joint_inertia": "bool",
     "dt_growth": "float or 'auto'",
     "trace_every": "int",
     "trace_capacity": "int",
@@ -54,6 +55,10 @@ class Settings(_core.Settings):
     ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the rest, or 30x faster
     than the slowest, get a larger effective mass, equilibria unchanged, where the longer step
     pays for the costlier one);
+    ``scale_joint_inertia`` (off by default; with 'auto' and the exact energy, on a tree: each
+    joint gets a fictitious inertia that brings its own rate, stiffness or pull over inertia,
+    down towards the slowest joint's, re-chosen at each estimate; equilibria and stability
+    unchanged, ``Result.scaled_joints`` counts the joints given one);
     ``polish`` (Newton steps after convergence); ``kt``
     velocity scale at each energy peak, in [0, 1); ``err`` relative peak threshold; ``ds``
     stopping window (steps); ``max_e`` bound on the sum of the last ``ds`` energy samples (J for

@@ -100,7 +100,8 @@ class Result:
     ``status`` 'no_equilibrium' means the potential falls without bound along the motion;
     ``reason`` says what was seen (also for 'diverged'). ``dt`` is the step in force at the end,
     ``dt_estimates`` the automatic estimates made, ``dt_reductions`` the roll-backs with the
-    step halved (divergence guard), ``scaled_modes`` the most stiff modes slowed at once. With
+    step halved (divergence guard), ``scaled_modes`` the most stiff modes slowed at once,
+    ``scaled_joints`` the most joints given a fictitious inertia at once. With
     ``polish``: ``residual_before_polish``, ``polish_iterations`` and whether the polished pose
     was kept (``polished``). ``mobility`` is the mechanism's degrees of freedom (nv of the free
     joints less the independent loop equations). ``loops`` counts the loop closures. With loops
@@ -139,6 +140,7 @@ class Result:
     dt_estimates: int
     dt_reductions: int
     scaled_modes: int
+    scaled_joints: int
     reason: str
     mobility: int
     assembly_distance: float
@@ -194,6 +196,12 @@ class Result:
             + (
                 f", {self.scaled_modes} stiff mode{'s' if self.scaled_modes > 1 else ''} slowed"
                 if self.scaled_modes
+                else ""
+            )
+            + (
+                f", {self.scaled_joints} joint{'s' if self.scaled_joints > 1 else ''} given"
+                " a fictitious inertia"
+                if self.scaled_joints
                 else ""
             ),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
@@ -263,6 +271,7 @@ class Result:
             "dt_estimates": self.dt_estimates,
             "dt_reductions": self.dt_reductions,
             "scaled_modes": self.scaled_modes,
+            "scaled_joints": self.scaled_joints,
             "loops": self.loops,
             "mobility": self.mobility,
             "assembly_distance": self.assembly_distance,

@@ -108,6 +108,8 @@ namespace pinsettle
     int dt_reductions = 0;
     /// Most stiff modes scaled by one estimate (Settings::scale_stiff_modes); 0 when none.
     int scaled_modes = 0;
+    /// Most joints given an added inertia by one estimate (Settings::scale_joint_inertia).
+    int scaled_joints = 0;
     /// Degrees of freedom of the mechanism: model.nv less the independent loop equations.
     int mobility = 0;
     /// How far the start configuration moved to assemble the loops (max |difference|, rad or

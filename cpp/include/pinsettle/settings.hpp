@@ -71,6 +71,12 @@ namespace pinsettle
     /// equilibria are unchanged; only the stiff modes' motion is slowed. Applied only where the
     /// longer step pays for the costlier one (kStiffCostBase, kStiffCostScale).
     bool scale_stiff_modes = true;
+    /// With the automatic step and the exact energy, on a tree (no loops): give each joint a
+    /// fictitious inertia (added to model.armature) that brings its own rate down towards the
+    /// slowest joint's, re-chosen at each step estimate (computeJointInertia). The equilibria
+    /// and their stability do not depend on the masses; the step follows the slow motion
+    /// instead of the fastest joint's. Result::scaled_joints says how many were given one.
+    bool scale_joint_inertia = false;
     /// Velocity scale applied at each detected energy peak, in [0, 1). 0 (the default, the
     /// fewest steps measured: docs/benchmarks.md) stops the mechanism dead at each peak.
     double kt = 0.;

@@ -37,6 +37,34 @@ namespace pinsettle
     Eigen::VectorXd & q_next);
 
   ///
+  /// \brief Fictitious joint inertias that bring every joint's own rate down towards the
+  /// slowest one's (dynamic relaxation's masses, kept diagonal so that pinocchio::aba carries
+  /// them as armature at no cost per step): a_i = r_i / omega_t^2 - M_ii, where a joint's rate
+  /// r_i = max(|K_ii|, |tau_i|) is its stiffness or its pull (N m per rad against N m, a radian
+  /// the length scale, as in computeTimeScale) and omega_t^2 the smallest r_i / M_ii, kept
+  /// within kJointInertiaSpread of the largest.
+  ///
+  /// Near a stable rest r_i = K_ii and, by the Rayleigh quotient, K_ii / M_ii is at least the
+  /// smallest eigenvalue of M^-1 K: the slowest mode is not slowed, the faster joints are. Far
+  /// from one the pull sets the rate (a chain held horizontal has no stiffness at all). Rates
+  /// below kJointRateFloor of the largest are round-off: those joints get nothing.
+  ///
+  /// \param[in] K The stiffness matrix (model.nv x model.nv, N m/rad or N/m).
+  /// \param[in] mass_diagonal The diagonal of the mass matrix (dim model.nv, kg m^2 or kg).
+  /// \param[in] tau The static generalized force (dim model.nv, N m or N).
+  /// \return The added inertia per velocity coordinate (dim model.nv, kg m^2 or kg, >= 0).
+  ///
+  Eigen::VectorXd computeJointInertia(
+    const Eigen::MatrixXd & K, const Eigen::VectorXd & mass_diagonal, const Eigen::VectorXd & tau);
+
+  /// Largest ratio of the fastest joint's squared rate to the target's (computeJointInertia):
+  /// a near-neutral joint must not slow the others a thousandfold (measured: 1e2 keeps chains
+  /// of 200 links unequalised, 1e4 and more slow the xArm7 2.4-fold).
+  constexpr double kJointInertiaSpread = 1e3;
+  /// Rates below this fraction of the largest are round-off (computeJointInertia).
+  constexpr double kJointRateFloor = 1e-9;
+
+  ///
   /// \brief The step-size control: a fixed step, or the automatic one with its re-estimates and
   /// the scaling of stiff modes.
   ///
@@ -120,9 +148,22 @@ namespace pinsettle
       return time_scale_.stiff_masses.size();
     }
 
-    /// \brief Kinetic energy of the scaled modes' added inertia at the velocity v (J); 0 when
-    /// none are scaled.
+    /// \brief Kinetic energy of the scaled modes' and joints' added inertia at the velocity v
+    /// (J); 0 when none are scaled.
     double addedEnergy(const Eigen::VectorXd & v);
+
+    /// \brief The model whose dynamics the run follows: the model, or its copy with the
+    /// joints' added inertia in its armature.
+    const pinocchio::Model & dynamicsModel() const
+    {
+      return inertia_active_ ? scaled_model_ : model_;
+    }
+
+    /// \brief Most joints given an added inertia by one estimate.
+    int scaledJoints() const
+    {
+      return scaled_joints_;
+    }
 
     ///
     /// \brief The acceleration in data.ddq under M + W^T diag(d) W instead of M (the stiff
@@ -174,6 +215,8 @@ namespace pinsettle
 
   private:
     double kineticEnergyOfAdded(const TimeScale & scale, const Eigen::VectorXd & v) const;
+    /// The time scale at q, with the joints' added inertia re-chosen there when they scale.
+    TimeScale estimateTimeScale(pinocchio::Data & data, const Eigen::VectorXd & q);
 
     const pinocchio::Model & model_;
     const LoopConstraints * loops_;
@@ -183,7 +226,11 @@ namespace pinsettle
     // The factor on dt_ of the next automatic step, and its largest value.
     double growth_ = 1., max_growth_ = 1.;
     std::int64_t estimated_at_ = 0, estimate_spacing_ = 1;
-    int estimates_ = 0, scaled_modes_ = 0;
+    int estimates_ = 0, scaled_modes_ = 0, scaled_joints_ = 0;
+    // The joints' added inertia (Settings::scale_joint_inertia) and the model that carries it.
+    bool scale_joint_inertia_ = false, inertia_active_ = false, scaled_model_current_ = false;
+    Eigen::VectorXd joint_inertia_;
+    pinocchio::Model scaled_model_;
     // The last estimate (its stiff-mode scaling applies to every step) and where it was made.
     TimeScale time_scale_;
     Eigen::VectorXd q_estimate_, moved_, a_;

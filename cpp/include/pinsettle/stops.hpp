@@ -258,6 +258,13 @@ namespace pinsettle
     const pinocchio::Model * unlockPulled(
       const pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v);
 
+    ///
+    /// \brief Run the held and locked dynamics on model: the stops' model with the joints'
+    /// added inertia in its armature (StepController::dynamicsModel), which must outlive this.
+    /// \param[in] version Changes whenever that armature does (StepController::estimates).
+    ///
+    void useDynamicsModel(const pinocchio::Model & model, int version);
+
     /// Armature of a locked joint over its diagonal mass.
     static constexpr double kLockArmature = 1e12;
 
@@ -292,6 +299,9 @@ namespace pinsettle
     // not yet).
     pinocchio::Model locked_;
     std::vector<double> locked_side_, side_, lock_mass_;
+    // The model whose dynamics the run follows, and the version of its armature.
+    const pinocchio::Model * dynamics_;
+    int dynamics_version_ = -1;
   };
 
 } // namespace pinsettle

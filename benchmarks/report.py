@@ -947,6 +947,27 @@ def overhead_tasks(config: Config, results: Results, programs: Path, work: Path)
     return tasks
 
 
+def joint_inertia_run(
+    scene: pinsettle.Scene, statics: Statics, q_star: np.ndarray, repeats: int, config: Config
+) -> dict:
+    """The chain's default solve but with scale_joint_inertia on (an option, off by default),
+    from Python: status, steps, the median wall time of the repeats, the joints given an inertia,
+    the final residual (relative, independent physics) and the distance to straight down."""
+    runs = [
+        pinsettle.solve(scene, scale_joint_inertia=True, max_time=config.scaling_max_time)
+        for _ in range(repeats)
+    ]
+    r = runs[-1]
+    return {
+        "status": r.status,
+        "steps": r.steps,
+        "seconds": statistics.median(x.wall_time for x in runs),
+        "scaled_joints": r.scaled_joints,
+        "residual": statics.residual(r.q),
+        "distance": statics.distance(q_star, r.q),
+    }
+
+
 def scaling_tasks(config: Config, results: Results, programs: Path, work: Path) -> list[Task]:
     """Chains of config.chain_lengths: the default solve profiled (benchmarks/kd_profile, within
     config.scaling_max_time; timed whole with its polish, in parts without), the bare step, and up
@@ -983,6 +1004,9 @@ def scaling_tasks(config: Config, results: Results, programs: Path, work: Path) 
                 "residual": statics.residual(q_final),
                 "distance": statics.distance(q_star, q_final),
             }
+            row["joint_inertia"] = joint_inertia_run(
+                bench.scene, statics, q_star, 1 if long_chain else config.sweep_repeats, config
+            )
             if not long_chain:
                 ref = Reference(q_star, residual, verdict, 0, math.nan, 0.0, profile["steps"], 0.0)
                 row["deep"] = run_kd(

@@ -1371,7 +1371,57 @@ def scaling_section(results: D.Results, figures: str) -> str:
         + "\n"
         + refusals(results)
         + fits
+        + joint_inertia_table(results)
         + f"![scaling]({figures}/scaling.png)\n\n"
+    )
+
+
+def joint_inertia_table(results: D.Results) -> str:
+    """The same chains with scale_joint_inertia on (an option, off by default), beside the
+    default run."""
+    rows = []
+    for row in results.scaling:
+        ji = row.get("joint_inertia")
+        if ji is None:
+            continue
+        default = solve_time(row)
+        rows.append(
+            [
+                str(row["n"]),
+                ji["status"],
+                f"{ji['steps']:,}",
+                f"{row['profile']['steps']:,}",
+                fmt_time(ji["seconds"]),
+                f"{ji['seconds'] / default:.2f}",
+                str(ji["scaled_joints"]),
+                fmt_e(ji["residual"]),
+                fmt_e(ji["distance"]),
+            ]
+        )
+    if not rows:
+        return ""
+    return (
+        "The same chains with `scale_joint_inertia = True` (off by default: a fictitious inertia "
+        "per joint that brings its rate down towards the slowest joint's, docs/method.md), timed "
+        "from Python (`pinsettle.solve`'s wall time, median of the same repeats): status, steps "
+        "and the default run's, time and its ratio to the default run's above, the joints given "
+        "an inertia, the final residual (relative) and the distance to straight down (rad).\n\n"
+        + table(
+            [
+                "links",
+                "status",
+                "steps",
+                "default steps",
+                "time",
+                "ratio",
+                "joints",
+                "final residual",
+                "distance",
+            ],
+            rows,
+            right=(0, 2, 3, 4, 5, 6, 7, 8),
+        )
+        + "\n"
     )
 
 

@@ -422,7 +422,7 @@ namespace pinsettle
     }
     // Joints held on their stops at the last step stay locked while they rest: one ABA.
     if (hold_ != nullptr)
-      hold_->useDynamicsModel(step_control_.dynamicsModel(), step_control_.estimates());
+      hold_->useDynamicsModel(step_control_.dynamicsModel(), step_control_.dynamicsVersion());
     locked_ = hold_ != nullptr ? hold_->lockedModel(q_, v_, &step_control_.timeScale()) : nullptr;
     computeAcceleration(locked_ != nullptr ? *locked_ : step_control_.dynamicsModel());
     // Both measures every step, from the body velocities the dynamics just computed. With stiff

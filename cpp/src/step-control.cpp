@@ -71,6 +71,7 @@ namespace pinsettle
                            && settings.energy == EnergyMeasure::Exact && model_.nv > 1;
     inertia_active_ = false;
     scaled_model_current_ = false;
+    ++dynamics_version_;
     scaled_joints_ = 0;
     if (scale_joint_inertia_)
       joint_inertia_.setZero(model_.nv);
@@ -117,6 +118,7 @@ namespace pinsettle
     const int scaled = static_cast<int>((joint_inertia_.array() > 0.).count());
     scaled_joints_ = std::max(scaled_joints_, scaled);
     inertia_active_ = scaled > 0;
+    ++dynamics_version_;
     if (inertia_active_)
     {
       if (!scaled_model_current_) // once per run: the model may have changed since the last

@@ -249,7 +249,7 @@ namespace pinsettle
     lock_mass_ = locked_side_;
   }
 
-  void StopHold::useDynamicsModel(const pinocchio::Model & model, int version)
+  void StopHold::useDynamicsModel(const pinocchio::Model & model, std::uint64_t version)
   {
     if (&model == dynamics_ && version == dynamics_version_)
       return;

@@ -249,6 +249,35 @@ BOOST_AUTO_TEST_CASE(a_chain_rests_with_one_joint_on_a_stop_and_the_rest_free)
   BOOST_CHECK_EQUAL(result.stop_contacts.size(), 1u);
 }
 
+BOOST_AUTO_TEST_CASE(joint_inertia_keeps_the_rest_on_a_stop_run_after_run)
+{
+  // The same chain with the fictitious joint inertia: the held and locked joints run on the
+  // model that carries it. The rest's conditions hold without the polish, and a solver used
+  // again runs as a fresh one does (to round-off: without the joint inertia too, a second run
+  // ends within 1e-25 of a fresh solver's).
+  const pinocchio::Model model = chain(3);
+  pinsettle::JointStops stops(model, false);
+  stops.setLimit(1, 0.6, 2.);
+  pinsettle::Settings settings;
+  settings.scale_joint_inertia = true;
+  settings.polish = false;
+  settings.max_e = 1e-16;
+  Eigen::VectorXd q0(3);
+  q0 << 1.5, 0.5, -0.5;
+  pinsettle::Solver solver(model, nullptr, &stops);
+  const pinsettle::Result first = solver.solve(q0, settings);
+  const pinsettle::Result second = solver.solve(q0, settings);
+  const pinsettle::Result fresh = pinsettle::Solver(model, nullptr, &stops).solve(q0, settings);
+  BOOST_REQUIRE(first.status == pinsettle::Status::Converged);
+  BOOST_CHECK_GT(first.scaled_joints, 0);
+  BOOST_CHECK_EQUAL(first.q[0], 0.6);
+  BOOST_CHECK_LT(restViolation(model, stops, first.q), 1e-6);
+  BOOST_CHECK(first.stability == pinsettle::Stability::Stable);
+  BOOST_CHECK_EQUAL(second.steps, fresh.steps);
+  BOOST_CHECK_LT((second.q - fresh.q).lpNorm<Eigen::Infinity>(), 1e-12);
+  BOOST_CHECK_EQUAL((first.q - fresh.q).lpNorm<Eigen::Infinity>(), 0.);
+}
+
 BOOST_AUTO_TEST_CASE(robots_released_from_neutral_rest_inside_their_limits)
 {
   // Arms of example-robot-data that pass through their stops without them.

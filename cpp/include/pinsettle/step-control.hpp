@@ -165,6 +165,13 @@ namespace pinsettle
       return scaled_joints_;
     }
 
+    /// \brief Changes whenever dynamicsModel()'s armature may have (each run, each estimate),
+    /// never back to an earlier value.
+    std::uint64_t dynamicsVersion() const
+    {
+      return dynamics_version_;
+    }
+
     ///
     /// \brief The acceleration in data.ddq under M + W^T diag(d) W instead of M (the stiff
     /// modes' added inertia), by the Woodbury identity: a' = a - Y (diag(d)^-1 + W Y)^-1 W a,
@@ -229,6 +236,7 @@ namespace pinsettle
     int estimates_ = 0, scaled_modes_ = 0, scaled_joints_ = 0;
     // The joints' added inertia (Settings::scale_joint_inertia) and the model that carries it.
     bool scale_joint_inertia_ = false, inertia_active_ = false, scaled_model_current_ = false;
+    std::uint64_t dynamics_version_ = 0;
     Eigen::VectorXd joint_inertia_;
     pinocchio::Model scaled_model_;
     // The last estimate (its stiff-mode scaling applies to every step) and where it was made.

@@ -9,6 +9,7 @@
 
 #include <Eigen/Cholesky>
 
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
@@ -261,9 +262,11 @@ namespace pinsettle
     ///
     /// \brief Run the held and locked dynamics on model: the stops' model with the joints'
     /// added inertia in its armature (StepController::dynamicsModel), which must outlive this.
-    /// \param[in] version Changes whenever that armature does (StepController::estimates).
+    /// \param[in] version Changes whenever that armature may have (the locked model is then
+    ///            built again), never back to an earlier value
+    ///            (StepController::dynamicsVersion).
     ///
-    void useDynamicsModel(const pinocchio::Model & model, int version);
+    void useDynamicsModel(const pinocchio::Model & model, std::uint64_t version);
 
     /// Armature of a locked joint over its diagonal mass.
     static constexpr double kLockArmature = 1e12;
@@ -301,7 +304,7 @@ namespace pinsettle
     std::vector<double> locked_side_, side_, lock_mass_;
     // The model whose dynamics the run follows, and the version of its armature.
     const pinocchio::Model * dynamics_;
-    int dynamics_version_ = -1;
+    std::uint64_t dynamics_version_ = 0;
   };
 
 } // namespace pinsettle

@@ -715,19 +715,22 @@ namespace pinsettle
     const bool restricted = loops_ != nullptr || stops_ != nullptr;
     int iterations = 0;
     double last_step = 0.; // |dq|_inf of the step taken before
+    StabilityReport at;    // the stiffness (and with loops or stops the basis) at q
     for (; iterations < 10 && residual > 0.; ++iterations)
     {
       // Newton on the allowed motions (all of them without loops or stops): K ds = -B^T tau,
-      // dq = B ds.
-      const StabilityReport at = restricted ? assess(q, forces) : StabilityReport();
-      const Eigen::MatrixXd K =
-        restricted ? at.stiffness : computeStiffnessMatrix(model, data, q, forces);
+      // dq = B ds. The first iteration starts where the report was drawn: its K and B.
+      if (iterations > 0 && restricted)
+        at = assess(q, forces);
+      else if (iterations > 0)
+        at.stiffness = computeStiffnessMatrix(model, data, q, forces);
+      const StabilityReport & here = iterations == 0 ? report : at;
       // Least squares with a rank cut: neutral directions (K singular there) are left alone.
-      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(K);
+      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(here.stiffness);
       cod.setThreshold(
         std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12));
       const Eigen::VectorXd dq =
-        restricted ? Eigen::VectorXd(-at.basis * cod.solve(at.basis.transpose() * tau))
+        restricted ? Eigen::VectorXd(-here.basis * cod.solve(here.basis.transpose() * tau))
                    : Eigen::VectorXd(-cod.solve(tau));
       pinocchio::integrate(model, q, dq, q_next);
       if (loops_ != nullptr)

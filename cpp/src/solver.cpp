@@ -406,8 +406,14 @@ namespace pinsettle
 
   void Solver::reestimateStep()
   {
-    if (step_control_.isEstimateDue(q_, step_))
-      runaway_.addSwitchLoss(step_control_.estimate(data, q_, v_, step_));
+    if (!step_control_.isEstimateDue(q_, step_))
+      return;
+    const double loss = step_control_.estimate(data, q_, v_, step_);
+    runaway_.addSwitchLoss(loss);
+    // Added inertia taken away takes its share of the energy at once: that drop is no peak of
+    // the motion, and stopping there would stop a fall at such estimates.
+    if (loss > 0.)
+      peaks_.restart();
   }
 
   Solver::StepEnergies Solver::evaluateDynamics()

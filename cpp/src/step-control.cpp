@@ -139,16 +139,18 @@ namespace pinsettle
     const TimeScale & scale = time_scale_;
     const Eigen::Index stiff = scale.stiff_masses.size();
     const double added_after = kineticEnergyOfAdded(scale, v);
-    double loss;
+    // The energy the switch takes: none where more inertia is added (the velocity is scaled to
+    // keep the energy), the removed inertia's share where some is taken away. The runaway
+    // monitor counts it as removed; counting the first case too made a fall's release look
+    // irregular, and with the joint inertia re-chosen along the fall it was never confirmed.
+    double loss = 0.;
     if (added_after > added_before)
     {
       // data.M is fresh from computeTimeScale's crba, the joints' added inertia included.
       double real = 0.5 * v.dot(data.M.selfadjointView<Eigen::Upper>() * v);
       if (inertia_active_)
         real -= 0.5 * v.cwiseAbs2().dot(joint_inertia_);
-      const double ratio = (real + added_before) / (real + added_after);
-      v *= std::sqrt(ratio);
-      loss = (1. - ratio) * (real + added_after);
+      v *= std::sqrt((real + added_before) / (real + added_after));
     }
     else
       loss = added_before - added_after;

@@ -775,6 +775,53 @@ BOOST_AUTO_TEST_CASE(joint_inertia_brings_each_joint_down_to_the_slowest_and_not
   BOOST_CHECK_EQUAL(capped[1], 0.);
 }
 
+BOOST_AUTO_TEST_CASE(an_estimate_takes_no_energy_where_it_adds_inertia_and_counts_what_it_takes)
+{
+  // Estimates along a moving chain, each re-choosing the joints' added inertia: the energy
+  // after (the bodies' plus the added inertia's, at the new velocity) is the energy before less
+  // what the estimate reports taken, which is nothing where inertia was added (the velocity is
+  // scaled to keep the energy) and the removed inertia's share where some was taken away. The
+  // runaway monitor sums what is taken as energy removed from the run.
+  const pinocchio::Model model = chain(5);
+  pinsettle::Settings settings;
+  settings.scale_joint_inertia = true;
+  pinsettle::StepController control(model, nullptr);
+  control.start(settings, nullptr);
+  pinocchio::Data data(model), scratch(model);
+  const auto energy = [&](const Eigen::VectorXd & q, const Eigen::VectorXd & v) {
+    pinocchio::crba(model, scratch, q);
+    const Eigen::MatrixXd M = scratch.M.selfadjointView<Eigen::Upper>();
+    return 0.5 * v.dot(M * v) + control.addedEnergy(v);
+  };
+  Eigen::VectorXd v = Eigen::VectorXd::LinSpaced(model.nv, 0.3, -0.2);
+  int added = 0, taken = 0;
+  for (int k = 0; k < 8; ++k)
+  {
+    Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
+    q[0] = 0.25 * M_PI * k; // round the circle: pulled, hanging, upright
+    q[2] = 0.3 * std::sin(k);
+    const Eigen::VectorXd v_before = v;
+    const double before = energy(q, v);
+    const double loss = control.estimate(data, q, v, 100 * k);
+    const double after = energy(q, v);
+    BOOST_TEST_CONTEXT("estimate " << k)
+    {
+      BOOST_CHECK_GE(loss, 0.);
+      BOOST_CHECK_SMALL(after - (before - loss), 1e-12 * before);
+      if (loss == 0. && v != v_before)
+        ++added; // scaled down to keep the energy
+      if (loss > 0.)
+      {
+        BOOST_CHECK(v == v_before); // the velocity kept, the removed inertia's share gone
+        ++taken;
+      }
+    }
+  }
+  BOOST_CHECK_GT(control.scaledJoints(), 0);
+  BOOST_CHECK_GT(added, 0);
+  BOOST_CHECK_GT(taken, 0);
+}
+
 BOOST_AUTO_TEST_CASE(joint_inertia_settles_a_chain_at_the_same_rest_in_fewer_steps)
 {
   // Released horizontal, the chain's run is set by its fast bottom links; with their inertia

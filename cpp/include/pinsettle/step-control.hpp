@@ -118,8 +118,9 @@ namespace pinsettle
     /// \param[in] q The configuration (dim model.nq).
     /// \param[in,out] v The joint velocity (dim model.nv).
     /// \param[in] step The step index, to space the next estimate.
-    /// \return The kinetic energy taken by the change of the scaled modes (J; negative when
-    ///         modes that carried energy were dropped).
+    /// \return The kinetic energy the change of the added inertia took out of the run (J): the
+    ///         share of the inertia taken away; 0 where inertia was added (v is scaled to keep
+    ///         the energy the same).
     ///
     double estimate(
       pinocchio::Data & data, const Eigen::VectorXd & q, Eigen::VectorXd & v, std::int64_t step);

@@ -104,7 +104,6 @@ namespace pinsettle
     next_sample_ = first_sample_;
     e_reset_ = e;
     removed_ = 0.;
-    switch_loss_ = 0.;
     released_sample_ = 0.;
     increment_sample_ = 0.;
     drift_sample_ = 0.;
@@ -123,7 +122,7 @@ namespace pinsettle
 
   bool RunawayMonitor::sample(double e)
   {
-    const double released = e - e_reset_ + removed_ + switch_loss_;
+    const double released = e - e_reset_ + removed_;
     const double increment = released - released_sample_;
     const double drift = drift_.lpNorm<Eigen::Infinity>();
     growing_ = increment > floor_ && increment_sample_ > 0.

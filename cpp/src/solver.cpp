@@ -382,7 +382,7 @@ namespace pinsettle
     runaway_.start(model_.nv, RunawayMonitor::kFirstSample, std::max(10. * settings.max_e, 1e-30));
     step_control_.start(settings, forces);
     if (step_control_.isAutomatic())
-      runaway_.addSwitchLoss(step_control_.estimate(data, q_, v_, step_));
+      runaway_.addRemoved(step_control_.estimate(data, q_, v_, step_));
     guard_.start(q_, v_, time_);
   }
 
@@ -409,7 +409,7 @@ namespace pinsettle
     if (!step_control_.isEstimateDue(q_, step_))
       return;
     const double loss = step_control_.estimate(data, q_, v_, step_);
-    runaway_.addSwitchLoss(loss);
+    runaway_.addRemoved(loss);
     // Added inertia taken away takes its share of the energy at once: that drop is no peak of
     // the motion, and stopping there would stop a fall at such estimates.
     if (loss > 0.)

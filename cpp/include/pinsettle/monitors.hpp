@@ -187,17 +187,11 @@ namespace pinsettle
     /// \brief Start counting again at step, with the kinetic energy e (J) there.
     void reset(std::int64_t step, double e);
 
-    /// \brief Energy taken out by a damping event (J).
+    /// \brief Energy taken out of the run (J): by a damping event, or by an estimate that took
+    /// added inertia away (StepController::estimate).
     void addRemoved(double e)
     {
       removed_ += e;
-    }
-
-    /// \brief Kinetic energy taken (or given back, negative) by a change of the scaled stiff
-    /// modes (J).
-    void addSwitchLoss(double e)
-    {
-      switch_loss_ += e;
     }
 
     /// \brief A step's motion dq (dim model.nv, tangent, rad or m).
@@ -245,8 +239,8 @@ namespace pinsettle
 
   private:
     std::int64_t first_sample_ = 1, reset_step_ = 0, next_sample_ = 1;
-    double e_reset_ = 0., removed_ = 0., switch_loss_ = 0., released_sample_ = 0.,
-           increment_sample_ = 0., drift_sample_ = 0., floor_ = 0.;
+    double e_reset_ = 0., removed_ = 0., released_sample_ = 0., increment_sample_ = 0.,
+           drift_sample_ = 0., floor_ = 0.;
     int growing_ = 0;
     // Net motion since the reset in tangent coordinates (a continuous joint unwrapped).
     Eigen::VectorXd drift_;

@@ -732,12 +732,13 @@ namespace pinsettle
         at.stiffness = computeStiffnessMatrix(model, data, q, forces);
       const StabilityReport & here = iterations == 0 ? report : at;
       // Least squares with a rank cut: neutral directions (K singular there) are left alone.
-      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(here.stiffness);
-      cod.setThreshold(
-        std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12));
+      const double cut =
+        std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12);
       const Eigen::VectorXd dq =
-        restricted ? Eigen::VectorXd(-here.basis * cod.solve(here.basis.transpose() * tau))
-                   : Eigen::VectorXd(-cod.solve(tau));
+        restricted
+          ? Eigen::VectorXd(
+              -here.basis * solveWithRankCut(here.stiffness, here.basis.transpose() * tau, cut))
+          : Eigen::VectorXd(-solveWithRankCut(here.stiffness, tau, cut));
       pinocchio::integrate(model, q, dq, q_next);
       if (loops_ != nullptr)
         projectOntoLoops(model, data, *loops_, q_next);

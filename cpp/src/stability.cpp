@@ -11,6 +11,7 @@
 #include <pinocchio/algorithm/rnea.hpp>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 
 #include <algorithm>
 #include <cmath>
@@ -53,9 +54,28 @@ namespace pinsettle
     bool hasCompositeJoint(const pinocchio::Model & model)
     {
       for (std::size_t j = 1; j < model.joints.size(); ++j)
-        if (model.joints[j].shortname() == "JointModelComposite")
+        if (boost::get<pinocchio::JointModelComposite>(&model.joints[j].toVariant()) != nullptr)
           return true;
       return false;
+    }
+
+    // Below this many degrees of freedom the eigen-decompositions work in fixed-capacity
+    // storage: a small mechanism's estimates and assessments otherwise spend much of their time
+    // in heap allocations (a fifth of a two-joint arm's whole solve).
+    constexpr int kSmallSize = 8;
+    template<int MaxN>
+    using MatrixN = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, MaxN, MaxN>;
+    template<int MaxN>
+    using VectorN = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, MaxN, 1>;
+
+    // Eigenvalues (increasing) and the softest direction of K's symmetric part.
+    template<int MaxN>
+    void decomposeStiffness(const Eigen::MatrixXd & K, StabilityReport & report)
+    {
+      const MatrixN<MaxN> symmetric = 0.5 * (K + K.transpose());
+      Eigen::SelfAdjointEigenSolver<MatrixN<MaxN>> eig(symmetric);
+      report.eigenvalues = eig.eigenvalues();
+      report.softest_direction = eig.eigenvectors().col(0);
     }
   } // namespace
 
@@ -112,10 +132,10 @@ namespace pinsettle
       report.softest_direction.resize(0);
       return report;
     }
-    const Eigen::MatrixXd symmetric = 0.5 * (K + K.transpose());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(symmetric);
-    report.eigenvalues = eig.eigenvalues();
-    report.softest_direction = eig.eigenvectors().col(0);
+    if (K.rows() <= kSmallSize)
+      decomposeStiffness<kSmallSize>(K, report);
+    else
+      decomposeStiffness<Eigen::Dynamic>(K, report);
     report.min_eigenvalue = report.eigenvalues[0];
     report.max_abs_eigenvalue = report.eigenvalues.cwiseAbs().maxCoeff();
     report.tolerance = relative_tolerance * report.max_abs_eigenvalue;
@@ -145,12 +165,13 @@ namespace pinsettle
   namespace
   {
     // Largest |lambda| of A x = lambda M x, with M = L L^T: the eigenvalues of L^-1 A L^-T.
+    template<int MaxN>
     double largestGeneralizedEigenvalue(
-      const Eigen::MatrixXd & A, const Eigen::LLT<Eigen::MatrixXd> & llt)
+      const Eigen::MatrixXd & A, const Eigen::LLT<MatrixN<MaxN>> & llt)
     {
-      Eigen::MatrixXd B = llt.matrixL().solve(0.5 * (A + A.transpose()));
+      MatrixN<MaxN> B = llt.matrixL().solve(0.5 * (A + A.transpose()));
       B = llt.matrixL().solve(B.transpose()).eval();
-      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(
+      Eigen::SelfAdjointEigenSolver<MatrixN<MaxN>> eig(
         0.5 * (B + B.transpose()), Eigen::EigenvaluesOnly);
       return eig.eigenvalues().cwiseAbs().maxCoeff();
     }
@@ -210,6 +231,149 @@ namespace pinsettle
     return computeTimeScale(K, M, tau, damped ? &D : nullptr, scale_stiff_modes);
   }
 
+  namespace
+  {
+    template<int MaxN>
+    TimeScale timeScaleOf(
+      const Eigen::MatrixXd & K,
+      const Eigen::MatrixXd & mass,
+      const Eigen::VectorXd & tau,
+      const Eigen::MatrixXd * damping,
+      bool scale_stiff_modes)
+    {
+      TimeScale scale;
+      const Eigen::Index n = K.rows();
+      MatrixN<MaxN> M = mass;
+      Eigen::LLT<MatrixN<MaxN>> llt(M);
+      if (llt.info() != Eigen::Success) // a massless chain end: regularise relative to M's scale
+      {
+        M.diagonal().array() += 1e-12 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
+        llt.compute(M);
+      }
+      const MatrixN<MaxN> L = llt.matrixL();
+      // Modes: K phi = lambda M phi. With B = L^-1 K L^-T = U Lambda U^T, Phi = L^-T U is
+      // M-orthonormal, Phi^T M = (L U)^T, and the modal pull is f = Phi^T tau = U^T L^-1 tau.
+      MatrixN<MaxN> B = L.template triangularView<Eigen::Lower>().solve(0.5 * (K + K.transpose()));
+      B = L.template triangularView<Eigen::Lower>().solve(B.transpose()).eval();
+      Eigen::SelfAdjointEigenSolver<MatrixN<MaxN>> eig(0.5 * (B + B.transpose()));
+      const VectorN<MaxN> & lambda = eig.eigenvalues(); // increasing
+      const MatrixN<MaxN> & U = eig.eigenvectors();
+      const VectorN<MaxN> f = U.transpose() * L.template triangularView<Eigen::Lower>().solve(tau);
+      const auto jointPull = [&](const VectorN<MaxN> & modal) { // |Phi modal|_inf
+        return L.transpose()
+          .template triangularView<Eigen::Upper>()
+          .solve(modal)
+          .template lpNorm<Eigen::Infinity>();
+      };
+      const double max_abs = lambda.cwiseAbs().maxCoeff();
+      const double pull_all = jointPull(U * f);
+      scale.omega_unscaled = std::sqrt(std::max(max_abs, pull_all));
+
+      // Soft set: modes by increasing |lambda|, each raising the level (its |lambda| unless it is
+      // zero within round-off, and the joint pull of the set so far). The stiff set starts at the
+      // first mode more than kStiffGap above the level (they are scaled down to the level), or more
+      // than kStiffSpread above the first level (a spread without a gap: a chain of links from 1 mm
+      // to 100 m; they are scaled down to kStiffSpread times that). Unstable modes (lambda < 0)
+      // count by |lambda|: their growth needs resolving too.
+      Eigen::Matrix<Eigen::Index, Eigen::Dynamic, 1, 0, MaxN, 1> order(n);
+      std::iota(order.data(), order.data() + n, Eigen::Index(0));
+      std::sort(order.data(), order.data() + n, [&](Eigen::Index a, Eigen::Index b) {
+        return std::abs(lambda[a]) < std::abs(lambda[b]);
+      });
+      // Eigenvalues below tol and pulls below pull_tol are zero within round-off: they set no
+      // level (a level of 1e-9 from a neutral mode would make every real mode 'stiff'). A zero
+      // mode's pull is noise from the eigenvectors of a near-degenerate cluster, hence the looser
+      // bound.
+      const double tol = 1e-12 * std::max(max_abs, pull_all);
+      const double pull_tol = std::max(tol, 1e-8 * pull_all);
+      Eigen::Index split = n;
+      double level = 0.;
+      double first_level = 0.;
+      double target = 0.;
+      VectorN<MaxN> soft_modal = VectorN<MaxN>::Zero(n);
+      for (Eigen::Index i = 0; i < n; ++i)
+      {
+        const Eigen::Index k = order[i];
+        const double size = std::abs(lambda[k]);
+        if (scale_stiff_modes && level > 0. && size > tol)
+        {
+          const double cap = kStiffSpread * first_level;
+          if (size > kStiffGap * level || size > cap)
+          {
+            split = i;
+            target = size > kStiffGap * level ? level : std::max(level, cap);
+            break;
+          }
+        }
+        if (size > tol)
+          level = std::max(level, size);
+        soft_modal += U.col(k) * f[k];
+        const double pull = jointPull(soft_modal);
+        if (pull > pull_tol)
+          level = std::max(level, pull);
+        if (first_level == 0.)
+          first_level = level;
+      }
+      double omega2 = std::max(max_abs, pull_all);
+      if (split < n)
+      {
+        const Eigen::Index r = n - split;
+        const auto stiffMode = [&](Eigen::Index j) { return order[split + j]; };
+        VectorN<MaxN> modal = f;
+        for (Eigen::Index j = 0; j < r; ++j) // the scaled modes' share of their pull
+          modal[stiffMode(j)] *= target / std::abs(lambda[stiffMode(j)]);
+        const double scaled = std::max(target, jointPull(U * modal));
+        // The correction costs every step an nv x nv inverse mass matrix and its product with
+        // the r modes (pinocchio::aba alone is O(nv)): keep the scaling only where the longer
+        // step it allows pays for that. The steps fall by about the square root of the step's
+        // gain (the slow modes, not the step, set how many it takes), hence the square.
+        const double gain = std::sqrt(omega2 / scaled);
+        const double cost = 1. + kStiffCostBase
+                            + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
+        if (gain > cost * cost)
+        {
+          Eigen::MatrixXd U_s(n, r);
+          scale.stiff_masses.resize(r);
+          for (Eigen::Index j = 0; j < r; ++j)
+          {
+            U_s.col(j) = U.col(stiffMode(j));
+            scale.stiff_masses[j] = std::abs(lambda[stiffMode(j)]) / target - 1.;
+          }
+          scale.stiff_momenta = (L * U_s).transpose();
+          omega2 = scaled;
+        }
+      }
+      scale.omega_max = std::sqrt(omega2);
+      if (damping != nullptr)
+        scale.damping_rate = largestGeneralizedEigenvalue<MaxN>(*damping, llt);
+      const double gamma = scale.damping_rate;
+      const double root = std::sqrt(gamma * gamma + 4. * omega2);
+      scale.critical_step =
+        gamma + root > 0. ? 4. / (gamma + root) : std::numeric_limits<double>::infinity();
+      return scale;
+    }
+  } // namespace
+
+  namespace
+  {
+    template<int MaxN>
+    Eigen::VectorXd solveRankCut(
+      const Eigen::MatrixXd & K, const Eigen::VectorXd & b, double threshold)
+    {
+      Eigen::CompleteOrthogonalDecomposition<MatrixN<MaxN>> cod(K);
+      cod.setThreshold(threshold);
+      return cod.solve(b);
+    }
+  } // namespace
+
+  Eigen::VectorXd solveWithRankCut(
+    const Eigen::MatrixXd & K, const Eigen::VectorXd & b, double threshold)
+  {
+    if (K.rows() <= kSmallSize && K.cols() <= kSmallSize)
+      return solveRankCut<kSmallSize>(K, b, threshold);
+    return solveRankCut<Eigen::Dynamic>(K, b, threshold);
+  }
+
   TimeScale computeTimeScale(
     const Eigen::MatrixXd & K,
     const Eigen::MatrixXd & mass,
@@ -217,115 +381,9 @@ namespace pinsettle
     const Eigen::MatrixXd * damping,
     bool scale_stiff_modes)
   {
-    TimeScale scale;
-    const Eigen::Index n = K.rows();
-    Eigen::MatrixXd M = mass;
-    Eigen::LLT<Eigen::MatrixXd> llt(M);
-    if (llt.info() != Eigen::Success) // a massless chain end: regularise relative to M's scale
-    {
-      M.diagonal().array() += 1e-12 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
-      llt.compute(M);
-    }
-    const Eigen::MatrixXd L = llt.matrixL();
-    // Modes: K phi = lambda M phi. With B = L^-1 K L^-T = U Lambda U^T, Phi = L^-T U is
-    // M-orthonormal, Phi^T M = (L U)^T, and the modal pull is f = Phi^T tau = U^T L^-1 tau.
-    Eigen::MatrixXd B = L.triangularView<Eigen::Lower>().solve(0.5 * (K + K.transpose()));
-    B = L.triangularView<Eigen::Lower>().solve(B.transpose()).eval();
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(0.5 * (B + B.transpose()));
-    const Eigen::VectorXd & lambda = eig.eigenvalues(); // increasing
-    const Eigen::MatrixXd & U = eig.eigenvectors();
-    const Eigen::VectorXd f = U.transpose() * L.triangularView<Eigen::Lower>().solve(tau);
-    const auto jointPull = [&](const Eigen::VectorXd & modal) { // |Phi modal|_inf
-      return L.transpose().triangularView<Eigen::Upper>().solve(modal).lpNorm<Eigen::Infinity>();
-    };
-    const double max_abs = lambda.cwiseAbs().maxCoeff();
-    const double pull_all = jointPull(U * f);
-    scale.omega_unscaled = std::sqrt(std::max(max_abs, pull_all));
-
-    // Soft set: modes by increasing |lambda|, each raising the level (its |lambda| unless it is
-    // zero within round-off, and the joint pull of the set so far). The stiff set starts at the
-    // first mode more than kStiffGap above the level (they are scaled down to the level), or more
-    // than kStiffSpread above the first level (a spread without a gap: a chain of links from 1 mm
-    // to 100 m; they are scaled down to kStiffSpread times that). Unstable modes (lambda < 0)
-    // count by |lambda|: their growth needs resolving too.
-    std::vector<Eigen::Index> order(static_cast<std::size_t>(n));
-    std::iota(order.begin(), order.end(), Eigen::Index(0));
-    std::sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) {
-      return std::abs(lambda[a]) < std::abs(lambda[b]);
-    });
-    // Eigenvalues below tol and pulls below pull_tol are zero within round-off: they set no
-    // level (a level of 1e-9 from a neutral mode would make every real mode 'stiff'). A zero
-    // mode's pull is noise from the eigenvectors of a near-degenerate cluster, hence the looser
-    // bound.
-    const double tol = 1e-12 * std::max(max_abs, pull_all);
-    const double pull_tol = std::max(tol, 1e-8 * pull_all);
-    std::size_t split = order.size();
-    double level = 0.;
-    double first_level = 0.;
-    double target = 0.;
-    Eigen::VectorXd soft_modal = Eigen::VectorXd::Zero(n);
-    for (std::size_t i = 0; i < order.size(); ++i)
-    {
-      const Eigen::Index k = order[i];
-      const double size = std::abs(lambda[k]);
-      if (scale_stiff_modes && level > 0. && size > tol)
-      {
-        const double cap = kStiffSpread * first_level;
-        if (size > kStiffGap * level || size > cap)
-        {
-          split = i;
-          target = size > kStiffGap * level ? level : std::max(level, cap);
-          break;
-        }
-      }
-      if (size > tol)
-        level = std::max(level, size);
-      soft_modal += U.col(k) * f[k];
-      const double pull = jointPull(soft_modal);
-      if (pull > pull_tol)
-        level = std::max(level, pull);
-      if (first_level == 0.)
-        first_level = level;
-    }
-    double omega2 = std::max(max_abs, pull_all);
-    if (split < order.size())
-    {
-      const Eigen::Index r = n - static_cast<Eigen::Index>(split);
-      const auto stiffMode = [&](Eigen::Index j) {
-        return order[split + static_cast<std::size_t>(j)];
-      };
-      Eigen::VectorXd modal = f;
-      for (Eigen::Index j = 0; j < r; ++j) // the scaled modes' share of their pull
-        modal[stiffMode(j)] *= target / std::abs(lambda[stiffMode(j)]);
-      const double scaled = std::max(target, jointPull(U * modal));
-      // The correction costs every step an nv x nv inverse mass matrix and its product with
-      // the r modes (pinocchio::aba alone is O(nv)): keep the scaling only where the longer
-      // step it allows pays for that. The steps fall by about the square root of the step's
-      // gain (the slow modes, not the step, set how many it takes), hence the square.
-      const double gain = std::sqrt(omega2 / scaled);
-      const double cost =
-        1. + kStiffCostBase + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
-      if (gain > cost * cost)
-      {
-        Eigen::MatrixXd U_s(n, r);
-        scale.stiff_masses.resize(r);
-        for (Eigen::Index j = 0; j < r; ++j)
-        {
-          U_s.col(j) = U.col(stiffMode(j));
-          scale.stiff_masses[j] = std::abs(lambda[stiffMode(j)]) / target - 1.;
-        }
-        scale.stiff_momenta = (L * U_s).transpose();
-        omega2 = scaled;
-      }
-    }
-    scale.omega_max = std::sqrt(omega2);
-    if (damping != nullptr)
-      scale.damping_rate = largestGeneralizedEigenvalue(*damping, llt);
-    const double gamma = scale.damping_rate;
-    const double root = std::sqrt(gamma * gamma + 4. * omega2);
-    scale.critical_step =
-      gamma + root > 0. ? 4. / (gamma + root) : std::numeric_limits<double>::infinity();
-    return scale;
+    if (K.rows() <= kSmallSize)
+      return timeScaleOf<kSmallSize>(K, mass, tau, damping, scale_stiff_modes);
+    return timeScaleOf<Eigen::Dynamic>(K, mass, tau, damping, scale_stiff_modes);
   }
 
 } // namespace pinsettle

@@ -30,7 +30,7 @@ namespace pinsettle
     bool isStoppable(const pinocchio::Model & model, pinocchio::JointIndex joint)
     {
       return model.nqs[joint] == 1 && model.nvs[joint] == 1
-             && model.joints[joint].shortname().find("Mimic") == std::string::npos;
+             && boost::get<pinocchio::JointModelMimic>(&model.joints[joint].toVariant()) == nullptr;
     }
 
     double asBound(double limit, double none)

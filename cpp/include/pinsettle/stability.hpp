@@ -183,6 +183,19 @@ namespace pinsettle
     bool scale_stiff_modes);
 
   ///
+  /// \brief Least-squares solution of K x = b with a rank cut: pivots below threshold times the
+  /// largest are taken as zero, and x has no part along the directions they span (a Newton step
+  /// that leaves neutral directions alone).
+  ///
+  /// \param[in] K Matrix (dim m x n).
+  /// \param[in] b Right-hand side (dim m).
+  /// \param[in] threshold Relative rank threshold (see Eigen::CompleteOrthogonalDecomposition).
+  /// \return x (dim n), the minimum-norm least-squares solution on the kept rank.
+  ///
+  Eigen::VectorXd solveWithRankCut(
+    const Eigen::MatrixXd & K, const Eigen::VectorXd & b, double threshold);
+
+  ///
   /// \brief Damping matrix D = -d applied / d v at (q, 0) by central differences (the damper
   /// forces are linear in v); zero without dampers.
   ///

@@ -258,7 +258,9 @@ namespace pinsettle
       Eigen::SelfAdjointEigenSolver<MatrixN<MaxN>> eig(0.5 * (B + B.transpose()));
       const VectorN<MaxN> & lambda = eig.eigenvalues(); // increasing
       const MatrixN<MaxN> & U = eig.eigenvectors();
-      const VectorN<MaxN> f = U.transpose() * L.template triangularView<Eigen::Lower>().solve(tau);
+      VectorN<MaxN> f = tau; // in place: a solve into tau's own type would allocate
+      L.template triangularView<Eigen::Lower>().solveInPlace(f);
+      f = U.transpose() * f;
       const auto jointPull = [&](const VectorN<MaxN> & modal) { // |Phi modal|_inf
         return L.transpose()
           .template triangularView<Eigen::Upper>()
@@ -362,7 +364,9 @@ namespace pinsettle
     {
       Eigen::CompleteOrthogonalDecomposition<MatrixN<MaxN>> cod(K);
       cod.setThreshold(threshold);
-      return cod.solve(b);
+      const VectorN<MaxN> rhs = b; // a solve on b's own type would allocate its temporaries
+      const VectorN<MaxN> x = cod.solve(rhs);
+      return x;
     }
   } // namespace
 

@@ -557,6 +557,84 @@ BOOST_AUTO_TEST_CASE(time_scale_with_a_damper_is_the_semi_implicit_euler_limit)
   BOOST_CHECK(grows(1.01 * h));
 }
 
+namespace
+{
+  // A random symmetric positive definite matrix (dim n x n) with a spread of about 1e3.
+  Eigen::MatrixXd randomMassMatrix(Eigen::Index n)
+  {
+    const Eigen::MatrixXd A = Eigen::MatrixXd::Random(n, n);
+    return A * A.transpose() + 1e-3 * Eigen::MatrixXd::Identity(n, n);
+  }
+} // namespace
+
+// Small mechanisms (up to 8 degrees of freedom) take a path in fixed-capacity storage: both
+// paths must give the time scale's definition, checked here against Eigen's generalized solver.
+BOOST_AUTO_TEST_CASE(time_scale_of_small_and_large_systems_is_its_definition)
+{
+  std::srand(7);
+  for (const Eigen::Index n : {1, 3, 8, 9, 12})
+  {
+    const Eigen::MatrixXd M = randomMassMatrix(n);
+    const Eigen::MatrixXd S = Eigen::MatrixXd::Random(n, n);
+    const Eigen::MatrixXd K = S + S.transpose(); // indefinite: unstable modes count by |lambda|
+    const Eigen::MatrixXd R = Eigen::MatrixXd::Random(n, n);
+    const Eigen::MatrixXd D = 0.1 * R * R.transpose();
+    const Eigen::VectorXd tau = Eigen::VectorXd::Random(n);
+
+    const long before = g_allocations.load();
+    const pinsettle::TimeScale scale = pinsettle::computeTimeScale(K, M, tau, &D, false);
+    const long allocations = g_allocations.load() - before;
+
+    const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> stiff(
+      K, M, Eigen::EigenvaluesOnly);
+    const double pull = M.llt().solve(tau).lpNorm<Eigen::Infinity>();
+    const double omega2 = std::max(stiff.eigenvalues().cwiseAbs().maxCoeff(), pull);
+    BOOST_CHECK_CLOSE(scale.omega_unscaled, std::sqrt(omega2), 1e-8);
+    BOOST_CHECK_CLOSE(scale.omega_max, std::sqrt(omega2), 1e-8);
+    const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> damped(
+      D, M, Eigen::EigenvaluesOnly);
+    const double gamma = damped.eigenvalues().maxCoeff();
+    BOOST_CHECK_CLOSE(scale.damping_rate, gamma, 1e-8);
+    BOOST_CHECK_CLOSE(
+      scale.critical_step, 4. / (gamma + std::sqrt(gamma * gamma + 4. * omega2)), 1e-8);
+    if (PINSETTLE_COUNT_MALLOC && n <= 8)
+      BOOST_CHECK_EQUAL(allocations, 0); // nothing stiff to return: no heap at all
+    else if (PINSETTLE_COUNT_MALLOC)
+      BOOST_CHECK_GT(allocations, 0); // the counter is live
+  }
+}
+
+// The polish's Newton step: the least-squares solution on K's range, nothing along its null
+// space, from the small (fixed-capacity) and the large path alike.
+BOOST_AUTO_TEST_CASE(rank_cut_solve_leaves_the_null_space_alone)
+{
+  std::srand(11);
+  for (const Eigen::Index n : {2, 3, 8, 9, 12})
+  {
+    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(Eigen::MatrixXd::Random(n, n));
+    const Eigen::MatrixXd Q = qr.householderQ();
+    Eigen::VectorXd lambda = Eigen::VectorXd::LinSpaced(n, 1., 100.);
+    lambda[n / 2] = 0.; // one neutral direction
+    lambda[0] = -3.;    // and an unstable one, which Newton takes like any other
+    const Eigen::MatrixXd K = Q * lambda.asDiagonal() * Q.transpose();
+    const Eigen::VectorXd null = Q.col(n / 2);
+    const Eigen::VectorXd y = Eigen::VectorXd::Random(n);
+    const Eigen::VectorXd b = K * y + 0.5 * null; // a part off K's range
+
+    const long before = g_allocations.load();
+    const Eigen::VectorXd x = pinsettle::solveWithRankCut(K, b, 1e-10);
+    const long allocations = g_allocations.load() - before;
+
+    BOOST_CHECK_SMALL(null.dot(x), 1e-12);
+    BOOST_CHECK_SMALL((K * x - K * y).lpNorm<Eigen::Infinity>(), 1e-10);
+    // x itself and one workspace of Eigen's (a heap decomposition makes a dozen)
+    if (PINSETTLE_COUNT_MALLOC && n <= 8)
+      BOOST_CHECK_LE(allocations, 2);
+    else if (PINSETTLE_COUNT_MALLOC)
+      BOOST_CHECK_GT(allocations, 2);
+  }
+}
+
 BOOST_AUTO_TEST_CASE(automatic_step_settles_a_stiff_spring_next_to_a_heavy_body)
 {
   // A 10 g slider on a 1e8 N/m spring, carried by a 10 kg pendulum: omega ~ 1e5 rad/s next to

@@ -9,26 +9,30 @@
 namespace pinsettle
 {
 
-  double computeBodyKineticEnergy(const pinocchio::Model & model, const pinocchio::Data & data)
+  double computeBodyKineticEnergy(
+    const pinocchio::Model & model, const pinocchio::Data & data, pinocchio::Convention convention)
   {
+    const bool world = convention == pinocchio::Convention::WORLD;
     double energy = 0.;
     for (pinocchio::JointIndex i = 1; i < static_cast<pinocchio::JointIndex>(model.njoints); ++i)
-      energy += model.inertias[i].vtiv(data.v[i]);
+      energy += world ? data.oinertias[i].vtiv(data.ov[i]) : model.inertias[i].vtiv(data.v[i]);
     return 0.5 * energy;
   }
 
   double computeSimplifiedKineticEnergy(
-    const pinocchio::Model & model, const pinocchio::Data & data)
+    const pinocchio::Model & model, const pinocchio::Data & data, pinocchio::Convention convention)
   {
+    const bool world = convention == pinocchio::Convention::WORLD;
     double energy = 0.;
     for (pinocchio::JointIndex i = 1; i < static_cast<pinocchio::JointIndex>(model.njoints); ++i)
     {
       const pinocchio::Inertia & body = model.inertias[i];
       if (body.mass() <= 0. && body.inertia().data().isZero(0.))
         continue; // a massless frame, not a body
-      const pinocchio::Motion & vi = data.v[i];
-      // Velocity of the centre of mass: v_O + w x c, c the lever in the joint frame.
-      const Eigen::Vector3d v_com = vi.linear() + vi.angular().cross(body.lever());
+      // The velocity and the centre of mass c in one frame (the joint's, or the world's).
+      const pinocchio::Motion & vi = world ? data.ov[i] : data.v[i];
+      const Eigen::Vector3d & c = world ? data.oinertias[i].lever() : body.lever();
+      const Eigen::Vector3d v_com = vi.linear() + vi.angular().cross(c); // v_O + w x c
       energy += v_com.squaredNorm() + vi.angular().squaredNorm();
     }
     return energy;

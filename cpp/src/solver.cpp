@@ -435,8 +435,9 @@ namespace pinsettle
     // modes scaled, the exact signal includes their added inertia: it is the energy the scaled
     // system exchanges with its potential.
     StepEnergies e;
-    e.exact = computeBodyKineticEnergy(model_, data);
-    e.simplified = computeSimplifiedKineticEnergy(model_, data);
+    const pinocchio::Convention convention = dynamicsConvention();
+    e.exact = computeBodyKineticEnergy(model_, data, convention);
+    e.simplified = computeSimplifiedKineticEnergy(model_, data, convention);
     e.added = step_control_.addedEnergy(v_);
     e.signal = settings_->energy == EnergyMeasure::Exact ? e.exact + e.added : e.simplified;
     return e;
@@ -447,9 +448,16 @@ namespace pinsettle
     if (loops_ != nullptr)
       stepper_->dynamics(data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
     else if (use_fext_)
-      pinocchio::aba(model, data, q_, v_, tau_, fext_);
+      pinocchio::aba(model, data, q_, v_, tau_, fext_, dynamicsConvention());
     else
-      pinocchio::aba(model, data, q_, v_, tau_);
+      pinocchio::aba(model, data, q_, v_, tau_, dynamicsConvention());
+  }
+
+  pinocchio::Convention Solver::dynamicsConvention() const
+  {
+    // ABA in the world convention is the faster (6 to 8 % on 6 to 9 joint arms); the loops'
+    // dynamics leave the body velocities in local frames.
+    return loops_ != nullptr ? pinocchio::Convention::LOCAL : pinocchio::Convention::WORLD;
   }
 
   void Solver::correctAcceleration()

@@ -17,7 +17,6 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
-#include <vector>
 
 namespace pinsettle
 {

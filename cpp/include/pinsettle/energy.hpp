@@ -13,13 +13,20 @@ namespace pinsettle
   ///
   /// \brief Exact kinetic energy sum_i 1/2 m_i |v_i|^2 + 1/2 w_i^T I_i w_i from the body
   /// velocities of a previous forward pass (pinocchio::aba or pinocchio::forwardKinematics with
-  /// a velocity, local convention), without forming the mass matrix.
+  /// a velocity), without forming the mass matrix.
   ///
   /// \param[in] model The model of the mechanism.
-  /// \param[in] data Data whose data.v holds the joint spatial velocities in local frames.
+  /// \param[in] data Data of that pass: in the local convention data.v holds the joint spatial
+  /// velocities in local frames; in the world convention (pinocchio::aba with
+  /// pinocchio::Convention::WORLD) data.ov holds them in the world frame and data.oinertias the
+  /// bodies' inertias there.
+  /// \param[in] convention The convention of that pass.
   /// \return The kinetic energy (J); equals 1/2 v^T M(q) v.
   ///
-  double computeBodyKineticEnergy(const pinocchio::Model & model, const pinocchio::Data & data);
+  double computeBodyKineticEnergy(
+    const pinocchio::Model & model,
+    const pinocchio::Data & data,
+    pinocchio::Convention convention = pinocchio::Convention::LOCAL);
 
   ///
   /// \brief Simplified energy sum_i |v_com,i|^2 + |w_i|^2 over the bodies (masses and inertias
@@ -30,7 +37,9 @@ namespace pinsettle
   /// \return The simplified energy (m^2/s^2 + rad^2/s^2).
   ///
   double computeSimplifiedKineticEnergy(
-    const pinocchio::Model & model, const pinocchio::Data & data);
+    const pinocchio::Model & model,
+    const pinocchio::Data & data,
+    pinocchio::Convention convention = pinocchio::Convention::LOCAL);
 
   ///
   /// \brief Both energy measures at the state (q, v): runs pinocchio::forwardKinematics and the

@@ -182,6 +182,8 @@ namespace pinsettle
     StepEnergies evaluateDynamics();
     // pinocchio::aba (or the loops' dynamics) at the current state, on model or a copy of it.
     void computeAcceleration(const pinocchio::Model & model);
+    // The convention computeAcceleration runs ABA in (its body velocities: data.v or data.ov).
+    pinocchio::Convention dynamicsConvention() const;
     // The acceleration the step integrates: with the scaled stiff modes' inertia and the joints
     // resting on their stops held (StopHold).
     void correctAcceleration();

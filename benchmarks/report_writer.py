@@ -431,7 +431,8 @@ reference (at least {D.STEP_BUDGET_MIN:,}; the dt sweep's runs to at least
 {D.DT_SWEEP_SECONDS:g} s): a setting that keeps it from converging ends there, `max_steps`.
 
 **Baselines**, on the same Pinocchio dynamics, C++ (`benchmarks/baselines.cpp`, built against
-the installed package: `pinocchio::aba`, `pinsettle::ForceElements`, timed inside the program
+the installed package: `pinocchio::aba` in the world convention as KD's step,
+`pinsettle::ForceElements`, timed inside the program
 like the solver's `wall_time`), semi-implicit Euler. **Each gets what KD gets: the start, never
 q\\*.** Its set-up linearises the mechanism at the start as KD's first step estimate does (M,
 K = `pinsettle::computeStiffnessMatrix`, the static force; the explicit stability limit
@@ -1228,11 +1229,12 @@ def cost_section(results: D.Results) -> str:
             "through them."
         )
     return (
-        "`benchmarks/step_cost.cpp`, in the same run: time per step of a bare `pinocchio::aba` + "
-        "`pinocchio::integrate` step against the solver's step on the same model (ABA, both "
-        "energy measures, peak detection, stopping rule, integration, the automatic step's "
-        "re-estimates), repeats interleaved, median (min-max) and in bold the ratio of the "
-        "medians to the bare step; the last row is the step with the model's position limits as "
+        "`benchmarks/step_cost.cpp`, in the same run: time per step of a bare `pinocchio::aba` "
+        "(world convention, as the solver's step) + `pinocchio::integrate` step against the "
+        "solver's step on the same model (ABA, both energy measures, peak detection, stopping "
+        "rule, integration, the automatic step's re-estimates), repeats interleaved, median "
+        "(min-max) and in bold the ratio of the medians to the bare step; the last row is the "
+        "step with the model's position limits as "
         "joint stops (`JointStops`) over the same step without them. Every run starts at rest "
         "0.3 rad from neutral in every joint; the solver runs with kt = 0.99 and `max_e = 0`, so "
         "that it damps at every peak but never stops and its velocity never reaches subnormal "

@@ -219,7 +219,8 @@ namespace bench
     w.force -= w.tau;
   }
 
-  // Forward dynamics at (q, v) with the applied efforts in w.tau (and w.fext): w.data.ddq.
+  // Forward dynamics at (q, v) with the applied efforts in w.tau (and w.fext): w.data.ddq. In
+  // the world convention, as the solver's step: the faster one, for every method alike.
   inline void forwardDynamics(
     const pinocchio::Model & model,
     const pinsettle::ForceElements * elements,
@@ -227,10 +228,11 @@ namespace bench
     const Eigen::VectorXd & v,
     Workspace & w)
   {
+    const pinocchio::Convention world = pinocchio::Convention::WORLD;
     if (elements != nullptr && elements->hasExternalForces())
-      pinocchio::aba(model, w.data, q, v, w.tau, w.fext);
+      pinocchio::aba(model, w.data, q, v, w.tau, w.fext, world);
     else
-      pinocchio::aba(model, w.data, q, v, w.tau);
+      pinocchio::aba(model, w.data, q, v, w.tau, world);
   }
 
   // q moved by h v on the configuration manifold; false when a value turned non-finite.

@@ -199,8 +199,8 @@ BOOST_AUTO_TEST_CASE(exact_energy_is_half_vT_M_v)
       // computeKineticEnergies (forward kinematics path) agrees with the ABA path.
       const std::pair<double, double> local = pinsettle::computeKineticEnergies(model, ref, q, v);
       BOOST_CHECK_CLOSE(local.first, ours, 1e-10);
-      // The world convention's ABA (the solver's step) gives both measures alike: from data.ov
-      // and data.oinertias, not data.v.
+      // The world convention's ABA (the solver's step) gives both measures alike: from data.ov,
+      // data.oh and data.oinertias, not data.v.
       pinocchio::Data world(model);
       pinocchio::aba(
         model, world, q, v, Eigen::VectorXd::Zero(model.nv), pinocchio::Convention::WORLD);

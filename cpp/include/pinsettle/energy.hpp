@@ -18,8 +18,8 @@ namespace pinsettle
   /// \param[in] model The model of the mechanism.
   /// \param[in] data Data of that pass: in the local convention data.v holds the joint spatial
   /// velocities in local frames; in the world convention (pinocchio::aba with
-  /// pinocchio::Convention::WORLD) data.ov holds them in the world frame and data.oinertias the
-  /// bodies' inertias there.
+  /// pinocchio::Convention::WORLD) data.ov holds them in the world frame and data.oh the bodies'
+  /// momenta there (data.oinertias times data.ov).
   /// \param[in] convention The convention of that pass.
   /// \return The kinetic energy (J); equals 1/2 v^T M(q) v.
   ///

@@ -19,6 +19,7 @@ import math
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -736,3 +737,29 @@ def test_full_panda_without_limits_has_no_equilibrium_at_the_default_step():
     assert result.status == "no_equilibrium", result.summary()
     assert "panda_finger_joint" in result.reason
     assert result.steps <= 2 * 100 * 2**9 * 4
+
+
+def test_limits_on_a_joint_of_several_entries_are_noted_and_warned():
+    """A planar joint's own position limits cannot be a stop (stops act on joints of one
+    configuration entry): the solve says so, in a warning and in the result, instead of
+    ignoring them; Pinocchio's placeholders (a continuous joint's, a free-flyer's) are no
+    limits and raise nothing."""
+    model = pinocchio.Model()
+    base = model.addJoint(0, pinocchio.JointModelPlanar(), pinocchio.SE3.Identity(), "base")
+    model.appendBodyToJoint(base, pinocchio.Inertia.FromSphere(1.0, 0.1), pinocchio.SE3.Identity())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert pinsettle.solve(model).unapplied_limits == ()
+    model.lowerPositionLimit[0] = -0.5
+    with pytest.warns(UserWarning, match="position limits of 'base' are not applied"):
+        result = pinsettle.solve(model)
+    assert result.unapplied_limits == ("base",)
+    notes = [line for line in result.summary().splitlines() if line.startswith("note")]
+    assert len(notes) == 1 and "base: position limits in the model not applied" in notes[0]
+    assert result.to_dict()["unapplied_limits"] == ["base"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert pinsettle.solve(model, limits=False).unapplied_limits == ()
+        for name in ("double_pendulum_continuous", "solo12"):
+            robot = pinsettle.load_robot(name)
+            assert pinsettle.solve(robot, max_steps=10).unapplied_limits == ()

@@ -431,21 +431,25 @@ PYBIND11_MODULE(_core, m)
       const pinocchio::Model & model = modelFrom(model_obj);
       const std::unique_ptr<JointStops> stops = stopsFrom(model, spec);
       py::dict out;
-      py::list list, equal;
+      py::list list, equal, unapplied;
       if (stops)
       {
         for (const JointStops::Stop & s : stops->stops())
           list.append(py::make_tuple(model.names[s.joint], s.iq, s.iv, s.lower, s.upper));
         for (const pinocchio::JointIndex j : stops->equalLimitJoints())
           equal.append(model.names[j]);
+        for (const pinocchio::JointIndex j : stops->unappliedLimitJoints())
+          unapplied.append(model.names[j]);
       }
       out["stops"] = list;
       out["equal_limits"] = equal;
+      out["unapplied_limits"] = unapplied;
       return out;
     },
     py::arg("model"), py::arg("stops"),
     "The stops the solver applies: (joint, index in q, index in v, lower, upper) for each "
-    "joint with one, and the joints whose equal model limits were taken as no stop.");
+    "joint with one, the joints whose equal model limits were taken as no stop, and the joints "
+    "of several configuration entries whose model limits no stop applies.");
 
   m.def(
     "kinetic_energies",

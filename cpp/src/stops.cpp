@@ -6,6 +6,7 @@
 #include "pinsettle/solver.hpp"
 
 #include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
 
 #include <Eigen/QR>
 
@@ -39,6 +40,36 @@ namespace pinsettle
     }
 
     constexpr double kInf = std::numeric_limits<double>::infinity();
+
+    // Whether configuration entry iq lies on a unit-norm group (a quaternion, a continuous
+    // joint's cos and sin): normalising a configuration moved along it moves it back.
+    bool isUnitNormEntry(const pinocchio::Model & model, const Eigen::VectorXd & neutral, int iq)
+    {
+      Eigen::VectorXd q = neutral;
+      q[iq] += 0.5;
+      pinocchio::normalize(model, q);
+      return q[iq] != neutral[iq] + 0.5;
+    }
+
+    // Pinocchio's parsers fill the limits of joints of several entries with +-1.01 (the MJCF
+    // parser on a free joint's translation too) or +-max.
+    constexpr double kPlaceholderLimit = 1.01;
+
+    // Whether a joint of several configuration entries has position limits other than
+    // Pinocchio's placeholders: bounds beyond kNoLimit, +-1.01, or of magnitude 1 or more on
+    // entries of unit norm, which never reach them.
+    bool hasOwnLimits(
+      const pinocchio::Model & model, pinocchio::JointIndex joint, const Eigen::VectorXd & neutral)
+    {
+      for (int iq = model.idx_qs[joint]; iq < model.idx_qs[joint] + model.nqs[joint]; ++iq)
+      {
+        const double none = isUnitNormEntry(model, neutral, iq) ? 1. : JointStops::kNoLimit;
+        for (const double bound : {model.lowerPositionLimit[iq], model.upperPositionLimit[iq]})
+          if (std::isnan(bound) || (std::abs(bound) < none && std::abs(bound) != kPlaceholderLimit))
+            return true;
+      }
+      return false;
+    }
   } // namespace
 
   JointStops::JointStops(const pinocchio::Model & model, bool from_model)
@@ -46,8 +77,16 @@ namespace pinsettle
   {
     if (!from_model)
       return;
+    Eigen::VectorXd neutral; // made once a joint of several entries needs it
     for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
     {
+      if (model.nqs[j] > 1)
+      {
+        if (neutral.size() == 0)
+          neutral = pinocchio::neutral(model);
+        if (hasOwnLimits(model, j, neutral))
+          unapplied_limits_.push_back(j);
+      }
       if (!isStoppable(model, j))
         continue;
       const int iq = model.idx_qs[j];

@@ -58,6 +58,7 @@ class _StopStiffness(_Stiffness, total=False):
 class _JointStops(TypedDict):
     stops: list[tuple[str, int, int, float, float]]
     equal_limits: list[str]
+    unapplied_limits: list[str]
 
 @type_check_only
 class _TimeScale(TypedDict):

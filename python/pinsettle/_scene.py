@@ -1093,14 +1093,18 @@ class _Compiled:
         own = self._own_stops if limits else {}
         return (limits, [(j, *_effective_stop(lim, own)) for j, lim in self._set_stops])
 
-    def equal_limits(self, stops: tuple[bool, list[tuple[int, float, float]]] | None) -> list[str]:
+    def limit_notes(
+        self, stops: tuple[bool, list[tuple[int, float, float]]] | None
+    ) -> tuple[list[str], list[str]]:
         """Joints whose equal model limits were taken as no stop (and that no stop set
-        overrides)."""
+        overrides), and joints of several configuration entries whose model limits no stop
+        applies."""
         if stops is None:
-            return []
+            return [], []
         set_by_name = {lim.joint for _, lim in self._set_stops}
-        equal: list[str] = _core.joint_stops(self.model, stops)["equal_limits"]
-        return [name for name in equal if name not in set_by_name]
+        found = _core.joint_stops(self.model, stops)
+        equal = [str(name) for name in found["equal_limits"] if name not in set_by_name]
+        return equal, [str(name) for name in found["unapplied_limits"]]
 
     def full_q(self, q: np.ndarray) -> np.ndarray:
         out: np.ndarray = self.q_ref.copy()

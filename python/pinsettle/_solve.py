@@ -4,6 +4,7 @@ settings are in ``_settings``)."""
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -116,10 +117,12 @@ class Result:
     'upper', ``limit_reactions`` to the stop's reaction (>= 0, N m or N: the force it pushes
     with), ``start_clamped`` each joint whose start was outside its stops to how far it was
     moved onto the nearest one (rad or m). ``equal_limits`` names the joints whose lower and
-    upper model limits are equal, taken as no stop. With stops ``residual`` is the largest
-    violation of the conditions of a rest against them (|force| off the stops, a stop that
-    would have to pull) and the stability verdict is that of K restricted to the joints not
-    pressed on a stop.
+    upper model limits are equal, taken as no stop; ``unapplied_limits`` the joints of several
+    configuration entries (planar, spherical, free-flyer, continuous) whose model limits are
+    not Pinocchio's placeholders, which no stop applies (solve warns). With stops ``residual``
+    is the largest violation of the conditions of a rest against them (|force| off the stops, a
+    stop that would have to pull) and the stability verdict is that of K restricted to the
+    joints not pressed on a stop.
     """
 
     q: np.ndarray
@@ -157,6 +160,7 @@ class Result:
     limit_reactions: dict[str, float] = field(default_factory=dict)
     start_clamped: dict[str, float] = field(default_factory=dict)
     equal_limits: tuple[str, ...] = ()
+    unapplied_limits: tuple[str, ...] = ()
     #: 'rad' or 'm' for each joint named in at_limit or start_clamped (for the summary).
     units: dict[str, str] = field(default_factory=dict, repr=False)
 
@@ -234,6 +238,13 @@ class Result:
                 + ": lower and upper limits equal in the model (a URDF's default when they "
                 "are left out), taken as no stop"
             )
+        if self.unapplied_limits:
+            lines.append(
+                "note             "
+                + ", ".join(self.unapplied_limits)
+                + ": position limits in the model not applied (stops act on revolute, "
+                "prismatic and helical joints only)"
+            )
         if self.reason:
             lines.append(f"reason           {self.reason}")
         if self.joints:
@@ -286,6 +297,7 @@ class Result:
             "limit_reactions": self.limit_reactions,
             "start_clamped": self.start_clamped,
             "equal_limits": list(self.equal_limits),
+            "unapplied_limits": list(self.unapplied_limits),
         }
 
 
@@ -468,7 +480,7 @@ def solve(
         if np.any(locked_v != 0.0):
             raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
         stops = compiled.stops_for(_limits_flag(limits, scene.limits))
-        equal = compiled.equal_limits(stops)
+        equal, unapplied = compiled.limit_notes(stops)
         solved = compiled.model
         raw = _core.solve(
             compiled.model,
@@ -500,11 +512,25 @@ def solve(
         q = pinocchio.neutral(model) if q0 is None else as_vector(q0, "q0", model.nq, "model.nq")
         v = np.zeros(model.nv) if v0 is None else as_vector(v0, "v0", model.nv, "model.nv")
         stops = (True, []) if _limits_flag(limits, True) else None
-        equal = [] if stops is None else list(_core.joint_stops(model, stops)["equal_limits"])
+        equal, unapplied = [], []
+        if stops is not None:
+            found = _core.joint_stops(model, stops)
+            equal = [str(name) for name in found["equal_limits"]]
+            unapplied = [str(name) for name in found["unapplied_limits"]]
         solved = model
         raw = _core.solve(model, q, v, s, callback, None, None, stops, progress=report)
         raw["loops"] = 0
         naming = model
+    if unapplied:
+        warnings.warn(
+            "position limits of "
+            + ", ".join(repr(name) for name in unapplied)
+            + " are not applied: stops act on joints of one configuration entry (revolute, "
+            "prismatic, helical), not on planar, spherical, free-flyer or continuous joints; "
+            "pass limits=False to solve without the model's limits",
+            UserWarning,
+            stacklevel=2,
+        )
     trace = raw.pop("trace")
     if trace is not None:
         trace["event_kind"] = tuple(trace["event_kind"])
@@ -521,6 +547,7 @@ def solve(
         limit_reactions={str(name): float(reaction) for name, _, reaction in contacts},
         start_clamped=clamped,
         equal_limits=tuple(equal),
+        unapplied_limits=tuple(unapplied),
         units={name: _unit(solved, name) for name in named},
     )
 

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <vector>
 
 namespace
 {
@@ -80,6 +81,53 @@ BOOST_AUTO_TEST_CASE(stops_come_from_the_model_limits)
   BOOST_REQUIRE_EQUAL(stops.equalLimitJoints().size(), 1u);
   BOOST_CHECK_EQUAL(stops.equalLimitJoints()[0], 2u);
   BOOST_CHECK(pinsettle::JointStops(model, false).empty());
+}
+
+BOOST_AUTO_TEST_CASE(limits_of_joints_of_several_entries_are_listed_unless_placeholders)
+{
+  // Pinocchio's placeholders (+-max; +-1.01, as its parsers fill a quaternion, a continuous
+  // joint's cos and sin, and the MJCF parser a free joint's translation) are no limit; any
+  // other bound on such a joint is a limit no stop applies.
+  pinocchio::Model model;
+  const pinocchio::SE3 at = pinocchio::SE3::Identity();
+  const pinocchio::Inertia body = pinocchio::Inertia::FromSphere(1., 0.1);
+  const std::vector<pinocchio::JointIndex> joints = {
+    model.addJoint(0, pinocchio::JointModelFreeFlyer(), at, "free"),
+    model.addJoint(0, pinocchio::JointModelPlanar(), at, "planar"),
+    model.addJoint(0, pinocchio::JointModelSpherical(), at, "ball"),
+    model.addJoint(0, pinocchio::JointModelRUBY(), at, "wheel"),
+    model.addJoint(0, pinocchio::JointModelRY(), at, "hinge")};
+  for (const pinocchio::JointIndex j : joints)
+    model.appendBodyToJoint(j, body);
+  const auto entries = [&](pinocchio::JointIndex j) {
+    return std::make_pair(model.idx_qs[j], model.nqs[j]);
+  };
+  model.lowerPositionLimit.setConstant(-std::numeric_limits<double>::max());
+  model.upperPositionLimit.setConstant(std::numeric_limits<double>::max());
+  for (const pinocchio::JointIndex j : {joints[0], joints[2], joints[3]})
+  {
+    model.lowerPositionLimit.segment(entries(j).first, entries(j).second).setConstant(-1.01);
+    model.upperPositionLimit.segment(entries(j).first, entries(j).second).setConstant(1.01);
+  }
+  // A unit-norm entry bounded by 1 or more never reaches its bound: no limit either.
+  model.upperPositionLimit[entries(joints[1]).first + 2] = 1.;
+  BOOST_CHECK(pinsettle::JointStops(model).unappliedLimitJoints().empty());
+  BOOST_CHECK(pinsettle::JointStops(model).stops().empty());
+
+  // Limits of their own: a planar joint's x, a ball's quaternion entry below 1, a free joint's
+  // height.
+  model.lowerPositionLimit[entries(joints[1]).first] = -0.5;
+  model.upperPositionLimit[entries(joints[2]).first] = 0.3;
+  model.lowerPositionLimit[entries(joints[0]).first + 2] = 0.;
+  const pinsettle::JointStops stops(model);
+  const std::vector<pinocchio::JointIndex> expected = {joints[0], joints[1], joints[2]};
+  BOOST_CHECK(stops.unappliedLimitJoints() == expected);
+  // A translation bound above 1 is a limit: the unit-norm entries' threshold is not applied to
+  // it (x below 2 alone).
+  model.lowerPositionLimit[entries(joints[1]).first] = -std::numeric_limits<double>::max();
+  model.upperPositionLimit[entries(joints[1]).first] = 2.;
+  BOOST_CHECK(pinsettle::JointStops(model).unappliedLimitJoints() == expected);
+  BOOST_CHECK(pinsettle::JointStops(model, false).unappliedLimitJoints().empty());
 }
 
 BOOST_AUTO_TEST_CASE(set_limit_checks_its_input)

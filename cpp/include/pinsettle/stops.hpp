@@ -46,7 +46,8 @@ namespace pinsettle
   /// stop: a joint whose lower and upper limits are equal (the URDF default when they are left
   /// out; equalLimitJoints lists them), a bound that is not finite or beyond kNoLimit (a model
   /// built in code), and joints with more than one configuration entry (continuous, spherical,
-  /// free-flyer, planar). setLimit adds or overrides a stop.
+  /// free-flyer, planar; unappliedLimitJoints lists those with limits of their own). setLimit
+  /// adds or overrides a stop.
   ///
   class JointStops
   {
@@ -99,6 +100,15 @@ namespace pinsettle
       return equal_limits_;
     }
 
+    /// \brief Joints of several configuration entries (planar, spherical, free-flyer,
+    /// continuous) whose model limits are not Pinocchio's placeholders: no stop applies them.
+    /// The placeholders are bounds beyond kNoLimit and, on entries of unit norm (a quaternion,
+    /// a continuous joint's cos and sin), bounds of magnitude 1 or more.
+    const std::vector<pinocchio::JointIndex> & unappliedLimitJoints() const
+    {
+      return unapplied_limits_;
+    }
+
     const pinocchio::Model & model() const
     {
       return model_;
@@ -108,6 +118,7 @@ namespace pinsettle
     const pinocchio::Model & model_;
     std::vector<Stop> stops_;
     std::vector<pinocchio::JointIndex> equal_limits_;
+    std::vector<pinocchio::JointIndex> unapplied_limits_;
   };
 
   ///

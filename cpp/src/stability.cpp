@@ -232,6 +232,151 @@ namespace pinsettle
 
   namespace
   {
+    // The modes of K phi = lambda M phi, with M = L L^T: B = L^-1 K L^-T = U Lambda U^T, and
+    // Phi = L^-T U is M-orthonormal (Phi^T M = (L U)^T).
+    template<int MaxN>
+    struct Modes
+    {
+      MatrixN<MaxN> L;
+      Eigen::LLT<MatrixN<MaxN>> llt; // of M (regularised where M is singular)
+      VectorN<MaxN> lambda;          // increasing
+      MatrixN<MaxN> U;
+      VectorN<MaxN> f; // the modal pull Phi^T tau = U^T L^-1 tau
+
+      // |Phi modal|_inf: the joint-space size of a modal vector.
+      double jointPull(const VectorN<MaxN> & modal) const
+      {
+        return L.transpose()
+          .template triangularView<Eigen::Upper>()
+          .solve(modal)
+          .template lpNorm<Eigen::Infinity>();
+      }
+    };
+
+    template<int MaxN>
+    Modes<MaxN> computeModes(
+      const Eigen::MatrixXd & K, const Eigen::MatrixXd & mass, const Eigen::VectorXd & tau)
+    {
+      Modes<MaxN> modes;
+      MatrixN<MaxN> M = mass;
+      modes.llt.compute(M);
+      if (modes.llt.info() != Eigen::Success) // a massless chain end: regularise relative to M
+      {
+        M.diagonal().array() += 1e-12 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
+        modes.llt.compute(M);
+      }
+      modes.L = modes.llt.matrixL();
+      const MatrixN<MaxN> & L = modes.L;
+      MatrixN<MaxN> B = L.template triangularView<Eigen::Lower>().solve(0.5 * (K + K.transpose()));
+      B = L.template triangularView<Eigen::Lower>().solve(B.transpose()).eval();
+      Eigen::SelfAdjointEigenSolver<MatrixN<MaxN>> eig(0.5 * (B + B.transpose()));
+      modes.lambda = eig.eigenvalues();
+      modes.U = eig.eigenvectors();
+      modes.f = tau; // in place: a solve into tau's own type would allocate
+      L.template triangularView<Eigen::Lower>().solveInPlace(modes.f);
+      modes.f = modes.U.transpose() * modes.f;
+      return modes;
+    }
+
+    // The stiff modes: order[split..] of the modes sorted by |lambda|, to be scaled down to
+    // |lambda| = target (split = n: none).
+    template<int MaxN>
+    struct StiffSet
+    {
+      Eigen::Matrix<Eigen::Index, Eigen::Dynamic, 1, 0, MaxN, 1> order;
+      Eigen::Index split;
+      double target = 0.;
+    };
+
+    // Soft set: modes by increasing |lambda|, each raising the level (its |lambda| unless it is
+    // zero within round-off, and the joint pull of the set so far). The stiff set starts at the
+    // first mode more than kStiffGap above the level (they are scaled down to the level), or more
+    // than kStiffSpread above the first level (a spread without a gap: a chain of links from 1 mm
+    // to 100 m; they are scaled down to kStiffSpread times that). Unstable modes (lambda < 0)
+    // count by |lambda|: their growth needs resolving too. scale_stiff_modes = false: none.
+    template<int MaxN>
+    StiffSet<MaxN> findStiffModes(
+      const Modes<MaxN> & modes, double max_abs, double pull_all, bool scale_stiff_modes)
+    {
+      const VectorN<MaxN> & lambda = modes.lambda;
+      const Eigen::Index n = lambda.size();
+      StiffSet<MaxN> stiff;
+      stiff.order.resize(n);
+      std::iota(stiff.order.data(), stiff.order.data() + n, Eigen::Index(0));
+      std::sort(stiff.order.data(), stiff.order.data() + n, [&](Eigen::Index a, Eigen::Index b) {
+        return std::abs(lambda[a]) < std::abs(lambda[b]);
+      });
+      stiff.split = n;
+      // Eigenvalues below tol and pulls below pull_tol are zero within round-off: they set no
+      // level (a level of 1e-9 from a neutral mode would make every real mode 'stiff'). A zero
+      // mode's pull is noise from the eigenvectors of a near-degenerate cluster, hence the looser
+      // bound.
+      const double tol = 1e-12 * std::max(max_abs, pull_all);
+      const double pull_tol = std::max(tol, 1e-8 * pull_all);
+      double level = 0.;
+      double first_level = 0.;
+      VectorN<MaxN> soft_modal = VectorN<MaxN>::Zero(n);
+      for (Eigen::Index i = 0; i < n; ++i)
+      {
+        const Eigen::Index k = stiff.order[i];
+        const double size = std::abs(lambda[k]);
+        if (scale_stiff_modes && level > 0. && size > tol)
+        {
+          const double cap = kStiffSpread * first_level;
+          if (size > kStiffGap * level || size > cap)
+          {
+            stiff.split = i;
+            stiff.target = size > kStiffGap * level ? level : std::max(level, cap);
+            break;
+          }
+        }
+        if (size > tol)
+          level = std::max(level, size);
+        soft_modal += modes.U.col(k) * modes.f[k];
+        const double pull = modes.jointPull(soft_modal);
+        if (pull > pull_tol)
+          level = std::max(level, pull);
+        if (first_level == 0.)
+          first_level = level;
+      }
+      return stiff;
+    }
+
+    // Slow the stiff set down to its target where the longer step pays for the correction it
+    // costs every step; returns omega^2 of the scaled system (omega2 when nothing is scaled).
+    template<int MaxN>
+    double scaleStiffModes(
+      const Modes<MaxN> & modes, const StiffSet<MaxN> & stiff, double omega2, TimeScale & scale)
+    {
+      const Eigen::Index n = modes.lambda.size();
+      if (stiff.split >= n)
+        return omega2;
+      const Eigen::Index r = n - stiff.split;
+      const auto stiffMode = [&](Eigen::Index j) { return stiff.order[stiff.split + j]; };
+      VectorN<MaxN> modal = modes.f;
+      for (Eigen::Index j = 0; j < r; ++j) // the scaled modes' share of their pull
+        modal[stiffMode(j)] *= stiff.target / std::abs(modes.lambda[stiffMode(j)]);
+      const double scaled = std::max(stiff.target, modes.jointPull(modes.U * modal));
+      // The correction costs every step an nv x nv inverse mass matrix and its product with
+      // the r modes (pinocchio::aba alone is O(nv)): keep the scaling only where the longer
+      // step it allows pays for that. The steps fall by about the square root of the step's
+      // gain (the slow modes, not the step, set how many it takes), hence the square.
+      const double gain = std::sqrt(omega2 / scaled);
+      const double cost =
+        1. + kStiffCostBase + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
+      if (!(gain > cost * cost))
+        return omega2;
+      Eigen::MatrixXd U_s(n, r);
+      scale.stiff_masses.resize(r);
+      for (Eigen::Index j = 0; j < r; ++j)
+      {
+        U_s.col(j) = modes.U.col(stiffMode(j));
+        scale.stiff_masses[j] = std::abs(modes.lambda[stiffMode(j)]) / stiff.target - 1.;
+      }
+      scale.stiff_momenta = (modes.L * U_s).transpose();
+      return scaled;
+    }
+
     template<int MaxN>
     TimeScale timeScaleOf(
       const Eigen::MatrixXd & K,
@@ -241,112 +386,15 @@ namespace pinsettle
       bool scale_stiff_modes)
     {
       TimeScale scale;
-      const Eigen::Index n = K.rows();
-      MatrixN<MaxN> M = mass;
-      Eigen::LLT<MatrixN<MaxN>> llt(M);
-      if (llt.info() != Eigen::Success) // a massless chain end: regularise relative to M's scale
-      {
-        M.diagonal().array() += 1e-12 * M.diagonal().cwiseAbs().maxCoeff() + 1e-300;
-        llt.compute(M);
-      }
-      const MatrixN<MaxN> L = llt.matrixL();
-      // Modes: K phi = lambda M phi. With B = L^-1 K L^-T = U Lambda U^T, Phi = L^-T U is
-      // M-orthonormal, Phi^T M = (L U)^T, and the modal pull is f = Phi^T tau = U^T L^-1 tau.
-      MatrixN<MaxN> B = L.template triangularView<Eigen::Lower>().solve(0.5 * (K + K.transpose()));
-      B = L.template triangularView<Eigen::Lower>().solve(B.transpose()).eval();
-      Eigen::SelfAdjointEigenSolver<MatrixN<MaxN>> eig(0.5 * (B + B.transpose()));
-      const VectorN<MaxN> & lambda = eig.eigenvalues(); // increasing
-      const MatrixN<MaxN> & U = eig.eigenvectors();
-      VectorN<MaxN> f = tau; // in place: a solve into tau's own type would allocate
-      L.template triangularView<Eigen::Lower>().solveInPlace(f);
-      f = U.transpose() * f;
-      const auto jointPull = [&](const VectorN<MaxN> & modal) { // |Phi modal|_inf
-        return L.transpose()
-          .template triangularView<Eigen::Upper>()
-          .solve(modal)
-          .template lpNorm<Eigen::Infinity>();
-      };
-      const double max_abs = lambda.cwiseAbs().maxCoeff();
-      const double pull_all = jointPull(U * f);
+      const Modes<MaxN> modes = computeModes<MaxN>(K, mass, tau);
+      const double max_abs = modes.lambda.cwiseAbs().maxCoeff();
+      const double pull_all = modes.jointPull(modes.U * modes.f);
       scale.omega_unscaled = std::sqrt(std::max(max_abs, pull_all));
-
-      // Soft set: modes by increasing |lambda|, each raising the level (its |lambda| unless it is
-      // zero within round-off, and the joint pull of the set so far). The stiff set starts at the
-      // first mode more than kStiffGap above the level (they are scaled down to the level), or more
-      // than kStiffSpread above the first level (a spread without a gap: a chain of links from 1 mm
-      // to 100 m; they are scaled down to kStiffSpread times that). Unstable modes (lambda < 0)
-      // count by |lambda|: their growth needs resolving too.
-      Eigen::Matrix<Eigen::Index, Eigen::Dynamic, 1, 0, MaxN, 1> order(n);
-      std::iota(order.data(), order.data() + n, Eigen::Index(0));
-      std::sort(order.data(), order.data() + n, [&](Eigen::Index a, Eigen::Index b) {
-        return std::abs(lambda[a]) < std::abs(lambda[b]);
-      });
-      // Eigenvalues below tol and pulls below pull_tol are zero within round-off: they set no
-      // level (a level of 1e-9 from a neutral mode would make every real mode 'stiff'). A zero
-      // mode's pull is noise from the eigenvectors of a near-degenerate cluster, hence the looser
-      // bound.
-      const double tol = 1e-12 * std::max(max_abs, pull_all);
-      const double pull_tol = std::max(tol, 1e-8 * pull_all);
-      Eigen::Index split = n;
-      double level = 0.;
-      double first_level = 0.;
-      double target = 0.;
-      VectorN<MaxN> soft_modal = VectorN<MaxN>::Zero(n);
-      for (Eigen::Index i = 0; i < n; ++i)
-      {
-        const Eigen::Index k = order[i];
-        const double size = std::abs(lambda[k]);
-        if (scale_stiff_modes && level > 0. && size > tol)
-        {
-          const double cap = kStiffSpread * first_level;
-          if (size > kStiffGap * level || size > cap)
-          {
-            split = i;
-            target = size > kStiffGap * level ? level : std::max(level, cap);
-            break;
-          }
-        }
-        if (size > tol)
-          level = std::max(level, size);
-        soft_modal += U.col(k) * f[k];
-        const double pull = jointPull(soft_modal);
-        if (pull > pull_tol)
-          level = std::max(level, pull);
-        if (first_level == 0.)
-          first_level = level;
-      }
-      double omega2 = std::max(max_abs, pull_all);
-      if (split < n)
-      {
-        const Eigen::Index r = n - split;
-        const auto stiffMode = [&](Eigen::Index j) { return order[split + j]; };
-        VectorN<MaxN> modal = f;
-        for (Eigen::Index j = 0; j < r; ++j) // the scaled modes' share of their pull
-          modal[stiffMode(j)] *= target / std::abs(lambda[stiffMode(j)]);
-        const double scaled = std::max(target, jointPull(U * modal));
-        // The correction costs every step an nv x nv inverse mass matrix and its product with
-        // the r modes (pinocchio::aba alone is O(nv)): keep the scaling only where the longer
-        // step it allows pays for that. The steps fall by about the square root of the step's
-        // gain (the slow modes, not the step, set how many it takes), hence the square.
-        const double gain = std::sqrt(omega2 / scaled);
-        const double cost = 1. + kStiffCostBase
-                            + static_cast<double>(n) * static_cast<double>(1 + r) / kStiffCostScale;
-        if (gain > cost * cost)
-        {
-          Eigen::MatrixXd U_s(n, r);
-          scale.stiff_masses.resize(r);
-          for (Eigen::Index j = 0; j < r; ++j)
-          {
-            U_s.col(j) = U.col(stiffMode(j));
-            scale.stiff_masses[j] = std::abs(lambda[stiffMode(j)]) / target - 1.;
-          }
-          scale.stiff_momenta = (L * U_s).transpose();
-          omega2 = scaled;
-        }
-      }
+      const StiffSet<MaxN> stiff = findStiffModes(modes, max_abs, pull_all, scale_stiff_modes);
+      const double omega2 = scaleStiffModes(modes, stiff, std::max(max_abs, pull_all), scale);
       scale.omega_max = std::sqrt(omega2);
       if (damping != nullptr)
-        scale.damping_rate = largestGeneralizedEigenvalue<MaxN>(*damping, llt);
+        scale.damping_rate = largestGeneralizedEigenvalue<MaxN>(*damping, modes.llt);
       const double gamma = scale.damping_rate;
       const double root = std::sqrt(gamma * gamma + 4. * omega2);
       scale.critical_step =

@@ -39,15 +39,35 @@ namespace pinsettle
 
   namespace
   {
-    // Generalized force of the applied efforts alone at rest: static force minus gravity.
+    // Generalized force of the applied efforts alone at (q, v) (at rest: gravity minus the
+    // static force): the joint efforts plus sum_i J_i^T f_i of the external forces. These are
+    // mapped by RNEA's backward pass without gravity and inertia, over the kinematics the forces
+    // were computed on: the difference of two gravity passes (an RNEA with the forces, gravity
+    // alone) costs twice that.
     Eigen::VectorXd appliedForce(
       const pinocchio::Model & model,
       pinocchio::Data & data,
       const Eigen::VectorXd & q,
+      const Eigen::VectorXd & v,
       const ForceModel & forces)
     {
-      const Eigen::VectorXd gravity = pinocchio::computeGeneralizedGravity(model, data, q);
-      return gravity - computeStaticForce(model, data, q, &forces);
+      Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
+      ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
+      forces.computeForces(model, data, q, v, tau, fext);
+      if (!forces.hasExternalForces())
+        return tau;
+      // computeForces ran pinocchio::forwardKinematics at q: data.liMi and the joints' motion
+      // subspaces are those of q; fext is in the joints' frames, as RNEA takes it.
+      for (pinocchio::JointIndex i = static_cast<pinocchio::JointIndex>(model.njoints) - 1; i > 0;
+           --i)
+      {
+        model.joints[i].jointVelocitySelector(tau).noalias() +=
+          data.joints[i].S().matrix().transpose() * fext[i].toVector();
+        const pinocchio::JointIndex parent = model.parents[i];
+        if (parent > 0)
+          fext[parent] += data.liMi[i].act(fext[i]);
+      }
+      return tau;
     }
 
     bool hasCompositeJoint(const pinocchio::Model & model)
@@ -101,6 +121,7 @@ namespace pinsettle
     // tau_static = g - applied: K = dg/dq - d applied/dq.
     const double h = 1e-6;
     Eigen::VectorXd dq = Eigen::VectorXd::Zero(model.nv), q_plus(model.nq), q_minus(model.nq);
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
     for (int k = 0; k < model.nv; ++k)
     {
       dq[k] = h;
@@ -112,9 +133,9 @@ namespace pinsettle
                     - computeStaticForce(model, data, q_minus, forces))
                    / (2. * h);
       else
-        K.col(k) -=
-          (appliedForce(model, data, q_plus, *forces) - appliedForce(model, data, q_minus, *forces))
-          / (2. * h);
+        K.col(k) -= (appliedForce(model, data, q_plus, zero, *forces)
+                     - appliedForce(model, data, q_minus, zero, *forces))
+                    / (2. * h);
     }
     return K;
   }
@@ -187,24 +208,13 @@ namespace pinsettle
       return D;
     // D = -d applied / d v by central differences at v = 0 (the damper forces are linear).
     const double h = 1e-6;
-    Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv), tau_plus(model.nv), tau_minus(model.nv);
-    ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
-    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
-    const auto applied = [&](Eigen::VectorXd & tau) {
-      tau.setZero();
-      for (pinocchio::Force & force : fext)
-        force.setZero();
-      forces->computeForces(model, data, q, v, tau, fext);
-      if (forces->hasExternalForces()) // the joint torques of fext: rnea without inertia terms
-        tau += pinocchio::computeGeneralizedGravity(model, data, q)
-               - pinocchio::rnea(model, data, q, zero, zero, fext);
-    };
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv);
     for (int k = 0; k < model.nv; ++k)
     {
       v[k] = h;
-      applied(tau_plus);
+      const Eigen::VectorXd tau_plus = appliedForce(model, data, q, v, *forces);
       v[k] = -h;
-      applied(tau_minus);
+      const Eigen::VectorXd tau_minus = appliedForce(model, data, q, v, *forces);
       v[k] = 0.;
       D.col(k) = -(tau_plus - tau_minus) / (2. * h);
     }

@@ -272,6 +272,11 @@ BOOST_AUTO_TEST_CASE(stiffness_matrix_matches_finite_differences)
   elements.addPointSpring(
     model.getFrameId("tool0"), Eigen::Vector3d::Zero(), 0, Eigen::Vector3d(0.4, 0.2, 0.6), 200.);
   elements.addJointSpring(2, 15., 0.3);
+  // A load fixed in the world on a point of a body, and an effort on a joint: the external
+  // forces' mapping to the joints moves with q too.
+  elements.addPointLoad(
+    model.getFrameId("tool0"), Eigen::Vector3d(0.05, 0., 0.1), Eigen::Vector3d(3., -2., 5.));
+  elements.addJointLoad(4, Eigen::VectorXd::Constant(1, 1.5));
   std::srand(11);
   for (const pinsettle::ForceModel * forces :
        {static_cast<const pinsettle::ForceModel *>(nullptr),
@@ -291,6 +296,40 @@ BOOST_AUTO_TEST_CASE(stiffness_matrix_matches_finite_differences)
     }
     BOOST_CHECK_SMALL((K - fd).lpNorm<Eigen::Infinity>(), 1e-5 * (1. + fd.norm()));
   }
+}
+
+BOOST_AUTO_TEST_CASE(damping_matrix_matches_finite_differences_of_rnea)
+{
+  // D = -d applied / d v, the applied efforts' joint torques recomputed here with Pinocchio's
+  // RNEA (gravity minus RNEA with the external forces) rather than the solver's own mapping.
+  const pinocchio::Model model = ur5();
+  pinocchio::Data data(model), reference(model);
+  pinsettle::ForceElements elements(model);
+  elements.addPointSpring(
+    model.getFrameId("tool0"), Eigen::Vector3d(0.02, 0., 0.05), 0, Eigen::Vector3d(0.4, 0.2, 0.6),
+    200., 0.1, 7.);
+  elements.addJointSpring(3, 15., 0.3, 2.);
+  std::srand(5);
+  const Eigen::VectorXd q = pinocchio::randomConfiguration(model);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
+  const auto applied = [&](const Eigen::VectorXd & v) {
+    Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
+    pinsettle::ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
+    elements.computeForces(model, reference, q, v, tau, fext);
+    return Eigen::VectorXd(
+      tau + pinocchio::computeGeneralizedGravity(model, reference, q)
+      - pinocchio::rnea(model, reference, q, zero, zero, fext));
+  };
+  Eigen::MatrixXd fd(model.nv, model.nv);
+  for (int k = 0; k < model.nv; ++k)
+  {
+    Eigen::VectorXd v = zero;
+    v[k] = 1e-6;
+    fd.col(k) = -(applied(v) - applied(-v)) / 2e-6;
+  }
+  const Eigen::MatrixXd D = pinsettle::computeDampingMatrix(model, data, q, &elements);
+  BOOST_CHECK_GT(fd.norm(), 1.);
+  BOOST_CHECK_SMALL((D - fd).lpNorm<Eigen::Infinity>(), 1e-6 * (1. + fd.norm()));
 }
 
 BOOST_AUTO_TEST_CASE(stability_verdicts_of_a_pendulum)

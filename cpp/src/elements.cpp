@@ -179,6 +179,18 @@ namespace pinsettle
     point_loads_.push_back(PointLoad{at, force, torque});
   }
 
+  void ForceElements::addStiffness(
+    const pinocchio::Model & model, const Eigen::VectorXd & /*q*/, Eigen::MatrixXd & K) const
+  {
+    // -d(-k stretch)/dq = k: the stretch moves one for one with the joint's velocity coordinate
+    // (a continuous joint's angle too); loads are constant.
+    for (const JointSpring & s : joint_springs_)
+    {
+      const int iv = model.idx_vs[s.joint];
+      K(iv, iv) += s.stiffness;
+    }
+  }
+
   void ForceElements::computeForces(
     const pinocchio::Model & model,
     pinocchio::Data & data,

@@ -100,7 +100,8 @@ namespace pinsettle
 
   bool stiffnessByFiniteDifferences(const pinocchio::Model & model, const ForceModel * forces)
   {
-    return (forces != nullptr && !forces->empty()) || hasCompositeJoint(model);
+    return (forces != nullptr && !forces->empty() && !forces->hasClosedFormStiffness())
+           || hasCompositeJoint(model);
   }
 
   Eigen::MatrixXd computeStiffnessMatrix(
@@ -118,6 +119,11 @@ namespace pinsettle
       pinocchio::computeGeneralizedGravityDerivatives(model, data, q, K);
     if (!composite && !applied)
       return K;
+    if (!composite && forces->hasClosedFormStiffness())
+    {
+      forces->addStiffness(model, q, K);
+      return K;
+    }
     // tau_static = g - applied: K = dg/dq - d applied/dq.
     const double h = 1e-6;
     Eigen::VectorXd dq = Eigen::VectorXd::Zero(model.nv), q_plus(model.nq), q_minus(model.nq);

@@ -122,6 +122,18 @@ namespace pinsettle
       return !point_springs_.empty() || !point_loads_.empty();
     }
 
+    /// Joint springs and loads alone: the springs' stiffness on the diagonal (point springs and
+    /// loads act through Jacobians that move with q: by differences).
+    bool hasClosedFormStiffness() const override
+    {
+      return !hasExternalForces();
+    }
+
+    void addStiffness(
+      const pinocchio::Model & model,
+      const Eigen::VectorXd & q,
+      Eigen::MatrixXd & K) const override;
+
     void computeForces(
       const pinocchio::Model & model,
       pinocchio::Data & data,

@@ -44,6 +44,28 @@ namespace pinsettle
       return false;
     }
 
+    /// \brief Whether addStiffness gives the efforts' share of the stiffness in closed form;
+    /// otherwise the stiffness takes it by central differences of computeForces.
+    virtual bool hasClosedFormStiffness() const
+    {
+      return false;
+    }
+
+    ///
+    /// \brief Add the efforts' share of the stiffness, -d applied / d q at (q, v = 0), to K.
+    /// Called only when hasClosedFormStiffness() is true.
+    ///
+    /// \param[in] model The model of the mechanism.
+    /// \param[in] q The joint configuration (dim model.nq).
+    /// \param[in,out] K Stiffness (dim model.nv x model.nv, N m/rad or N/m).
+    ///
+    virtual void addStiffness(
+      const pinocchio::Model & /*model*/,
+      const Eigen::VectorXd & /*q*/,
+      Eigen::MatrixXd & /*K*/) const
+    {
+    }
+
     ///
     /// \brief Add the applied efforts at the state (q, v).
     ///
@@ -74,6 +96,12 @@ namespace pinsettle
   public:
     /// \param[in] tau The constant effort (dim model.nv, N m or N).
     explicit ConstantGeneralizedForce(const Eigen::VectorXd & tau);
+
+    /// A constant effort adds no stiffness.
+    bool hasClosedFormStiffness() const override
+    {
+      return true;
+    }
 
     void computeForces(
       const pinocchio::Model & model,

@@ -67,8 +67,9 @@ namespace pinsettle
   /// (pinocchio::computeGeneralizedGravityDerivatives), except on a model with a composite joint,
   /// where Pinocchio 4.1's derivatives are wrong (the coupling between the parts of a composite
   /// is dropped) and gravity's part is differenced too; the applied efforts, when there are any,
-  /// by central finite differences of their generalized force (step 1e-6 along each tangent
-  /// direction, through pinocchio::integrate). stiffnessByFiniteDifferences says which.
+  /// in closed form where the force model gives it (ForceModel::addStiffness: joint springs and
+  /// loads), else by central finite differences of their generalized force (step 1e-6 along each
+  /// tangent direction, through pinocchio::integrate). stiffnessByFiniteDifferences says which.
   ///
   /// \param[in] q The joint configuration (dim model.nq).
   /// \param[in] forces Applied efforts, or nullptr for gravity alone.
@@ -82,8 +83,9 @@ namespace pinsettle
 
   ///
   /// \brief Whether computeStiffnessMatrix differences (part of) K numerically: with applied
-  /// efforts, or on a model with a composite joint. A verdict then takes a tolerance of 1e-7 of
-  /// the largest eigenvalue instead of 1e-9.
+  /// efforts whose stiffness has no closed form (point springs and loads), or on a model with a
+  /// composite joint. A verdict then takes a tolerance of 1e-7 of the largest eigenvalue instead
+  /// of 1e-9.
   ///
   bool stiffnessByFiniteDifferences(const pinocchio::Model & model, const ForceModel * forces);
 

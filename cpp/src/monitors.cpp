@@ -154,11 +154,10 @@ namespace pinsettle
     return (quiet && not_rising) || exact_rest || creeping_;
   }
 
-  void RestCheck::record(
-    const StabilityReport & report, const Eigen::VectorXd & q, std::int64_t step)
+  void RestCheck::record(StabilityReport report, const Eigen::VectorXd & q, std::int64_t step)
   {
     stalled_ = creeping_ && report_q_.size() == q.size() && report_q_ == q;
-    report_ = report;
+    report_ = std::move(report);
     report_q_ = q;
     last_assessed_ = step;
   }

@@ -666,7 +666,7 @@ namespace pinsettle
     Eigen::VectorXd tau = staticForce(q_, forces_); // at result.q, polished or not
     result.residual = residualOf(q_, tau);
     result.residual_before_polish = result.residual;
-    StabilityReport report = rest_.isAssessed(q_) ? rest_.report() : assess(q_, forces_);
+    StabilityReport report = rest_.isAssessed(q_) ? rest_.takeReport() : assess(q_, forces_);
     if (settings_->polish && status == Status::Converged)
       polish(report, forces_, tau, result);
     const std::pair<double, double> energies = computeKineticEnergies(model_, data, result.q, v_);

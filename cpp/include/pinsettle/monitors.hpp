@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <utility>
 #include <vector>
 
 namespace pinsettle
@@ -275,8 +276,8 @@ namespace pinsettle
     /// \brief Whether the signals call for an assessment at step.
     bool isDue(bool quiet, bool not_rising, bool exact_rest, std::int64_t step);
 
-    /// \brief Keep the assessment of q, made at step.
-    void record(const StabilityReport & report, const Eigen::VectorXd & q, std::int64_t step);
+    /// \brief Keep the assessment of q, made at step (moved in: its matrices are not copied).
+    void record(StabilityReport report, const Eigen::VectorXd & q, std::int64_t step);
 
     /// \brief Whether the rest just assessed ends the run.
     bool accepts() const
@@ -310,6 +311,13 @@ namespace pinsettle
     bool isAssessed(const Eigen::VectorXd & q) const
     {
       return report_.verdict != Stability::Unknown && report_q_ == q;
+    }
+
+    /// \brief Hand the last assessment over at the end of a run (the check keeps none).
+    StabilityReport takeReport()
+    {
+      report_q_.resize(0);
+      return std::move(report_);
     }
 
   private:

@@ -719,7 +719,9 @@ def test_torque_disk_has_no_equilibrium(solved):
     assert np.array_equal(traced.q, result.q)
     energy = traced.trace.kinetic_energy
     assert len(energy) > 100 and np.all(np.diff(energy) > 0)
-    assert energy[-1] <= result.kinetic_energy
+    # The last sample may be of the final state: the step's energy (from the momenta ABA
+    # leaves) and the result's (from a forward kinematics pass) then agree to round-off.
+    assert energy[-1] <= result.kinetic_energy * (1.0 + 1e-14)
 
 
 @pytest.mark.parametrize("name", NO_EQUILIBRIUM_SCENES)

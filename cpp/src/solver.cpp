@@ -7,6 +7,7 @@
 #include "pinsettle/model-checks.hpp"
 #include "pinsettle/stability.hpp"
 #include "loop-stepper.hpp"
+#include "unit-norm.hpp"
 
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/crba.hpp>
@@ -66,12 +67,10 @@ namespace pinsettle
       probe.segment(iq, nq) = q.segment(iq, nq);
       if (!pinocchio::isNormalized(model, probe, 1e-6))
       {
-        // The unit-norm entries are those that normalize changes in a segment of ones.
-        probe.segment(iq, nq).setOnes();
-        pinocchio::normalize(model, probe);
+        const Eigen::Array<bool, Eigen::Dynamic, 1> unit = unitNormEntries(model, j, neutral);
         double squared = 0.;
         for (int k = 0; k < nq; ++k)
-          if (probe[iq + k] != 1.)
+          if (unit[k])
             squared += q[iq + k] * q[iq + k];
         std::ostringstream msg;
         msg << name << "[" << iq << ":" << iq + nq << "] (joint '" << model.names[j] << "', "

@@ -4,9 +4,9 @@
 
 #include "pinsettle/stops.hpp"
 #include "pinsettle/solver.hpp"
+#include "unit-norm.hpp"
 
 #include <pinocchio/algorithm/crba.hpp>
-#include <pinocchio/algorithm/joint-configuration.hpp>
 
 #include <Eigen/QR>
 
@@ -41,16 +41,6 @@ namespace pinsettle
 
     constexpr double kInf = std::numeric_limits<double>::infinity();
 
-    // Whether configuration entry iq lies on a unit-norm group (a quaternion, a continuous
-    // joint's cos and sin): normalising a configuration moved along it moves it back.
-    bool isUnitNormEntry(const pinocchio::Model & model, const Eigen::VectorXd & neutral, int iq)
-    {
-      Eigen::VectorXd q = neutral;
-      q[iq] += 0.5;
-      pinocchio::normalize(model, q);
-      return q[iq] != neutral[iq] + 0.5;
-    }
-
     // Pinocchio's parsers fill the limits of joints of several entries with +-1.01 (the MJCF
     // parser on a free joint's translation too) or +-max.
     constexpr double kPlaceholderLimit = 1.01;
@@ -61,9 +51,11 @@ namespace pinsettle
     bool hasOwnLimits(
       const pinocchio::Model & model, pinocchio::JointIndex joint, const Eigen::VectorXd & neutral)
     {
-      for (int iq = model.idx_qs[joint]; iq < model.idx_qs[joint] + model.nqs[joint]; ++iq)
+      const Eigen::Array<bool, Eigen::Dynamic, 1> unit = unitNormEntries(model, joint, neutral);
+      for (int k = 0; k < model.nqs[joint]; ++k)
       {
-        const double none = isUnitNormEntry(model, neutral, iq) ? 1. : JointStops::kNoLimit;
+        const int iq = model.idx_qs[joint] + k;
+        const double none = unit[k] ? 1. : JointStops::kNoLimit;
         for (const double bound : {model.lowerPositionLimit[iq], model.upperPositionLimit[iq]})
           if (std::isnan(bound) || (std::abs(bound) < none && std::abs(bound) != kPlaceholderLimit))
             return true;

@@ -58,6 +58,13 @@ JOINTS = {
     "free-flyer": pinocchio.JointModelFreeFlyer,
     "planar": pinocchio.JointModelPlanar,
     "continuous": pinocchio.JointModelRUBY,
+    # Motion subspaces that turn with the joint's own angles (Pinocchio's gravity derivatives
+    # miss that turn: the stiffness differences gravity there).
+    "universal": lambda: pinocchio.JointModelUniversal(
+        np.array([1.0, 0, 0]), np.array([0, 0, 1.0])
+    ),
+    "spherical-zyx": pinocchio.JointModelSphericalZYX,
+    "ellipsoid": lambda: pinocchio.JointModelEllipsoid(0.1, 0.2, 0.05),
 }
 
 finite = {"allow_nan": False, "allow_infinity": False}

@@ -3,7 +3,9 @@
 //
 
 #include "pinsettle/elements.hpp"
+#include "joint-kinds.hpp"
 
+#include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 
 #include <cmath>
@@ -66,6 +68,66 @@ namespace pinsettle
       const Eigen::Vector3d f = R.transpose() * force;
       fext[at.joint].linear() += f;
       fext[at.joint].angular() += R.transpose() * torque + at.point.cross(f);
+    }
+
+    // Whether every joint from the root to `joint` moves by the exponential of its tangent
+    // directions, which the closed-form stiffness relies on (hasVaryingMotionSubspace).
+    bool hasClosedFormSupport(const pinocchio::Model & model, pinocchio::JointIndex joint)
+    {
+      for (pinocchio::JointIndex j = joint; j > 0; j = model.parents[j])
+        if (hasVaryingMotionSubspace(model.joints[j]))
+          return false;
+      return true;
+    }
+
+    // The world point Jacobian of a point p (world) of body `joint`, added to G (3 x nv) with
+    // a sign: the velocity v_m + w_m x p of each column of the world Jacobian data.J on the
+    // support (computeJointJacobians).
+    void addPointJacobian(
+      const pinocchio::Model & model,
+      const pinocchio::Data & data,
+      pinocchio::JointIndex joint,
+      const Eigen::Vector3d & p,
+      double sign,
+      Eigen::Matrix3Xd & G)
+    {
+      for (pinocchio::JointIndex j = joint; j > 0; j = model.parents[j])
+        for (int m = model.idx_vs[j]; m < model.idx_vs[j] + model.nvs[j]; ++m)
+        {
+          const auto column = data.J.col(m);
+          G.col(m) += sign * (column.head<3>() + column.tail<3>().cross(p));
+        }
+    }
+
+    // -d(J_p^T F)/dq for a force f and torque t held fixed in the world at the point p (world)
+    // of body `joint`: the wrench at the world origin is F = (f, t + p x f). A step along m
+    // turns the columns J_k below it, dJ_k = J_m x J_k (hasClosedFormSupport), and moves the
+    // point by J_m's velocity at p, which turns the moment p x f.
+    void addFixedWrenchStiffness(
+      const pinocchio::Model & model,
+      const pinocchio::Data & data,
+      pinocchio::JointIndex joint,
+      const Eigen::Vector3d & p,
+      const Eigen::Vector3d & f,
+      const Eigen::Vector3d & t,
+      Eigen::MatrixXd & K)
+    {
+      const pinocchio::Force F(f, t + p.cross(f));
+      for (pinocchio::JointIndex jk = joint; jk > 0; jk = model.parents[jk])
+        for (int k = model.idx_vs[jk]; k < model.idx_vs[jk] + model.nvs[jk]; ++k)
+        {
+          const pinocchio::Motion Jk(data.J.col(k));
+          for (pinocchio::JointIndex jm = joint; jm > 0; jm = model.parents[jm])
+            for (int m = model.idx_vs[jm]; m < model.idx_vs[jm] + model.nvs[jm]; ++m)
+            {
+              const pinocchio::Motion Jm(data.J.col(m));
+              const Eigen::Vector3d dp = Jm.linear() + Jm.angular().cross(p);
+              double d = Jk.angular().dot(dp.cross(f));
+              if (jm <= jk) // on one path from the root: jm is jk or an ancestor of it
+                d += Jm.cross(Jk).dot(F);
+              K(k, m) -= d;
+            }
+        }
     }
   } // namespace
 
@@ -139,6 +201,8 @@ namespace pinsettle
         "spring: both ends are on the same rigid body (joint '" + model_.names[a.joint]
         + "'); such a spring exerts no net effort");
     point_springs_.push_back(PointSpring{a, b, stiffness, rest_length, damping});
+    points_differenced_ = points_differenced_ || !hasClosedFormSupport(model_, a.joint)
+                          || !hasClosedFormSupport(model_, b.joint);
     spring_damping_ = spring_damping_ || damping > 0.;
   }
 
@@ -177,18 +241,56 @@ namespace pinsettle
     if (at.joint == 0)
       throw std::invalid_argument("load: the frame is fixed to the world; the load does nothing");
     point_loads_.push_back(PointLoad{at, force, torque});
+    points_differenced_ = points_differenced_ || !hasClosedFormSupport(model_, at.joint);
   }
 
   void ForceElements::addStiffness(
-    const pinocchio::Model & model, const Eigen::VectorXd & /*q*/, Eigen::MatrixXd & K) const
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    Eigen::MatrixXd & K) const
   {
     // -d(-k stretch)/dq = k: the stretch moves one for one with the joint's velocity coordinate
-    // (a continuous joint's angle too); loads are constant.
+    // (a continuous joint's angle too); joint loads are constant.
     for (const JointSpring & s : joint_springs_)
     {
       const int iv = model.idx_vs[s.joint];
       K(iv, iv) += s.stiffness;
     }
+    if (!hasExternalForces())
+      return;
+    pinocchio::computeJointJacobians(model, data, q);
+
+    Eigen::Matrix3Xd G(3, model.nv);
+    for (const PointSpring & s : point_springs_)
+    {
+      // The tension T u on a (u along d = b - a) changes with d by
+      // K_c = k u u^T + T / |d| (I - u u^T), and d with q by G = J_b - J_a: G^T K_c G.
+      const Eigen::Vector3d pa = worldPoint(data, s.a), pb = worldPoint(data, s.b);
+      const Eigen::Vector3d d = pb - pa;
+      const double length = d.norm();
+      Eigen::Matrix3d Kc = s.stiffness * Eigen::Matrix3d::Identity();
+      Eigen::Vector3d force_on_a = Eigen::Vector3d::Zero();
+      if (length > 0.)
+      {
+        const Eigen::Vector3d u = d / length;
+        const double tension = s.stiffness * (length - s.rest_length);
+        Kc = tension / length * Eigen::Matrix3d::Identity()
+             + (s.stiffness - tension / length) * u * u.transpose();
+        force_on_a = tension * u;
+      }
+      // At coincident ends the force is taken as zero (computeForces); the stiffness as k in
+      // every direction, exact for a zero rest length.
+      G.setZero();
+      addPointJacobian(model, data, s.b.joint, pb, 1., G);
+      addPointJacobian(model, data, s.a.joint, pa, -1., G);
+      K.noalias() += G.transpose() * Kc * G;
+      addFixedWrenchStiffness(model, data, s.a.joint, pa, force_on_a, Eigen::Vector3d::Zero(), K);
+      addFixedWrenchStiffness(model, data, s.b.joint, pb, -force_on_a, Eigen::Vector3d::Zero(), K);
+    }
+    for (const PointLoad & l : point_loads_)
+      addFixedWrenchStiffness(
+        model, data, l.at.joint, worldPoint(data, l.at), l.force, l.torque, K);
   }
 
   void ForceElements::computeForces(

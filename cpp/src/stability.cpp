@@ -4,6 +4,7 @@
 
 #include "pinsettle/stability.hpp"
 #include "pinsettle/solver.hpp"
+#include "joint-kinds.hpp"
 
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
@@ -70,14 +71,6 @@ namespace pinsettle
       return tau;
     }
 
-    bool hasCompositeJoint(const pinocchio::Model & model)
-    {
-      for (std::size_t j = 1; j < model.joints.size(); ++j)
-        if (boost::get<pinocchio::JointModelComposite>(&model.joints[j].toVariant()) != nullptr)
-          return true;
-      return false;
-    }
-
     // Below this many degrees of freedom the eigen-decompositions work in fixed-capacity
     // storage: a small mechanism's estimates and assessments otherwise spend much of their time
     // in heap allocations (a fifth of a two-joint arm's whole solve).
@@ -101,7 +94,7 @@ namespace pinsettle
   bool stiffnessByFiniteDifferences(const pinocchio::Model & model, const ForceModel * forces)
   {
     return (forces != nullptr && !forces->empty() && !forces->hasClosedFormStiffness())
-           || hasCompositeJoint(model);
+           || hasVaryingMotionSubspace(model);
   }
 
   Eigen::MatrixXd computeStiffnessMatrix(
@@ -111,17 +104,18 @@ namespace pinsettle
     const ForceModel * forces)
   {
     Eigen::MatrixXd K = Eigen::MatrixXd::Zero(model.nv, model.nv);
-    // Pinocchio 4.1's gravity derivatives drop the coupling between the parts of a composite
-    // joint (a composite of RX and RY gets a triangular block): difference gravity there.
-    const bool composite = hasCompositeJoint(model);
+    // Pinocchio 4.1's gravity derivatives drop the turning of a motion subspace that varies with
+    // its joint's configuration (a composite's parts lose their coupling, a universal joint its
+    // second axis's turn): difference gravity there.
+    const bool varying = hasVaryingMotionSubspace(model);
     const bool applied = forces != nullptr && !forces->empty();
-    if (!composite)
+    if (!varying)
       pinocchio::computeGeneralizedGravityDerivatives(model, data, q, K);
-    if (!composite && !applied)
+    if (!varying && !applied)
       return K;
-    if (!composite && forces->hasClosedFormStiffness())
+    if (!varying && forces->hasClosedFormStiffness())
     {
-      forces->addStiffness(model, q, K);
+      forces->addStiffness(model, data, q, K);
       return K;
     }
     // tau_static = g - applied: K = dg/dq - d applied/dq.
@@ -134,7 +128,7 @@ namespace pinsettle
       pinocchio::integrate(model, q, dq, q_plus);
       pinocchio::integrate(model, q, -dq, q_minus);
       dq[k] = 0.;
-      if (composite)
+      if (varying)
         K.col(k) = (computeStaticForce(model, data, q_plus, forces)
                     - computeStaticForce(model, data, q_minus, forces))
                    / (2. * h);

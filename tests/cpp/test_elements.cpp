@@ -17,6 +17,7 @@
 
 #include <cmath>
 #include <string>
+#include <vector>
 
 namespace
 {
@@ -262,10 +263,42 @@ BOOST_AUTO_TEST_CASE(bad_elements_are_rejected)
   BOOST_CHECK(elements.empty());
 }
 
+namespace
+{
+  // Central differences of the static force (computeStaticForce: aba's fext path), step 1e-6
+  // along each tangent direction; forces may be nullptr (gravity alone).
+  Eigen::MatrixXd differencedStiffness(
+    const pinocchio::Model & model, const Eigen::VectorXd & q, const pinsettle::ForceModel * forces)
+  {
+    pinocchio::Data data(model);
+    Eigen::MatrixXd fd(model.nv, model.nv);
+    for (int k = 0; k < model.nv; ++k)
+    {
+      Eigen::VectorXd dq = Eigen::VectorXd::Zero(model.nv);
+      dq[k] = 1e-6;
+      fd.col(k) =
+        (pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, dq), forces)
+         - pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, -dq), forces))
+        / 2e-6;
+    }
+    return fd;
+  }
+
+  void addBody(pinocchio::Model & model, pinocchio::JointIndex joint, double mass)
+  {
+    model.appendBodyToJoint(
+      joint, pinocchio::Inertia(
+               mass, Eigen::Vector3d(0.1, -0.05, -0.3),
+               Eigen::Vector3d(0.02, 0.03, 0.01).asDiagonal().toDenseMatrix()));
+    model.addJointFrame(joint);
+    model.addBodyFrame("body_" + model.names[joint], joint);
+  }
+} // namespace
+
 BOOST_AUTO_TEST_CASE(stiffness_matrix_matches_finite_differences)
 {
-  // Gravity's part is analytic, the elements' part by finite differences inside: compare the
-  // whole with central differences of computeStaticForce taken here.
+  // Gravity's part is analytic, the elements' part in closed form: compare the whole with
+  // central differences of computeStaticForce taken here.
   const pinocchio::Model model = ur5();
   pinocchio::Data data(model);
   pinsettle::ForceElements elements(model);
@@ -284,16 +317,7 @@ BOOST_AUTO_TEST_CASE(stiffness_matrix_matches_finite_differences)
   {
     const Eigen::VectorXd q = pinocchio::randomConfiguration(model);
     const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model, data, q, forces);
-    Eigen::MatrixXd fd(model.nv, model.nv);
-    for (int k = 0; k < model.nv; ++k)
-    {
-      Eigen::VectorXd dq = Eigen::VectorXd::Zero(model.nv);
-      dq[k] = 1e-6;
-      fd.col(k) =
-        (pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, dq), forces)
-         - pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, -dq), forces))
-        / 2e-6;
-    }
+    const Eigen::MatrixXd fd = differencedStiffness(model, q, forces);
     BOOST_CHECK_SMALL((K - fd).lpNorm<Eigen::Infinity>(), 1e-5 * (1. + fd.norm()));
   }
 }
@@ -303,22 +327,6 @@ BOOST_AUTO_TEST_CASE(joint_springs_and_loads_give_their_stiffness_in_closed_form
   // Without point springs or loads K = dg/dq + diag(k): no differences, and the verdict's
   // tolerance is the analytic 1e-9. Checked against central differences of the static force,
   // on revolute joints and on a continuous one (its spring acts on the angle atan2(s, c)).
-  const auto differenced = [](
-                             const pinocchio::Model & model, const Eigen::VectorXd & q,
-                             const pinsettle::ForceModel & forces) {
-    pinocchio::Data data(model);
-    Eigen::MatrixXd fd(model.nv, model.nv);
-    for (int k = 0; k < model.nv; ++k)
-    {
-      Eigen::VectorXd dq = Eigen::VectorXd::Zero(model.nv);
-      dq[k] = 1e-6;
-      fd.col(k) =
-        (pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, dq), &forces)
-         - pinsettle::computeStaticForce(model, data, pinocchio::integrate(model, q, -dq), &forces))
-        / 2e-6;
-    }
-    return fd;
-  };
   const pinocchio::Model arm = ur5();
   pinsettle::ForceElements elements(arm);
   elements.addJointSpring(2, 15., 0.3);
@@ -329,7 +337,7 @@ BOOST_AUTO_TEST_CASE(joint_springs_and_loads_give_their_stiffness_in_closed_form
   std::srand(3);
   pinocchio::Data data(arm);
   const Eigen::VectorXd q = pinocchio::randomConfiguration(arm);
-  const Eigen::MatrixXd fd = differenced(arm, q, elements);
+  const Eigen::MatrixXd fd = differencedStiffness(arm, q, &elements);
   BOOST_CHECK_SMALL(
     (pinsettle::computeStiffnessMatrix(arm, data, q, &elements) - fd).lpNorm<Eigen::Infinity>(),
     1e-6 * (1. + fd.norm()));
@@ -344,14 +352,124 @@ BOOST_AUTO_TEST_CASE(joint_springs_and_loads_give_their_stiffness_in_closed_form
   const Eigen::Vector2d at(std::cos(2.), std::sin(2.)); // 2 rad: 1.6 rad of stretch
   pinocchio::Data wheel_data(wheel);
   const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(wheel, wheel_data, at, &coil);
-  BOOST_CHECK_SMALL((K - differenced(wheel, at, coil)).lpNorm<Eigen::Infinity>(), 1e-6);
+  BOOST_CHECK_SMALL((K - differencedStiffness(wheel, at, &coil)).lpNorm<Eigen::Infinity>(), 1e-6);
 
-  // A point load acts through a Jacobian that moves with q: differenced.
+  // A point load on the arm: closed form too (the next case checks it on every joint kind).
   pinsettle::ForceElements loaded(arm);
   loaded.addPointLoad(
     arm.getFrameId("tool0"), Eigen::Vector3d::Zero(), Eigen::Vector3d(0., 0., -5.));
-  BOOST_CHECK(!loaded.hasClosedFormStiffness());
-  BOOST_CHECK(pinsettle::stiffnessByFiniteDifferences(arm, &loaded));
+  BOOST_CHECK(loaded.hasClosedFormStiffness());
+  BOOST_CHECK(!pinsettle::stiffnessByFiniteDifferences(arm, &loaded));
+}
+
+BOOST_AUTO_TEST_CASE(point_springs_and_loads_give_their_stiffness_in_closed_form)
+{
+  // A tree with every joint kind the closed form covers, several degrees of freedom per joint
+  // included (the columns of one joint turn each other), joints in depth-first order as
+  // Pinocchio's algorithms need: springs between moving bodies with and
+  // without a rest length, one to the world, loads with and without a torque. K (gravity
+  // analytic, the elements in closed form) against central differences of the static force.
+  pinocchio::Model model;
+  const auto placement = [](double x, double y, double z) {
+    return pinocchio::SE3(
+      Eigen::AngleAxisd(0.3, Eigen::Vector3d(1., 2., 3.).normalized()).toRotationMatrix(),
+      Eigen::Vector3d(x, y, z));
+  };
+  const pinocchio::JointIndex base =
+    model.addJoint(0, pinocchio::JointModelFreeFlyer(), placement(0., 0., 1.), "base");
+  const pinocchio::JointIndex ball =
+    model.addJoint(base, pinocchio::JointModelSpherical(), placement(0.2, 0., 0.), "ball");
+  const pinocchio::JointIndex planar =
+    model.addJoint(ball, pinocchio::JointModelPlanar(), placement(0., 0.3, -0.2), "planar");
+  const pinocchio::JointIndex cross =
+    model.addJoint(planar, pinocchio::JointModelTranslation(), placement(0., 0., -0.1), "cross");
+  const pinocchio::JointIndex slider =
+    model.addJoint(base, pinocchio::JointModelPY(), placement(-0.2, 0.1, 0.), "slider");
+  const pinocchio::JointIndex screw = model.addJoint(
+    slider, pinocchio::JointModelHelicalUnaligned(Eigen::Vector3d(1., 1., 0.).normalized(), 0.05),
+    placement(0., 0., -0.4), "screw");
+  const pinocchio::JointIndex wheel =
+    model.addJoint(screw, pinocchio::JointModelRUBX(), placement(0.1, 0., 0.), "wheel");
+  const pinocchio::JointIndex hinge = model.addJoint(
+    wheel, pinocchio::JointModelRevoluteUnaligned(Eigen::Vector3d(0., 1., 1.).normalized()),
+    placement(0., -0.2, 0.), "hinge");
+  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+    addBody(model, j, 0.5 + 0.25 * static_cast<double>(j));
+  const auto frame = [&](pinocchio::JointIndex j) {
+    return model.getFrameId("body_" + model.names[j]);
+  };
+
+  pinsettle::ForceElements elements(model);
+  elements.addPointSpring(
+    frame(cross), Eigen::Vector3d(0.1, 0., 0.05), frame(hinge), Eigen::Vector3d(0., 0.2, 0.), 80.,
+    0.3);
+  elements.addPointSpring(
+    frame(planar), Eigen::Vector3d(0.05, 0.1, 0.), frame(wheel), Eigen::Vector3d::Zero(), 30.);
+  elements.addPointSpring(
+    0, Eigen::Vector3d(0.5, -0.4, 2.), frame(ball), Eigen::Vector3d(0., 0.1, 0.2), 120., 0.4);
+  elements.addPointLoad(
+    frame(hinge), Eigen::Vector3d(0.02, 0., 0.1), Eigen::Vector3d(3., -2., 5.),
+    Eigen::Vector3d(0.4, 0.1, -0.3));
+  elements.addPointLoad(frame(base), Eigen::Vector3d(0.1, 0.1, 0.), Eigen::Vector3d(0., 7., -1.));
+  elements.addJointSpring(slider, 40., 0.1);
+  BOOST_CHECK(elements.hasClosedFormStiffness());
+  BOOST_CHECK(!pinsettle::stiffnessByFiniteDifferences(model, &elements));
+
+  pinocchio::Data data(model);
+  std::srand(5);
+  for (int trial = 0; trial < 3; ++trial)
+  {
+    // integrate normalises a quaternion to first order only: a step this long leaves it 1e-3
+    // off the unit sphere, where the differences and the derivatives part.
+    Eigen::VectorXd q =
+      pinocchio::integrate(model, pinocchio::neutral(model), Eigen::VectorXd::Random(model.nv));
+    pinocchio::normalize(model, q);
+    const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model, data, q, &elements);
+    const Eigen::MatrixXd fd = differencedStiffness(model, q, &elements);
+    BOOST_TEST_CONTEXT("trial " << trial)
+    BOOST_CHECK_SMALL((K - fd).lpNorm<Eigen::Infinity>(), 1e-6 * (1. + fd.norm()));
+    // The elements' share is not small next to gravity's: the check would see it missing.
+    const Eigen::MatrixXd gravity_only = pinsettle::computeStiffnessMatrix(model, data, q);
+    BOOST_CHECK_GT((K - gravity_only).lpNorm<Eigen::Infinity>(), 10.);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(joints_whose_subspace_turns_are_differenced)
+{
+  // A universal joint's, a ZYX spherical's and an ellipsoid's motion subspaces turn with their
+  // own angles: Pinocchio's gravity derivatives miss that turn and a point load has no closed
+  // form. K, with gravity alone and with a load, against central differences.
+  const std::vector<pinocchio::JointModel> joints = {
+    pinocchio::JointModelUniversal(Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY()),
+    pinocchio::JointModelSphericalZYX(), pinocchio::JointModelEllipsoid(0.1, 0.2, 0.3)};
+  for (const pinocchio::JointModel & kind : joints)
+  {
+    BOOST_TEST_CONTEXT(kind.shortname())
+    {
+      pinocchio::Model model;
+      const pinocchio::JointIndex joint =
+        model.addJoint(0, kind, pinocchio::SE3::Identity(), "gimbal");
+      addBody(model, joint, 2.);
+      pinsettle::ForceElements elements(model);
+      elements.addPointLoad(
+        model.getFrameId("body_gimbal"), Eigen::Vector3d(0., 0., -0.5),
+        Eigen::Vector3d(1., 2., -3.));
+      BOOST_CHECK(!elements.hasClosedFormStiffness());
+      BOOST_CHECK(pinsettle::stiffnessByFiniteDifferences(model, nullptr));
+      pinocchio::Data data(model);
+      const Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(model.nq, 0.4, -0.7);
+      for (const pinsettle::ForceModel * forces :
+           {static_cast<const pinsettle::ForceModel *>(nullptr),
+            static_cast<const pinsettle::ForceModel *>(&elements)})
+      {
+        const Eigen::MatrixXd fd = differencedStiffness(model, q, forces);
+        BOOST_CHECK_SMALL(
+          (pinsettle::computeStiffnessMatrix(model, data, q, forces) - fd)
+            .lpNorm<Eigen::Infinity>(),
+          1e-6 * (1. + fd.norm()));
+      }
+    }
+  }
 }
 
 BOOST_AUTO_TEST_CASE(damping_matrix_matches_finite_differences_of_rnea)

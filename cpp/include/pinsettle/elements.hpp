@@ -122,15 +122,23 @@ namespace pinsettle
       return !point_springs_.empty() || !point_loads_.empty();
     }
 
-    /// Joint springs and loads alone: the springs' stiffness on the diagonal (point springs and
-    /// loads act through Jacobians that move with q: by differences).
+    ///
+    /// The stiffness in closed form: joint springs' k on the diagonal; a point spring's
+    /// G^T K_c G (G the Jacobian of its span, K_c its axial and transverse stiffness) and, for
+    /// every point element, the turning of the joints' axes under its world-fixed force. This
+    /// holds where every joint that carries a point element moves by the exponential of its
+    /// tangent directions (revolute, prismatic, helical, continuous, spherical, planar,
+    /// translation, free-flyer); below a universal, ZYX-spherical, ellipsoid, mimic or
+    /// composite joint the stiffness is differenced.
+    ///
     bool hasClosedFormStiffness() const override
     {
-      return !hasExternalForces();
+      return !points_differenced_;
     }
 
     void addStiffness(
       const pinocchio::Model & model,
+      pinocchio::Data & data,
       const Eigen::VectorXd & q,
       Eigen::MatrixXd & K) const override;
 
@@ -170,7 +178,8 @@ namespace pinsettle
     std::vector<PointLoad> point_loads_;
     Eigen::VectorXd joint_loads_;
     bool has_joint_loads_ = false;
-    bool spring_damping_ = false; // a point spring with damping needs body velocities
+    bool points_differenced_ = false; // a point element below a joint with no closed form
+    bool spring_damping_ = false;     // a point spring with damping needs body velocities
     bool joint_damping_ = false;
   };
 

@@ -56,11 +56,13 @@ namespace pinsettle
     /// Called only when hasClosedFormStiffness() is true.
     ///
     /// \param[in] model The model of the mechanism.
+    /// \param[in] data Scratch data of the model (its kinematic quantities are overwritten).
     /// \param[in] q The joint configuration (dim model.nq).
     /// \param[in,out] K Stiffness (dim model.nv x model.nv, N m/rad or N/m).
     ///
     virtual void addStiffness(
       const pinocchio::Model & /*model*/,
+      pinocchio::Data & /*data*/,
       const Eigen::VectorXd & /*q*/,
       Eigen::MatrixXd & /*K*/) const
     {

@@ -64,12 +64,14 @@ namespace pinsettle
   /// force (computeStaticForce) along the tangent directions of the configuration space.
   ///
   /// Gravity comes from Pinocchio's analytic derivatives
-  /// (pinocchio::computeGeneralizedGravityDerivatives), except on a model with a composite joint,
-  /// where Pinocchio 4.1's derivatives are wrong (the coupling between the parts of a composite
-  /// is dropped) and gravity's part is differenced too; the applied efforts, when there are any,
-  /// in closed form where the force model gives it (ForceModel::addStiffness: joint springs and
-  /// loads), else by central finite differences of their generalized force (step 1e-6 along each
-  /// tangent direction, through pinocchio::integrate). stiffnessByFiniteDifferences says which.
+  /// (pinocchio::computeGeneralizedGravityDerivatives), except on a model with a joint whose
+  /// motion subspace varies with its own configuration (universal, ZYX spherical, ellipsoid,
+  /// composite), where Pinocchio 4.1's derivatives drop that variation and gravity's part is
+  /// differenced too; the applied efforts, when there are any, in closed form where the force
+  /// model gives it (ForceModel::addStiffness: the force elements, unless a point element hangs
+  /// below such a joint), else by central finite differences of their generalized force (step
+  /// 1e-6 along each tangent direction, through pinocchio::integrate).
+  /// stiffnessByFiniteDifferences says which.
   ///
   /// \param[in] q The joint configuration (dim model.nq).
   /// \param[in] forces Applied efforts, or nullptr for gravity alone.
@@ -83,9 +85,9 @@ namespace pinsettle
 
   ///
   /// \brief Whether computeStiffnessMatrix differences (part of) K numerically: with applied
-  /// efforts whose stiffness has no closed form (point springs and loads), or on a model with a
-  /// composite joint. A verdict then takes a tolerance of 1e-7 of the largest eigenvalue instead
-  /// of 1e-9.
+  /// efforts whose stiffness has no closed form (ForceModel::hasClosedFormStiffness), or on a
+  /// model with a joint whose motion subspace varies with its configuration. A verdict then takes a
+  /// tolerance of 1e-7 of the largest eigenvalue instead of 1e-9.
   ///
   bool stiffnessByFiniteDifferences(const pinocchio::Model & model, const ForceModel * forces);
 

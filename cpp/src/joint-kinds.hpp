@@ -1,0 +1,74 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+// Private to the library: which joints' motion subspaces turn with their own configuration.
+//
+
+#ifndef __pinsettle_joint_kinds_hpp__
+#define __pinsettle_joint_kinds_hpp__
+
+#include <pinocchio/multibody/model.hpp>
+
+namespace pinsettle
+{
+
+  namespace detail
+  {
+    struct SubspaceVaries : boost::static_visitor<bool>
+    {
+      template<typename JointModel>
+      bool operator()(const JointModel &) const
+      {
+        return false;
+      }
+      bool operator()(const pinocchio::JointModelUniversal &) const
+      {
+        return true;
+      }
+      bool operator()(const pinocchio::JointModelSphericalZYX &) const
+      {
+        return true;
+      }
+      bool operator()(const pinocchio::JointModelEllipsoid &) const
+      {
+        return true;
+      }
+      bool operator()(const pinocchio::JointModelComposite &) const
+      {
+        return true;
+      }
+      bool operator()(const pinocchio::JointModelMimic &) const
+      {
+        return true;
+      }
+    };
+  } // namespace detail
+
+  ///
+  /// \brief Whether a joint's motion subspace, in its own frame, varies with its configuration
+  /// (universal, ZYX spherical, ellipsoid, composite, mimic).
+  ///
+  /// The others (revolute, prismatic, helical, continuous, spherical, planar, translation,
+  /// free-flyer) move by the exponential of their tangent directions (pinocchio::integrate
+  /// composes on the right), so a step along direction m of a joint turns every world column
+  /// J_k at or below it by J_m x J_k. Pinocchio 4.1's gravity derivatives assume as much: where
+  /// the subspace varies they drop its turning (a 2 kg universal joint's K is off by 1.2 N m/rad,
+  /// a composite's parts lose their coupling).
+  ///
+  inline bool hasVaryingMotionSubspace(const pinocchio::JointModel & joint)
+  {
+    return boost::apply_visitor(detail::SubspaceVaries(), joint.toVariant());
+  }
+
+  /// \brief Whether any joint of the model has a varying motion subspace.
+  inline bool hasVaryingMotionSubspace(const pinocchio::Model & model)
+  {
+    for (std::size_t j = 1; j < model.joints.size(); ++j)
+      if (hasVaryingMotionSubspace(model.joints[j]))
+        return true;
+    return false;
+  }
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_joint_kinds_hpp__

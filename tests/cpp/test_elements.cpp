@@ -364,11 +364,11 @@ BOOST_AUTO_TEST_CASE(joint_springs_and_loads_give_their_stiffness_in_closed_form
 
 BOOST_AUTO_TEST_CASE(point_springs_and_loads_give_their_stiffness_in_closed_form)
 {
-  // A tree with every joint kind the closed form covers, several degrees of freedom per joint
-  // included (the columns of one joint turn each other), joints in depth-first order as
-  // Pinocchio's algorithms need: springs between moving bodies with and
-  // without a rest length, one to the world, loads with and without a torque. K (gravity
-  // analytic, the elements in closed form) against central differences of the static force.
+  // A tree (in depth-first order, as Pinocchio's algorithms need) with every joint kind the
+  // closed form covers, several degrees of freedom per joint included (the columns of one joint
+  // turn each other): springs between moving bodies with and without a rest length, one to the
+  // world, loads with and without a torque. K (gravity analytic, the elements in closed form)
+  // against central differences of the static force.
   pinocchio::Model model;
   const auto placement = [](double x, double y, double z) {
     return pinocchio::SE3(

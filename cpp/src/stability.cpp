@@ -419,8 +419,12 @@ namespace pinsettle
     Eigen::VectorXd solveRankCut(
       const Eigen::MatrixXd & K, const Eigen::VectorXd & b, double threshold)
     {
-      Eigen::CompleteOrthogonalDecomposition<MatrixN<MaxN>> cod(K);
+      // The threshold must be set before the decomposition: compute() takes the rank from it to
+      // build Z, and a cut set afterwards made solve() apply Z's coefficients for a rank they
+      // were never computed for (uninitialised memory: a Newton step 25 times too long).
+      Eigen::CompleteOrthogonalDecomposition<MatrixN<MaxN>> cod(K.rows(), K.cols());
       cod.setThreshold(threshold);
+      cod.compute(K);
       const VectorN<MaxN> rhs = b; // a solve on b's own type would allocate its temporaries
       const VectorN<MaxN> x = cod.solve(rhs);
       return x;

@@ -46,7 +46,9 @@ namespace pinsettle
 
   ///
   /// \brief Whether a joint's motion subspace, in its own frame, varies with its configuration
-  /// (universal, ZYX spherical, ellipsoid, composite, mimic).
+  /// (universal, ZYX spherical, ellipsoid, composite). A mimic joint, which the model checks
+  /// refuse before any solve (its coupling is held as a constraint), is counted with them: its
+  /// derivatives are not relied on either.
   ///
   /// The others (revolute, prismatic, helical, continuous, spherical, planar, translation,
   /// free-flyer) move by the exponential of their tangent directions (pinocchio::integrate

@@ -128,8 +128,8 @@ namespace pinsettle
     /// every point element, the turning of the joints' axes under its world-fixed force. This
     /// holds where every joint that carries a point element moves by the exponential of its
     /// tangent directions (revolute, prismatic, helical, continuous, spherical, planar,
-    /// translation, free-flyer); below a universal, ZYX-spherical, ellipsoid, mimic or
-    /// composite joint the stiffness is differenced.
+    /// translation, free-flyer); below a universal, ZYX-spherical, ellipsoid or composite joint
+    /// the stiffness is differenced.
     ///
     bool hasClosedFormStiffness() const override
     {

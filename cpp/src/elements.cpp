@@ -53,6 +53,28 @@ namespace pinsettle
       return data.oMi[at.joint].rotation() * (vi.linear() + vi.angular().cross(at.point));
     }
 
+    // A point spring's span at the kinematics in data: its ends (world), its length, the unit
+    // vector u from a to b and the elastic tension k (|d| - rest_length) along it. At coincident
+    // ends the direction is undefined: u is zero, and so is the spring's force (a zero-length
+    // spring pulls with k d = 0 there anyway).
+    struct Span
+    {
+      Eigen::Vector3d a, b, u;
+      double length, tension;
+    };
+
+    Span springSpan(const pinocchio::Data & data, const PointSpring & s)
+    {
+      Span span;
+      span.a = worldPoint(data, s.a);
+      span.b = worldPoint(data, s.b);
+      const Eigen::Vector3d d = span.b - span.a;
+      span.length = d.norm();
+      span.u = span.length > 0. ? Eigen::Vector3d(d / span.length) : Eigen::Vector3d::Zero();
+      span.tension = span.length > 0. ? s.stiffness * (span.length - s.rest_length) : 0.;
+      return span;
+    }
+
     // A world-aligned force (N) and torque (N m) at a point, as the spatial force on the joint,
     // in the joint's frame (the convention of the fext argument of aba and rnea).
     void addWorldForce(
@@ -265,28 +287,23 @@ namespace pinsettle
     for (const PointSpring & s : point_springs_)
     {
       // The tension T u on a (u along d = b - a) changes with d by
-      // K_c = k u u^T + T / |d| (I - u u^T), and d with q by G = J_b - J_a: G^T K_c G.
-      const Eigen::Vector3d pa = worldPoint(data, s.a), pb = worldPoint(data, s.b);
-      const Eigen::Vector3d d = pb - pa;
-      const double length = d.norm();
+      // K_c = k u u^T + T / |d| (I - u u^T), and d with q by G = J_b - J_a: G^T K_c G. At
+      // coincident ends (no force) the stiffness is taken as k in every direction, exact for a
+      // zero rest length.
+      const Span span = springSpan(data, s);
       Eigen::Matrix3d Kc = s.stiffness * Eigen::Matrix3d::Identity();
-      Eigen::Vector3d force_on_a = Eigen::Vector3d::Zero();
-      if (length > 0.)
-      {
-        const Eigen::Vector3d u = d / length;
-        const double tension = s.stiffness * (length - s.rest_length);
-        Kc = tension / length * Eigen::Matrix3d::Identity()
-             + (s.stiffness - tension / length) * u * u.transpose();
-        force_on_a = tension * u;
-      }
-      // At coincident ends the force is taken as zero (computeForces); the stiffness as k in
-      // every direction, exact for a zero rest length.
+      if (span.length > 0.)
+        Kc = span.tension / span.length * Eigen::Matrix3d::Identity()
+             + (s.stiffness - span.tension / span.length) * span.u * span.u.transpose();
+      const Eigen::Vector3d force_on_a = span.tension * span.u;
       G.setZero();
-      addPointJacobian(model, data, s.b.joint, pb, 1., G);
-      addPointJacobian(model, data, s.a.joint, pa, -1., G);
+      addPointJacobian(model, data, s.b.joint, span.b, 1., G);
+      addPointJacobian(model, data, s.a.joint, span.a, -1., G);
       K.noalias() += G.transpose() * Kc * G;
-      addFixedWrenchStiffness(model, data, s.a.joint, pa, force_on_a, Eigen::Vector3d::Zero(), K);
-      addFixedWrenchStiffness(model, data, s.b.joint, pb, -force_on_a, Eigen::Vector3d::Zero(), K);
+      addFixedWrenchStiffness(
+        model, data, s.a.joint, span.a, force_on_a, Eigen::Vector3d::Zero(), K);
+      addFixedWrenchStiffness(
+        model, data, s.b.joint, span.b, -force_on_a, Eigen::Vector3d::Zero(), K);
     }
     for (const PointLoad & l : point_loads_)
       addFixedWrenchStiffness(
@@ -332,22 +349,12 @@ namespace pinsettle
     const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
     for (const PointSpring & s : point_springs_)
     {
-      const Eigen::Vector3d d = worldPoint(data, s.b) - worldPoint(data, s.a);
-      const double length = d.norm();
-      Eigen::Vector3d force_on_a;
-      if (length > 0.)
-      {
-        const Eigen::Vector3d u = d / length;
-        double tension = s.stiffness * (length - s.rest_length);
-        if (s.damping > 0.)
-          tension +=
-            s.damping * u.dot(worldPointVelocity(data, s.b) - worldPointVelocity(data, s.a));
-        force_on_a = tension * u;
-      }
-      else
-        // Coincident ends: a zero-length spring pulls with k d = 0; with a rest length the
-        // direction is undefined and the force is taken as zero.
-        force_on_a.setZero();
+      const Span span = springSpan(data, s);
+      double tension = span.tension;
+      if (s.damping > 0.) // u is zero at coincident ends: no force
+        tension +=
+          s.damping * span.u.dot(worldPointVelocity(data, s.b) - worldPointVelocity(data, s.a));
+      const Eigen::Vector3d force_on_a = tension * span.u;
       addWorldForce(data, s.a, force_on_a, zero, fext);
       addWorldForce(data, s.b, -force_on_a, zero, fext);
     }

@@ -141,7 +141,11 @@ def test_goal_1_says_which_baseline_is_faster_and_why(quick):
     ) in line
     assert "KD damps once every" in line and "set-up" in line
     kd = d.runs[report_writer.kd_key()]
-    if kd.setup / report_writer.time_to(kd) > report_writer.SETUP_HEAVY:
+    tk = report_writer.kd_reach(d)[0]  # the KD time the line gives
+    assert (
+        f"KD's set-up {report_writer.fmt_time(kd.setup)} is {kd.setup / tk:.0%} of its time" in line
+    )
+    if kd.setup / tk > report_writer.SETUP_HEAVY:
         assert f"Why, on {name}" in line
     if d.nv == 1:  # one mode: the line compares the steps and a step's time, as measured
         reach = report_writer.kd_reach(d)
@@ -168,6 +172,21 @@ def test_goal_5_says_why_from_the_measured_growth():
     assert "Why" not in report_writer.goal5_reasons(
         types.SimpleNamespace(scaling=[]), n, steps, per, quadratic
     )
+
+
+def test_goal_5_gives_the_growth_with_joint_inertia_only_where_every_chain_converged():
+    def row(n, status, steps, seconds):
+        ji = {"status": status, "steps": steps, "seconds": seconds}
+        return {"n": n, "joint_inertia": ji}
+
+    # Time as n^1.5 with the option: the line gives its fit and the steps' range.
+    rows = [row(k, "converged", 30 + k, 1e-6 * k**1.5) for k in (5, 20, 80)]
+    text = report_writer.joint_inertia_growth(types.SimpleNamespace(scaling=rows))
+    assert "(5 to 80 links) take 35 to 110 steps" in text
+    assert "grows as n^1.50" in text and "not the default" in text
+    rows[1]["joint_inertia"]["status"] = "max_steps"
+    assert report_writer.joint_inertia_growth(types.SimpleNamespace(scaling=rows)) == ""
+    assert report_writer.joint_inertia_growth(types.SimpleNamespace(scaling=rows[:1])) == ""
 
 
 def test_the_report_keeps_what_it_did_not_write(quick):
@@ -499,3 +518,19 @@ def test_the_loop_scene_is_measured_on_the_closed_mechanism(quick):
         assert len(times) == results.config.step_cost_repeats
         assert all(math.isfinite(x) and x > 0 for x in times)
     assert "`benchmarks/loop_step_cost.cpp`, in the same run" in text
+
+
+def test_unfinished_chains_tell_a_refusal_from_a_run_out_of_time():
+    config = types.SimpleNamespace(scaling_max_time=150.0)
+    rows = [
+        {"n": 5, "profile": {"status": "converged"}},
+        {"n": 300, "profile": {"status": "time_limit"}},
+        {"n": 400, "refused": "model: nv = 400 is too big"},
+        {"n": 1000, "refused": "model: nv = 1000 is too big"},
+    ]
+    results = types.SimpleNamespace(scaling=rows, config=config)
+    assert report_writer.unfinished_chains(results) == (
+        "300 links did not converge within 150 s; 400, 1000 links were refused"
+    )
+    results.scaling = rows[:1]
+    assert report_writer.unfinished_chains(results) == ""

@@ -514,6 +514,7 @@ def test_settings_defaults():
         "energy": "exact",
         "backtrack": True,
         "polish": True,
+        "newton_takeover": False,
         "scale_stiff_modes": True,
         "scale_joint_inertia": False,
         "dt_growth": "auto",

@@ -392,6 +392,9 @@ PYBIND11_MODULE(_core, m)
       "The growth dt='auto' uses: dt_growth, or for 'auto' that of the other settings.")
     .def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
     .def_readwrite(
+      "newton_takeover", &Settings::newton_takeover,
+      "Try Newton at damping events; a rest it reaches at round-off ends the run.")
+    .def_readwrite(
       "scale_stiff_modes", &Settings::scale_stiff_modes,
       "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).")
     .def_readwrite(

@@ -278,6 +278,12 @@ namespace pinsettle
       if (peaks_.isPeak(e.signal))
       {
         damp(e, result);
+        if (isSettledByNewton(result))
+        {
+          status = Status::Converged;
+          ++step_;
+          break;
+        }
         continue; // re-evaluate the dynamics at the damped state
       }
       peaks_.record(e.signal);
@@ -362,6 +368,10 @@ namespace pinsettle
       assemble(result);
     impacts_ = 0;
     stationary_ = false;
+    newton_tried_at_ = 0;
+    newton_spacing_ =
+      std::max<std::int64_t>(1, static_cast<std::int64_t>(model_.nv) * model_.nv / 4);
+    settled_by_newton_ = false;
     if (stops_ != nullptr)
     {
       hits_.reserve(stops_->stops().size());
@@ -664,9 +674,10 @@ namespace pinsettle
     result.v = v_;
     Eigen::VectorXd tau = staticForce(q_, forces_); // at result.q, polished or not
     result.residual = residualOf(q_, tau);
-    result.residual_before_polish = result.residual;
+    if (!settled_by_newton_) // else it holds the residual where Newton took over
+      result.residual_before_polish = result.residual;
     StabilityReport report = rest_.isAssessed(q_) ? rest_.takeReport() : assess(q_, forces_);
-    if (settings_->polish && status == Status::Converged)
+    if (settings_->polish && status == Status::Converged && !settled_by_newton_)
       polish(report, forces_, tau, result);
     const std::pair<double, double> energies = computeKineticEnergies(model_, data, result.q, v_);
     result.kinetic_energy = energies.first;
@@ -704,48 +715,49 @@ namespace pinsettle
     return next <= kRoundOffStep * std::max(1., q.lpNorm<Eigen::Infinity>());
   }
 
-  void Solver::polish(
-    StabilityReport & report, const ForceModel * forces, Eigen::VectorXd & tau_q, Result & result)
+  double Solver::newtonReach(const StabilityReport & report, double residual)
   {
-    const pinocchio::Model & model = model_;
     // The correction a rest in a basin needs is about residual / (smallest stiffness): allow ten
     // times that and no more, so that Newton cannot wander to another stationary point.
-    double softest = 0.;
     for (Eigen::Index k = 0; k < report.eigenvalues.size(); ++k)
       if (report.eigenvalues[k] > report.tolerance)
-      {
-        softest = report.eigenvalues[k];
-        break;
-      }
-    if (softest <= 0.)
-      return;
-    const double reach = 10. * result.residual / softest;
+        return 10. * residual / report.eigenvalues[k];
+    return -1.;
+  }
 
-    Eigen::VectorXd q = result.q, q_next(model.nq);
-    Eigen::VectorXd tau = tau_q;
-    double residual = result.residual;
+  Solver::NewtonRun Solver::iterateNewton(
+    const Eigen::VectorXd & q0,
+    const Eigen::VectorXd & tau0,
+    double residual0,
+    const StabilityReport & report,
+    const ForceModel * forces,
+    double max_move)
+  {
+    const pinocchio::Model & model = model_;
+    NewtonRun run{q0, tau0, residual0, 0, residual0 == 0.};
+    Eigen::VectorXd & q = run.q;
+    Eigen::VectorXd q_next(model.nq);
     // Loops and stops restrict the motions Newton may take (the report's basis).
     const bool restricted = loops_ != nullptr || stops_ != nullptr;
-    int iterations = 0;
     double last_step = 0.; // |dq|_inf of the step taken before
     StabilityReport at;    // the stiffness (and with loops or stops the basis) at q
-    for (; iterations < 10 && residual > 0.; ++iterations)
+    for (; run.iterations < 10 && run.residual > 0.; ++run.iterations)
     {
       // Newton on the allowed motions (all of them without loops or stops): K ds = -B^T tau,
       // dq = B ds. The first iteration starts where the report was drawn: its K and B.
-      if (iterations > 0 && restricted)
+      if (run.iterations > 0 && restricted)
         at = assess(q, forces);
-      else if (iterations > 0)
+      else if (run.iterations > 0)
         at.stiffness = computeStiffnessMatrix(model, data, q, forces);
-      const StabilityReport & here = iterations == 0 ? report : at;
+      const StabilityReport & here = run.iterations == 0 ? report : at;
       // Least squares with a rank cut: neutral directions (K singular there) are left alone.
       const double cut =
         std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12);
       const Eigen::VectorXd dq =
         restricted
           ? Eigen::VectorXd(
-              -here.basis * solveWithRankCut(here.stiffness, here.basis.transpose() * tau, cut))
-          : Eigen::VectorXd(-solveWithRankCut(here.stiffness, tau, cut));
+              -here.basis * solveWithRankCut(here.stiffness, here.basis.transpose() * run.tau, cut))
+          : Eigen::VectorXd(-solveWithRankCut(here.stiffness, run.tau, cut));
       pinocchio::integrate(model, q, dq, q_next);
       if (loops_ != nullptr)
         projectOntoLoops(model, data, *loops_, q_next);
@@ -758,31 +770,89 @@ namespace pinsettle
       }
       const Eigen::VectorXd tau_next = staticForce(q_next, forces);
       const double residual_next = residualOf(q_next, tau_next);
-      if (!(residual_next < residual))
+      if (!(residual_next < run.residual))
         break;
       q.swap(q_next);
-      tau = tau_next;
-      residual = residual_next;
+      run.tau = tau_next;
+      run.residual = residual_next;
+      if (
+        max_move < std::numeric_limits<double>::infinity()
+        && pinocchio::difference(model, q0, q).lpNorm<Eigen::Infinity>() > max_move)
+      {
+        ++run.iterations;
+        return run; // out of reach: not at round-off, whatever the residual
+      }
       const double step = dq.lpNorm<Eigen::Infinity>();
       if (isAtRoundOff(step, last_step, q))
       {
-        ++iterations;
+        ++run.iterations;
+        run.at_round_off = true;
         break;
       }
       last_step = step;
     }
-    result.polish_iterations = iterations;
-    if (iterations == 0)
+    run.at_round_off = run.at_round_off || run.residual == 0.;
+    return run;
+  }
+
+  void Solver::polish(
+    StabilityReport & report, const ForceModel * forces, Eigen::VectorXd & tau_q, Result & result)
+  {
+    const double reach = newtonReach(report, result.residual);
+    if (reach < 0.)
       return;
-    const double moved = pinocchio::difference(model, result.q, q).lpNorm<Eigen::Infinity>();
-    const StabilityReport after = assess(q, forces);
+    NewtonRun run = iterateNewton(result.q, tau_q, result.residual, report, forces);
+    result.polish_iterations = run.iterations;
+    if (run.iterations == 0)
+      return;
+    const double moved = pinocchio::difference(model_, result.q, run.q).lpNorm<Eigen::Infinity>();
+    StabilityReport after = assess(run.q, forces);
     if (moved > reach || after.verdict != report.verdict)
       return;
-    result.q = q;
-    result.residual = residual;
+    result.q = run.q;
+    result.residual = run.residual;
     result.polished = true;
-    tau_q = tau;
-    report = after;
+    tau_q = run.tau;
+    report = std::move(after);
+  }
+
+  bool Solver::isSettledByNewton(Result & result)
+  {
+    if (
+      !settings_->polish || !settings_->newton_takeover
+      || step_ - newton_tried_at_ < newton_spacing_)
+      return false;
+    newton_tried_at_ = step_;
+    StabilityReport report = assess(q_, forces_);
+    if (report.verdict == Stability::Unstable)
+      return false;
+    const Eigen::VectorXd tau = staticForce(q_, forces_);
+    const double residual = residualOf(q_, tau);
+    // Within the polish's reach and near where the mechanism stands: far from its rest the
+    // reach (residual over the softest stiffness) is long, and Newton, clamped onto a stop,
+    // found a 'rest' 2.8 rad away and 3.7 J above the start of a bistable pendulum's release.
+    const double reach = std::min(newtonReach(report, residual), kTakeoverReach);
+    if (reach < 0.)
+      return false;
+    // Only a Newton run that gets to round-off within the basin ends the run: anything less
+    // (a stall, a step beyond the reach, another kind of rest) leaves the mechanism to the
+    // damping, where it was.
+    NewtonRun run = iterateNewton(q_, tau, residual, report, forces_, reach);
+    if (!run.at_round_off)
+      return false;
+    if (pinocchio::difference(model_, q_, run.q).lpNorm<Eigen::Infinity>() > reach)
+      return false;
+    StabilityReport after = assess(run.q, forces_);
+    if (after.verdict != report.verdict)
+      return false;
+    result.residual_before_polish = residual;
+    result.polish_iterations = run.iterations;
+    result.polished = run.iterations > 0;
+    q_ = run.q;
+    v_.setZero();
+    rest_.record(std::move(after), q_, step_);
+    settled_by_newton_ = true;
+    return true;
   }
 
 } // namespace pinsettle

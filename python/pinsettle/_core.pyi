@@ -27,6 +27,7 @@ class Settings:
     energy: str
     backtrack: bool
     polish: bool
+    newton_takeover: bool
     scale_stiff_modes: bool
     scale_joint_inertia: bool
     trace_every: int

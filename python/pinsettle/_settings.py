@@ -27,6 +27,7 @@ SETTING_TYPES: dict[str, str] = {
     "energy": "str ('exact' or 'simplified')",
     "backtrack": "bool",
     "polish": "bool",
+    "newton_takeover": "bool",
     "scale_stiff_modes": "bool",
     "scale_joint_inertia": "bool",
     "dt_growth": "float or 'auto'",
@@ -59,7 +60,10 @@ class Settings(_core.Settings):
     joint gets a fictitious inertia that brings its own rate, stiffness or pull over inertia,
     down towards the slowest joint's, re-chosen at each estimate; equilibria and stability
     unchanged, ``Result.scaled_joints`` counts the joints given one);
-    ``polish`` (Newton steps after convergence); ``kt``
+    ``polish`` (Newton steps after convergence); ``newton_takeover`` (off by default; with
+    ``polish``: at a damping event, at most once every max(1, nv^2 / 4) steps, the polish's
+    Newton from where the mechanism stands; a rest it reaches at round-off within the polish's
+    reach and 0.1 (rad or m), stable or neutral as where it started, ends the run); ``kt``
     velocity scale at each energy peak, in [0, 1); ``err`` relative peak threshold; ``ds``
     stopping window (steps); ``max_e`` bound on the sum of the last ``ds`` energy samples (J for
     the exact measure); ``max_steps``; ``max_time`` (s); ``energy`` ('exact' or 'simplified');

@@ -103,7 +103,8 @@ class Result:
     ``dt_estimates`` the automatic estimates made, ``dt_reductions`` the roll-backs with the
     step halved (divergence guard), ``scaled_modes`` the most stiff modes slowed at once,
     ``scaled_joints`` the most joints given a fictitious inertia at once. With
-    ``polish``: ``residual_before_polish``, ``polish_iterations`` and whether the polished pose
+    ``polish``: ``residual_before_polish`` (where the run stopped, or where Newton took over at
+    a damping event: ``newton_takeover``), ``polish_iterations`` and whether the polished pose
     was kept (``polished``). ``mobility`` is the mechanism's degrees of freedom (nv of the free
     joints less the independent loop equations). ``loops`` counts the loop closures. With loops
     (a ``Scene`` with ``[[loop]]``): ``assembly_distance`` how far the start moved to close

@@ -361,6 +361,7 @@ BOOST_AUTO_TEST_CASE(step_loop_does_not_allocate)
   settings.max_e = 0.; // never converges: runs exactly max_steps steps
   // No trace: its event list grows with the damping events (amortised, a few allocations).
   settings.dt = 1e-3; // the automatic step allocates when it re-estimates (a few times a run)
+  settings.newton_takeover = false; // its tries at damping events allocate (and would end it)
   const Eigen::VectorXd q0 = pinocchio::neutral(model);
   long allocations[2], frees[2];
   const long steps[2] = {100, 20000};
@@ -414,7 +415,8 @@ BOOST_AUTO_TEST_CASE(non_finite_values_stop_with_diverged)
   const PoisonAfter poison(50);
   pinsettle::Solver solver(model);
   pinsettle::Settings settings = tight();
-  settings.ds = 100; // a run longer than the poison's 50 evaluations
+  settings.ds = 100;                // a run longer than the poison's 50 evaluations:
+  settings.newton_takeover = false; // not ended by Newton at a damping event before them
   const pinsettle::Result result =
     solver.solve(Eigen::VectorXd::Constant(1, 1.), settings, &poison);
   // Every evaluation after the 50th is NaN: each roll-back to the start with half the step meets
@@ -793,8 +795,9 @@ BOOST_AUTO_TEST_CASE(newton_polish_brings_the_residual_to_round_off_and_keeps_th
   pinsettle::Solver solver(model);
   pinsettle::Settings settings;
   settings.polish = true;
-  settings.max_e = 1e-3; // a loose stopping bound: the run leaves the polish work to do
-  settings.ds = 100;     // near the rest: with the default window of 10 the run stops 0.04 rad off
+  settings.newton_takeover = false; // the polish after the run, from where the run stops
+  settings.max_e = 1e-3;            // a loose stopping bound: the run leaves the polish work to do
+  settings.ds = 100; // near the rest: with the default window of 10 the run stops 0.04 rad off
   const pinsettle::Result result = solver.solve(pinocchio::neutral(model), settings);
   BOOST_CHECK(result.status == pinsettle::Status::Converged);
   BOOST_CHECK(result.polished);
@@ -811,6 +814,34 @@ BOOST_AUTO_TEST_CASE(newton_polish_brings_the_residual_to_round_off_and_keeps_th
   const pinsettle::Result plain = solver.solve(pinocchio::neutral(model), settings);
   BOOST_CHECK_EQUAL(plain.residual, result.residual_before_polish);
   BOOST_CHECK_LT(pinocchio::difference(model, plain.q, result.q).lpNorm<Eigen::Infinity>(), 1e-5);
+}
+
+BOOST_AUTO_TEST_CASE(newton_takes_over_at_a_damping_event_at_the_same_strict_minimum)
+{
+  // The pendulum released at 1 rad: with the takeover Newton ends the run at an early damping
+  // event; without it (the default) the damping goes on until the energy stays below max_e.
+  // Both rest hanging straight down (g(q) = 0 recomputed with Pinocchio), the takeover's at
+  // round-off, in fewer steps.
+  const pinocchio::Model model = pendulum();
+  pinsettle::Solver solver(model);
+  pinsettle::Settings settings;
+  settings.newton_takeover = true;
+  const Eigen::VectorXd q0 = Eigen::VectorXd::Constant(1, 1.);
+  const pinsettle::Result taken = solver.solve(q0, settings);
+  settings.newton_takeover = false;
+  const pinsettle::Result damped = solver.solve(q0, settings);
+  BOOST_REQUIRE(taken.status == pinsettle::Status::Converged);
+  BOOST_REQUIRE(damped.status == pinsettle::Status::Converged);
+  BOOST_CHECK_LT(taken.steps, damped.steps);
+  BOOST_CHECK(taken.polished);
+  BOOST_CHECK_GT(taken.residual_before_polish, taken.residual);
+  BOOST_CHECK(taken.stability == pinsettle::Stability::Stable);
+  pinocchio::Data data(model);
+  const double weight = model.inertias[1].mass() * 9.81 * model.inertias[1].lever().norm();
+  BOOST_CHECK_LE(
+    pinocchio::computeGeneralizedGravity(model, data, taken.q).lpNorm<Eigen::Infinity>(),
+    1e-14 * weight);
+  BOOST_CHECK_LT(pinocchio::difference(model, damped.q, taken.q).lpNorm<Eigen::Infinity>(), 1e-12);
 }
 
 BOOST_AUTO_TEST_CASE(joint_inertia_brings_each_joint_down_to_the_slowest_and_not_below_the_modes)

@@ -122,9 +122,11 @@ namespace pinsettle
     /// Joints whose start was outside their stops, and how far each was moved onto the nearest
     /// stop (rad or m).
     std::vector<std::pair<pinocchio::JointIndex, double>> start_clamped;
-    /// Residual before the Newton polish (N m or N); equal to residual when not polished.
+    /// Residual before the Newton polish (N m or N): where the run stopped, or where Newton
+    /// took over at a damping event (Settings::newton_takeover); equal to residual when not
+    /// polished.
     double residual_before_polish = 0.;
-    /// Newton iterations of the polish; whether its result was kept.
+    /// Newton iterations of the polish (or of the takeover); whether its result was kept.
     int polish_iterations = 0;
     bool polished = false;
     /// Why the run ended short of convergence (no_equilibrium, diverged), else empty.

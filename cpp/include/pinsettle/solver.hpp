@@ -15,6 +15,7 @@
 #include "pinsettle/step-control.hpp"
 #include "pinsettle/stops.hpp"
 
+#include <limits>
 #include <memory>
 
 namespace pinsettle
@@ -209,10 +210,39 @@ namespace pinsettle
     // Below this (times max(1, |q|_inf)) a Newton step moves q by its round-off only.
     static constexpr double kRoundOffStep = 1e-15;
 
+    // Newton iterations from q0 (static force tau0, residual0), the first on report's
+    // stiffness: at most 10, until the residual stops falling, the step is at round-off or q
+    // has moved more than max_move (|dq|_inf from q0) away.
+    struct NewtonRun
+    {
+      Eigen::VectorXd q, tau;
+      double residual;
+      int iterations;
+      bool at_round_off; // ended at round-off (or a zero residual), not by a stall or the count
+    };
+    NewtonRun iterateNewton(
+      const Eigen::VectorXd & q0,
+      const Eigen::VectorXd & tau0,
+      double residual0,
+      const StabilityReport & report,
+      const ForceModel * forces,
+      double max_move = std::numeric_limits<double>::infinity());
+    // How far (|dq|_inf) Newton may move from a rest of this report and residual and stay in
+    // its basin; negative when the report has no positive stiffness to tell.
+    static double newtonReach(const StabilityReport & report, double residual);
+
     // Newton steps from the converged result.q, whose static force is tau; keeps them only if
     // the rest stays of the same kind (report) and close, and then tau is that of the new q.
     void polish(
       StabilityReport & report, const ForceModel * forces, Eigen::VectorXd & tau, Result & result);
+
+    // Settings::newton_takeover, at a damping event (not sooner than newton_spacing_ steps
+    // after the last try): Newton from q, kept and the run ended only if it gets to round-off
+    // within the reach and the rest stays of the same kind.
+    bool isSettledByNewton(Result & result);
+    // The farthest (|dq|_inf, rad or m: a radian the length scale, as the step estimates' far
+    // move) Newton may take a takeover from where the mechanism stands.
+    static constexpr double kTakeoverReach = 0.1;
 
     // Static force, stiffness report and projections of the closed mechanism (loops or not).
     Eigen::VectorXd staticForce(const Eigen::VectorXd & q, const ForceModel * forces);
@@ -240,6 +270,10 @@ namespace pinsettle
     int impacts_ = 0; // steps in a row with a joint past a stop
     // The last step started and ended at rest on the same q: an exact rest, no window needed.
     bool stationary_ = false;
+    // Newton's takeover: the step of its last try, the steps between tries (those of the step
+    // estimates: a try costs O(nv^3), a step O(nv)), and whether it ended the run.
+    std::int64_t newton_tried_at_ = 0, newton_spacing_ = 1;
+    bool settled_by_newton_ = false;
 
     // Workspace, sized once for the model.
     Eigen::VectorXd q_, v_, dq_, q_next_, tau_;

@@ -369,8 +369,6 @@ namespace pinsettle
     impacts_ = 0;
     stationary_ = false;
     newton_tried_at_ = 0;
-    newton_spacing_ =
-      std::max<std::int64_t>(1, static_cast<std::int64_t>(model_.nv) * model_.nv / 4);
     settled_by_newton_ = false;
     if (stops_ != nullptr)
     {
@@ -734,7 +732,7 @@ namespace pinsettle
     double max_move)
   {
     const pinocchio::Model & model = model_;
-    NewtonRun run{q0, tau0, residual0, 0, residual0 == 0.};
+    NewtonRun run{q0, tau0, residual0, 0, false};
     Eigen::VectorXd & q = run.q;
     Eigen::VectorXd q_next(model.nq);
     // Loops and stops restrict the motions Newton may take (the report's basis).
@@ -818,9 +816,10 @@ namespace pinsettle
 
   bool Solver::isSettledByNewton(Result & result)
   {
-    if (
-      !settings_->polish || !settings_->newton_takeover
-      || step_ - newton_tried_at_ < newton_spacing_)
+    // A try costs O(nv^3), a step O(nv): the step estimates' spacing, without their ds floor.
+    const std::int64_t spacing =
+      std::max<std::int64_t>(1, static_cast<std::int64_t>(model_.nv) * model_.nv / 4);
+    if (!settings_->polish || !settings_->newton_takeover || step_ - newton_tried_at_ < spacing)
       return false;
     newton_tried_at_ = step_;
     StabilityReport report = assess(q_, forces_);
@@ -834,13 +833,11 @@ namespace pinsettle
     const double reach = std::min(newtonReach(report, residual), kTakeoverReach);
     if (reach < 0.)
       return false;
-    // Only a Newton run that gets to round-off within the basin ends the run: anything less
-    // (a stall, a step beyond the reach, another kind of rest) leaves the mechanism to the
-    // damping, where it was.
+    // Only a Newton run that gets to round-off within the reach (iterateNewton gives up as soon
+    // as it moves further) ends the run: anything less (a stall, a step beyond the reach,
+    // another kind of rest) leaves the mechanism to the damping, where it was.
     NewtonRun run = iterateNewton(q_, tau, residual, report, forces_, reach);
     if (!run.at_round_off)
-      return false;
-    if (pinocchio::difference(model_, q_, run.q).lpNorm<Eigen::Infinity>() > reach)
       return false;
     StabilityReport after = assess(run.q, forces_);
     if (after.verdict != report.verdict)

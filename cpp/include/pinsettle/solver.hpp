@@ -236,7 +236,7 @@ namespace pinsettle
     void polish(
       StabilityReport & report, const ForceModel * forces, Eigen::VectorXd & tau, Result & result);
 
-    // Settings::newton_takeover, at a damping event (not sooner than newton_spacing_ steps
+    // Settings::newton_takeover, at a damping event (not sooner than max(1, nv^2 / 4) steps
     // after the last try): Newton from q, kept and the run ended only if it gets to round-off
     // within the reach and the rest stays of the same kind.
     bool isSettledByNewton(Result & result);
@@ -270,9 +270,8 @@ namespace pinsettle
     int impacts_ = 0; // steps in a row with a joint past a stop
     // The last step started and ended at rest on the same q: an exact rest, no window needed.
     bool stationary_ = false;
-    // Newton's takeover: the step of its last try, the steps between tries (those of the step
-    // estimates: a try costs O(nv^3), a step O(nv)), and whether it ended the run.
-    std::int64_t newton_tried_at_ = 0, newton_spacing_ = 1;
+    // Newton's takeover: the step of its last try, and whether it ended the run.
+    std::int64_t newton_tried_at_ = 0;
     bool settled_by_newton_ = false;
 
     // Workspace, sized once for the model.

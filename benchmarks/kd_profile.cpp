@@ -15,16 +15,17 @@
 //   and model checks, the mass-matrix check, the first estimate);
 // - step estimates: every later estimate;
 // - stability assessments: every assessStability call (the rest checks and the final verdict);
-// - polish: in the solve with polish = true (the same trajectory, then Newton steps), the time
-//   of its stiffness matrices and of the assessments it adds, and its whole wall time; medians
-//   of repeats made one after the other, after those of the plain solve;
+// - polish: the default solve (polish = true, and with it Newton's takeover at damping events:
+//   a shorter run than the plain one where Newton ends it), its set-up, estimates, assessments,
+//   the time of its stiffness matrices and its whole wall time; medians of repeats made one
+//   after the other, after those of the plain solve;
 // - the rest: the steps themselves, the final residual and energies.
 //
 //   kd_profile SPEC      (benchmarks/spec.hpp; the default settings but max_time, no stops)
 //
 // Prints one JSON object: the solve's status, steps, residual and final q, and per repeat its
 // wall time, set-up, estimates and assessments (s), and a bare step's time (s); with polish 1
-// the same solve with polish = true (its times, Newton iterations, residual and final q).
+// the default solve, polish = true (its times and parts, Newton iterations, residual, final q).
 //
 
 #include "bare-step.hpp"
@@ -217,8 +218,8 @@ int main(int argc, char ** argv)
       bench::addElement(elements, line);
     const ForceModel * forces = elements.empty() ? nullptr : &elements;
 
-    std::vector<double> wall, setup, estimates, assess, polish_wall, polish_assess,
-      polish_stiffness, bare;
+    std::vector<double> wall, setup, estimates, assess, polish_wall, polish_setup, polish_estimates,
+      polish_assess, polish_stiffness, bare;
     Solve plain, polished;
     // With repeats, one solve first, untimed: the first in a process pays for cold caches and
     // first allocations, which a solve in a running program does not.
@@ -251,6 +252,8 @@ int main(int argc, char ** argv)
     {
       polished = profiledSolve(model, spec.q0, forces, true, spec.max_time);
       polish_wall.push_back(polished.result.wall_time);
+      polish_setup.push_back(polished.profile.setup);
+      polish_estimates.push_back(polished.profile.estimate_seconds);
       polish_assess.push_back(polished.profile.assess_seconds);
       polish_stiffness.push_back(polished.profile.stiffness_seconds);
       spent += polished.result.wall_time;
@@ -266,6 +269,8 @@ int main(int argc, char ** argv)
               << ", \"bare_step\": " << list(bare) << ", \"q\": " << bench::jsonVector(r.q);
     if (spec.polish)
       std::cout << ", \"polish_wall\": " << list(polish_wall)
+                << ", \"polish_setup\": " << list(polish_setup)
+                << ", \"polish_estimates\": " << list(polish_estimates)
                 << ", \"polish_assessments\": " << list(polish_assess)
                 << ", \"polish_assessment_count\": " << polished.profile.assessments
                 << ", \"polish_stiffness\": " << list(polish_stiffness)

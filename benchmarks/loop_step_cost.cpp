@@ -132,8 +132,9 @@ namespace
     pinsettle::EnergyMeasure measure)
   {
     pinsettle::Settings settings;
-    settings.max_e = 0.; // never stops early: exactly `steps` steps
-    settings.kt = 0.99;  // stays clear of subnormal velocities (see step_cost.cpp)
+    settings.max_e = 0.;              // never stops early: exactly `steps` steps
+    settings.newton_takeover = false; // nor Newton at a damping event
+    settings.kt = 0.99;               // stays clear of subnormal velocities (see step_cost.cpp)
     settings.max_steps = steps;
     settings.energy = measure;
     pinsettle::Solver solver(model, &loops);

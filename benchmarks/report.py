@@ -85,6 +85,7 @@ from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants a
     BASELINES,
     CHAIN_LENGTHS,
     CURVE_SAMPLES,
+    DEEP,
     DEEP_MAX_E,
     DT_SAFETY,
     DT_SWEEP_SECONDS,
@@ -600,7 +601,13 @@ def run_kd_profile(
     out = run_program(program, spec)
     keys = ["wall", "setup", "estimates", "assessments", "bare_step"]
     if polish:
-        keys += ["polish_wall", "polish_assessments", "polish_stiffness"]
+        keys += [
+            "polish_wall",
+            "polish_setup",
+            "polish_estimates",
+            "polish_assessments",
+            "polish_stiffness",
+        ]
     out["median"] = {key: statistics.median(out[key]) for key in keys}
     return out
 
@@ -779,7 +786,7 @@ def scene_tasks(config: Config, results: Results, programs: Path, work: Path) ->
             setup = d.profile["median"]["setup"] if d.profile else 0.0
             for energy in ("exact", "simplified"):
                 d.runs[f"kd_{energy}"] = run_kd(
-                    s, ref, {"energy": energy, "max_e": DEEP_MAX_E}, reps, setup=setup
+                    s, ref, {"energy": energy, **DEEP}, reps, setup=setup
                 )
             # The default settings, nothing changed: where they stop (goal 2 of issue 20).
             d.runs["kd_default"] = run_kd(
@@ -840,7 +847,7 @@ def scene_tasks(config: Config, results: Results, programs: Path, work: Path) ->
                 run_kd(
                     d.statics,
                     d.ref,
-                    {"energy": e, "kt": kt, "max_e": DEEP_MAX_E},
+                    {"energy": e, "kt": kt, **DEEP},
                     sreps,
                     setup=setup,
                 )
@@ -867,7 +874,7 @@ def scene_tasks(config: Config, results: Results, programs: Path, work: Path) ->
             d = results.scenes[name]
             s, ref = d.statics, d.ref
             setup = d.profile["median"]["setup"] if d.profile else 0.0
-            deep = {"max_e": DEEP_MAX_E}
+            deep = dict(DEEP)
             d.sweeps["backtrack"] = [
                 run_kd(s, ref, {**deep, "energy": e, "backtrack": b}, sreps, setup=setup)
                 for e in ("exact", "simplified")
@@ -1012,7 +1019,7 @@ def scaling_tasks(config: Config, results: Results, programs: Path, work: Path) 
                 row["deep"] = run_kd(
                     statics,
                     ref,
-                    {"max_e": DEEP_MAX_E, "max_time": config.scaling_max_time},
+                    {**DEEP, "max_time": config.scaling_max_time},
                     1,
                     label="deep",
                     setup=profile["median"]["setup"],

@@ -36,6 +36,9 @@ SCALING_MAX_TIME = 150.0
 #: The bound of the stopping rule in the runs whose curves are plotted: far below every level,
 #: so that the curve shows how the error falls, down to round-off.
 DEEP_MAX_E = 1e-26
+#: The settings of those runs: the damping's own run down to round-off (Newton's takeover at a
+#: damping event, on by default, would end it where the default run ends).
+DEEP = {"max_e": DEEP_MAX_E, "newton_takeover": False}
 #: The baselines run until their residual is below this fraction of the force scale.
 BASELINE_TARGET = 1e-13
 #: Largest number of samples kept per curve (the solver's trace decimates beyond it).

@@ -79,8 +79,9 @@ namespace
     const pinsettle::JointStops * stops = nullptr)
   {
     pinsettle::Settings settings;
-    settings.max_e = 0.; // never stops early: exactly `steps` steps
-    settings.kt = 0.99;  // stays clear of subnormal velocities (see the top of the file)
+    settings.max_e = 0.;              // never stops early: exactly `steps` steps
+    settings.newton_takeover = false; // nor Newton at a damping event
+    settings.kt = 0.99; // stays clear of subnormal velocities (see the top of the file)
     settings.max_steps = steps;
     settings.energy = measure;
     pinsettle::Solver solver(model, nullptr, stops);

@@ -408,12 +408,21 @@ def test_the_overhead_split_adds_up(quick):
         m = p["median"]
         assert p["status"] == "converged", name
         # One set-up (the first estimate), at least the final assessment; the parts are inside
-        # the solve, and the polished solve takes the same steps and then its Newton steps.
+        # the solve. The default solve (polish and Newton's takeover) is the plain one or one
+        # that Newton ended sooner, at a damping event; its parts are inside it too.
         assert m["setup"] > 0 and p["assessment_count"] >= 1, name
         for k in range(len(p["wall"])):
             parts = p["setup"][k] + p["estimates"][k] + p["assessments"][k]
             assert parts <= p["wall"][k], name
-        assert p["polish_steps"] == p["steps"] and p["polish_iterations"] >= 0, name
+        for k in range(len(p["polish_wall"])):
+            parts = (
+                p["polish_setup"][k]
+                + p["polish_estimates"][k]
+                + p["polish_assessments"][k]
+                + p["polish_stiffness"][k]
+            )
+            assert 0 < parts <= p["polish_wall"][k], name
+        assert 0 < p["polish_steps"] <= p["steps"] and p["polish_iterations"] >= 0, name
         # Every estimate went through the wrapper: the first (the set-up) and the others.
         assert p["dt_estimates"] == p["estimate_count"] + 1, name
 

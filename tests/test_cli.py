@@ -83,6 +83,7 @@ def test_demo_flags_reach_the_solver():
         (["--no-polish"], {"polish": False}),
         (["--no-backtrack"], {"backtrack": False}),
         (["--scale-joint-inertia"], {"scale_joint_inertia": True}),
+        (["--no-newton-takeover"], {"newton_takeover": False}),
     ],
 )
 def test_demo_step_flags_reach_the_solver(flags, settings):

@@ -291,8 +291,9 @@ def test_cli_gives_a_progress_callable_only_when_it_is_wanted(argv, wanted, monk
 @pytest.fixture(scope="module")
 def long_scene(tmp_path_factory):
     """A 100-link chain released horizontal (robots/make_chain.py): with the step fixed at
-    0.2 ms, no stopping bound (max_e = 0) and 50,000 steps it solves for well over DELAY on any
-    machine (about 2 s on the project's) and ends max_steps."""
+    0.2 ms, no stopping bound (max_e = 0), no Newton taking over at a damping event and 50,000
+    steps it solves for well over DELAY on any machine (about 2 s on the project's) and ends
+    max_steps."""
     folder = tmp_path_factory.mktemp("progress")
     urdf = subprocess.run(
         [sys.executable, str(ROBOTS / "make_chain.py"), "100"],
@@ -304,7 +305,7 @@ def long_scene(tmp_path_factory):
     scene = folder / "chain100.toml"
     scene.write_text(
         '[model]\nurdf = "chain100.urdf"\n[start]\njoint1 = 1.5707963267948966\n'
-        "[solver]\ndt = 2e-4\nmax_e = 0\nmax_steps = 50000\n",
+        "[solver]\ndt = 2e-4\nmax_e = 0\nmax_steps = 50000\nnewton_takeover = false\n",
         encoding="utf-8",
     )
     return scene

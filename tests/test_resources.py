@@ -129,18 +129,30 @@ def _solves(scene: pinsettle.Scene, check: Callable[[pinsettle.Result], None], *
 
 
 @pytest.mark.parametrize(
-    "name, loops",
-    [("pendulum", 0), ("slider_crank", 1)],
-    ids=["tree", "loop"],
+    "name, loops, takeover",
+    [("pendulum", 0, False), ("slider_crank", 1, False), ("slider_crank", 1, True)],
+    ids=["tree", "loop", "loop_newton_takeover"],
 )
-def test_memory_flat_over_10000_solves_with_tracing(libc, name, loops):
+def test_memory_flat_over_10000_solves_with_tracing(libc, name, loops, takeover):
     scene = pinsettle.load_scene(ROBOTS / f"{name}.toml")
     # The callback polled every 20 steps (check_every also paces the step's re-estimates: the
-    # same for every solve here); a stopping window of 100 steps, so that a solve is long.
-    settings = {"trace_every": 1, "trace_configurations": True, "check_every": 20, "ds": 100}
+    # same for every solve here); a stopping window of 100 steps, so that a solve is long,
+    # unless Newton takes over at a damping event (its own memory checked in the third case).
+    settings = {
+        "trace_every": 1,
+        "trace_configurations": True,
+        "check_every": 20,
+        "ds": 100,
+        "newton_takeover": takeover,
+    }
     first = pinsettle.solve(scene, **settings)
-    assert first.converged and first.loops == loops and first.steps >= 100
-    assert first.trace is not None and len(first.trace.step) > 100
+    assert first.converged and first.loops == loops
+    if takeover:  # ended by Newton, sooner than the damping alone
+        damped = pinsettle.solve(scene, **{**settings, "newton_takeover": False})
+        assert first.steps < damped.steps and first.polish_iterations > 0
+    else:
+        assert first.steps >= 100 and len(first.trace.step) > 100
+    assert first.trace is not None
 
     def same_as_first(result: pinsettle.Result) -> None:
         # Each solve does the whole work: its trace of every step, with configurations.

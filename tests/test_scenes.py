@@ -1060,7 +1060,9 @@ def test_damping_changes_the_motion_not_the_equilibrium(kind):
     assert undamped.converged and damped.converged
     assert damped.q == pytest.approx(undamped.q, abs=1e-6)
     assert build(5.0).residual(damped.q) < MAX_RESIDUAL
-    assert damped.steps != undamped.steps
+    # The damping's own runs differ (with the defaults Newton may end both at the first event).
+    alone = {"newton_takeover": False}
+    assert pinsettle.solve(build(5.0), **alone).steps != pinsettle.solve(build(0.0), **alone).steps
     # The damper acts during the motion: same start, different states after a few steps.
     early_a = pinsettle.solve(build(0.0), max_steps=3)  # before the first peak stops both
     early_b = pinsettle.solve(build(5.0), max_steps=3)

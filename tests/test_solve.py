@@ -81,6 +81,7 @@ PENDULUM_CASES = {
     "simplified_energy": ([1.0], {"energy": "simplified"}),
     "backtrack": ([1.0], {"backtrack": True}),
     "backtrack_kt_0.2_from_-2.5": ([-2.5], {"backtrack": True, "kt": 0.2}),
+    "damping_alone": ([1.0], {"newton_takeover": False}),
 }
 
 
@@ -91,7 +92,8 @@ def test_pendulum_settles_hanging_down(pendulum, q0, overrides):
     assert abs(result.q[0]) < 1e-8  # analytic answer: straight down (not 2 pi k, k != 0)
     assert np.max(np.abs(gravity(pendulum, result.q))) < 1e-8
     assert result.peaks >= 1  # it swung and was damped: q0 is not an equilibrium
-    assert result.steps > result.settings.ds
+    if not result.settings.newton_takeover:  # (the default may end it at a damping event)
+        assert result.steps > result.settings.ds  # the stopping rule's window was filled
     assert_consistent_result(pendulum, result)
 
 
@@ -116,6 +118,7 @@ def test_kt_scales_the_velocity_at_each_peak(pendulum):
         trace_capacity=10**6,
         max_e=1e-14,
         backtrack=False,
+        newton_takeover=False,  # every event a damping, to the stopping rule
     )
     assert result.converged
     trace = result.trace
@@ -135,7 +138,13 @@ def test_kt_scales_the_velocity_at_each_peak(pendulum):
 
 def test_kt_0_stops_the_motion_at_each_peak(pendulum):
     result = pinsettle.solve(
-        pendulum, [1.0], kt=0.0, trace_every=1, trace_capacity=10**6, max_e=1e-20
+        pendulum,
+        [1.0],
+        kt=0.0,
+        trace_every=1,
+        trace_capacity=10**6,
+        max_e=1e-20,
+        newton_takeover=False,  # every event a damping, to the stopping rule
     )
     assert result.trace.stride == 1  # every step kept
     assert result.converged
@@ -310,8 +319,9 @@ def test_max_steps(pendulum):
 
 
 def test_time_limit(ur5):
-    # max_e = 0 can never hold with ds >= 2 (the newest sample must be below a positive one).
-    result = pinsettle.solve(ur5, max_e=0.0, max_time=1e-9, check_every=64)
+    # max_e = 0 can never hold with ds >= 2 (the newest sample must be below a positive one),
+    # and without the takeover nothing else ends the run.
+    result = pinsettle.solve(ur5, max_e=0.0, max_time=1e-9, check_every=64, newton_takeover=False)
     assert result.status == "time_limit"
     assert result.steps > 0 and result.steps % 64 == 0  # the clock is read every check_every
 
@@ -382,7 +392,13 @@ def test_trace_every_10(pendulum):
 
 def test_trace_capacity_bounds_the_samples(pendulum):
     result = pinsettle.solve(
-        pendulum, [1.0], trace_every=1, trace_capacity=16, max_e=1e-14, dt=1e-3
+        pendulum,
+        [1.0],
+        trace_every=1,
+        trace_capacity=16,
+        max_e=1e-14,
+        dt=1e-3,
+        newton_takeover=False,  # the damping's long run, to its stopping rule
     )
     assert result.steps > 1000
     trace = result.trace
@@ -416,9 +432,16 @@ def test_callback_true_aborts(ur5):
 
 def test_callback_is_called_every_check_every_steps(pendulum):
     calls = []
-    # A stopping window of 100 steps: the pendulum does not settle within the 100-step budget.
+    # A stopping window of 100 steps (and no takeover): the pendulum does not settle within
+    # the 100-step budget.
     result = pinsettle.solve(
-        pendulum, [1.0], max_steps=100, ds=100, check_every=10, callback=lambda: calls.append(None)
+        pendulum,
+        [1.0],
+        max_steps=100,
+        ds=100,
+        check_every=10,
+        callback=lambda: calls.append(None),
+        newton_takeover=False,
     )
     assert result.status == "max_steps"
     assert len(calls) == 9  # at steps 10, 20, ..., 90 (returning None means go on)
@@ -439,9 +462,13 @@ def test_callback_exception_propagates(pendulum):
 
 CTRL_C_SCRIPT = textwrap.dedent(
     """
+    import signal
     import sys
     import pinsettle
 
+    # Python's own Ctrl-C handling, whoever started this process (a shell's background job
+    # starts it with SIGINT ignored, and Python then leaves it so).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     model = pinsettle.load_robot("ur5")
     use_callback = sys.argv[1] == "callback"
     announced = []
@@ -455,9 +482,13 @@ CTRL_C_SCRIPT = textwrap.dedent(
 
     if not use_callback:
         print("started", flush=True)
-    # max_e = 0 never holds: the run only ends on the signal.
+    # max_e = 0 never holds, nor Newton takes over: the run only ends on the signal.
     result = pinsettle.solve(
-        model, max_e=0.0, max_steps=10**12, callback=announce if use_callback else None
+        model,
+        max_e=0.0,
+        max_steps=10**12,
+        newton_takeover=False,
+        callback=announce if use_callback else None,
     )
     print("status", result.status, flush=True)
     """
@@ -514,7 +545,7 @@ def test_settings_defaults():
         "energy": "exact",
         "backtrack": True,
         "polish": True,
-        "newton_takeover": False,
+        "newton_takeover": True,
         "scale_stiff_modes": True,
         "scale_joint_inertia": False,
         "dt_growth": "auto",
@@ -559,8 +590,9 @@ def test_a_step_grown_between_peaks_settles_a_chain_in_fewer_steps_at_the_same_r
     chain = pinocchio.buildModelFromXML(chain_urdf(20))
     q0 = np.zeros(chain.nq)
     q0[0] = np.pi / 2
-    grown = pinsettle.solve(chain, q0, limits=False)
-    fixed = pinsettle.solve(chain, q0, limits=False, dt_growth=1)
+    # The damping's own runs: Newton taking over at a damping event would end both sooner.
+    grown = pinsettle.solve(chain, q0, limits=False, newton_takeover=False)
+    fixed = pinsettle.solve(chain, q0, limits=False, dt_growth=1, newton_takeover=False)
     assert grown.converged and fixed.converged
     assert grown.steps < 0.7 * fixed.steps, (grown.steps, fixed.steps)
     assert grown.dt_reductions == 0 and grown.stability == "stable"
@@ -622,7 +654,7 @@ def test_settings_repr_replace_to_dict_eq():
 
 
 def test_settings_passed_to_solve_is_not_modified(pendulum):
-    s = pinsettle.Settings(kt=0.3, max_steps=50)
+    s = pinsettle.Settings(kt=0.3, max_steps=50, newton_takeover=False)
     before = s.to_dict()
     result = pinsettle.solve(pendulum, [1.0], s, kt=0.1, max_steps=20)
     assert s.to_dict() == before
@@ -632,7 +664,7 @@ def test_settings_passed_to_solve_is_not_modified(pendulum):
 
 
 def test_dict_settings_and_overrides(pendulum):
-    result = pinsettle.solve(pendulum, [1.0], {"kt": 0.0, "max_steps": 7})
+    result = pinsettle.solve(pendulum, [1.0], {"kt": 0.0, "max_steps": 7, "newton_takeover": False})
     assert result.settings.kt == 0.0 and result.steps == 7
     result = pinsettle.solve(pendulum, [1.0], {"max_steps": 7}, max_steps=3)
     assert result.steps == 3

@@ -1,4 +1,4 @@
-"""Settings.newton_takeover (off by default; with the polish): at a damping event the polish's
+"""Settings.newton_takeover (on by default, with the polish): at a damping event the polish's
 Newton is tried from where the mechanism stands, and a rest it reaches at round-off, within the
 polish's reach and of the same kind, ends the run. Checked against the independent physics of
 tests/scene_reference.py: the rest is an equilibrium (against the stops: the KKT conditions),
@@ -95,8 +95,9 @@ def test_a_rest_newton_takes_over_is_an_equilibrium_of_the_same_kind(name, limit
 def test_newton_takes_over_long_before_the_damping_alone_stops():
     # Measured: 66 steps with the damping alone, 22 with the takeover.
     scene = pinsettle.load_scene("double_pendulum_springs")
-    damped = pinsettle.solve(scene)
-    taken = pinsettle.solve(scene, newton_takeover=True)
+    damped = pinsettle.solve(scene, newton_takeover=False)
+    taken = pinsettle.solve(scene)  # the default
+    assert taken.settings.newton_takeover
     assert taken.steps < 0.5 * damped.steps, (taken.steps, damped.steps)
     assert taken.polished and taken.polish_iterations >= 1
     assert taken.residual_before_polish > taken.residual
@@ -105,7 +106,7 @@ def test_newton_takes_over_long_before_the_damping_alone_stops():
 def test_without_the_polish_the_run_is_the_damping_s_own():
     scene = pinsettle.load_scene("double_pendulum_springs")
     plain = pinsettle.solve(scene, polish=False, newton_takeover=True)
-    damped = pinsettle.solve(scene, polish=False)
+    damped = pinsettle.solve(scene, polish=False, newton_takeover=False)
     assert plain.steps == damped.steps and np.array_equal(plain.q, damped.q)
     assert not plain.polished
 
@@ -122,3 +123,20 @@ def test_a_start_at_an_unstable_rest_is_pushed_off_not_taken():
     taken = pinsettle.solve(pinsettle.load_scene("pendulum_upright"), newton_takeover=True)
     assert taken.status == "converged" and taken.stability == "stable"
     assert taken.pushes >= 1
+
+
+def test_a_rest_held_by_a_stop_and_the_loops_is_taken_where_they_hold_it():
+    # The four-bar's one degree of freedom held by the rocker's stop: Newton's step clamps it
+    # onto the stop, where nothing is left to move; that is a rest at round-off (its closed
+    # form and the stop's reaction are checked in tests/test_limits.py on the default run).
+    scene = pinsettle.load_scene("fourbar_stop")
+    damped = pinsettle.solve(scene, newton_takeover=False)
+    taken = pinsettle.solve(scene)
+    assert taken.converged and taken.steps < damped.steps, (taken.steps, damped.steps)
+    assert taken.polish_iterations >= 1 and taken.residual_before_polish > 1e-3
+    assert taken.at_limit == damped.at_limit == {"rocker_joint": "upper"}
+    assert np.abs(taken.q - damped.q).max() < 1e-12
+    assert taken.limit_reactions["rocker_joint"] == pytest.approx(
+        damped.limit_reactions["rocker_joint"], rel=1e-9
+    )
+    assert taken.stability == damped.stability == "stable"

@@ -45,6 +45,13 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
         help="Newton polish after convergence (default: on)",
     )
     group.add_argument(
+        "--newton-takeover",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="with the polish, Newton tried at damping events may end the run at its rest "
+        "(default: on)",
+    )
+    group.add_argument(
         "--scale-stiff-modes",
         action=argparse.BooleanOptionalAction,
         default=None,

@@ -60,7 +60,7 @@ class Settings(_core.Settings):
     joint gets a fictitious inertia that brings its own rate, stiffness or pull over inertia,
     down towards the slowest joint's, re-chosen at each estimate; equilibria and stability
     unchanged, ``Result.scaled_joints`` counts the joints given one);
-    ``polish`` (Newton steps after convergence); ``newton_takeover`` (off by default; with
+    ``polish`` (Newton steps after convergence); ``newton_takeover`` (on by default; with
     ``polish``: at a damping event, at most once every max(1, nv^2 / 4) steps, the polish's
     Newton from where the mechanism stands; a rest it reaches at round-off within the polish's
     reach and 0.1 (rad or m), stable or neutral as where it started, ends the run); ``kt``

@@ -318,7 +318,7 @@ def scaling_figure(results: D.Results, path: Path) -> None:
     rows = measured_chains(results)
     n = np.array([row["n"] for row in rows], dtype=float)
     fig, (a, b, c) = plt.subplots(1, 3, figsize=(14, 4.5))
-    per_step = [solve_time(row) / max(row["profile"]["steps"], 1) for row in rows]
+    per_step = [solve_time(row) / max(solve_steps(row), 1) for row in rows]
     bare = [row["profile"]["median"]["bare_step"] for row in rows]
     a.plot(n, per_step, marker="^", label="KD, whole solve / steps")
     a.plot(n, bare, marker="o", label="bare aba + integrate")
@@ -326,10 +326,10 @@ def scaling_figure(results: D.Results, path: Path) -> None:
     a.set_ylabel("time per step (s)")
     a.legend(fontsize=8)
     done = [row["profile"]["status"] == "converged" for row in rows]
-    b.plot(n, [row["profile"]["steps"] for row in rows], marker="o", label="steps (defaults)")
+    b.plot(n, [solve_steps(row) for row in rows], marker="o", label="steps (defaults)")
     for k, ok in enumerate(done):
         if not ok:
-            status, steps = rows[k]["profile"]["status"], rows[k]["profile"]["steps"]
+            status, steps = rows[k]["profile"]["status"], solve_steps(rows[k])
             b.annotate(status, (n[k], steps), fontsize=7)
     b.set_ylabel("steps")
     b.legend(fontsize=8)
@@ -1255,6 +1255,13 @@ def solve_time(row: dict) -> float:
     return float(row["profile"]["median"]["polish_wall"])
 
 
+def solve_steps(row: dict) -> int:
+    """The steps of a scaling chain's default solve (solve_time's): with Newton's takeover they
+    may be fewer than the profile's plain solve took."""
+    p = row["profile"]
+    return int(p.get("polish_steps", p["steps"]))
+
+
 def measured_chains(results: D.Results) -> list[dict]:
     """The chains of the scaling section that pinsettle took (not refused)."""
     return [row for row in results.scaling if "refused" not in row]
@@ -1310,13 +1317,13 @@ def scaling_section(results: D.Results, figures: str) -> str:
             continue
         p = row["profile"]
         m = p["median"]
-        wall, steps = solve_time(row), max(p["steps"], 1)
+        wall, steps = solve_time(row), max(solve_steps(row), 1)
         deep = row.get("deep")
         rows.append(
             [
                 str(row["n"]),
                 f"{p['status']}",
-                f"{p['steps']:,}",
+                f"{solve_steps(row):,}",
                 fmt_time(wall),
                 fmt_time(wall / steps),
                 fmt_time(m["bare_step"]),
@@ -1334,7 +1341,7 @@ def scaling_section(results: D.Results, figures: str) -> str:
     if len(done) >= 2:
         n = [r["n"] for r in done]
         wall = [solve_time(r) for r in done]
-        steps = [r["profile"]["steps"] for r in done]
+        steps = [solve_steps(r) for r in done]
         per = [w / s for w, s in zip(wall, steps, strict=True)]
         bare = [r["profile"]["median"]["bare_step"] for r in done]
         fits = (
@@ -1359,12 +1366,13 @@ def scaling_section(results: D.Results, figures: str) -> str:
         f"settings within `max_time = {results.config.scaling_max_time:g}` s, profiled by "
         "`benchmarks/kd_profile.cpp` (one run past "
         f"{results.config.deep_chain_max} links, else the median of up to "
-        f"{results.config.sweep_repeats}): status, steps, wall time (the polish included), time "
-        "per step, a bare `aba` + `integrate` step and the ratio, the set-up, the step estimates "
-        "and stability assessments (count: share of the same solve's time without the polish), "
-        "the final residual (relative, independent physics); up to "
+        f"{results.config.sweep_repeats}): status, steps and wall time of the default solve (the "
+        "polish and Newton's takeover included), time per step, a bare `aba` + `integrate` step "
+        "and the ratio, the set-up, the step estimates and stability assessments (count: share "
+        "of the solve's time with `polish = False`, the damping's own run), the final residual "
+        "(relative, independent physics); up to "
         f"{results.config.deep_chain_max} links also the steps and time to a "
-        f"residual of {LEVEL:g} (`max_e = {D.DEEP_MAX_E:g}`).\n\n"
+        f"residual of {LEVEL:g} (`max_e = {D.DEEP_MAX_E:g}`, `newton_takeover = False`).\n\n"
         + table(
             [
                 "links",
@@ -1909,6 +1917,28 @@ def overhead_rows(results: D.Results) -> list[dict]:
     return out
 
 
+def goal4_verdict(rows: list[dict]) -> str:
+    """Goal 4's shares (the damping's own run, polish off, and the default solve), met or not,
+    and why not where the default solve's Newton is what passes the bound."""
+    text = ", ".join(
+        f"{r['name']} {r['fraction']:.1%} ({r['fraction_polish']:.1%} in the default solve)"
+        for r in rows
+    )
+    worst = max(max(r["fraction"], r["fraction_polish"]) for r in rows)
+    if worst <= 0.25:
+        return text + ": met."
+    newton = [r for r in rows if r["fraction"] <= 0.25 < r["fraction_polish"]]
+    why = "".join(
+        f" Why, on {r['name']} ({r['fraction_polish']:.2%}): the default solve's Newton (its "
+        "tries at damping events and the polish) counts as overhead, and it replaces steps: "
+        f"{r['default_steps']:,} steps and "
+        f"{fmt_time(r['default_wall'])} against {r['steps']:,} steps and "
+        f"{fmt_time(r['wall'])} with `polish = False`."
+        for r in newton
+    )
+    return text + ": **not met**." + why
+
+
 def overhead_section(results: D.Results) -> str:
     rows = []
     for r in overhead_rows(results):
@@ -1934,15 +1964,9 @@ def overhead_section(results: D.Results) -> str:
     goal = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
     verdict = ""
     if goal:
-        worst = max(max(r["fraction"], r["fraction_polish"]) for r in goal)
         verdict = (
             "\n\n**Goal 4 of issue 20** (set-up, step estimates, stability assessments and polish "
-            "at most 25% of a solve on the UR5, chain20 and chain100): "
-            + ", ".join(
-                f"{r['name']} {r['fraction']:.0%} ({r['fraction_polish']:.0%} in the default solve)"
-                for r in goal
-            )
-            + (": met." if worst <= 0.25 else ": **not met**.")
+            "at most 25% of a solve on the UR5, chain20 and chain100): " + goal4_verdict(goal)
         )
     s = pinsettle.Settings()
     return (
@@ -2407,21 +2431,15 @@ def goals_section(results: D.Results) -> str:
     rows = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
     rows = rows or overhead_rows(results)  # a quick run: the scenes it has
     if rows:
-        worst = max(max(r["fraction"], r["fraction_polish"]) for r in rows)
         lines.append(
             "- **Goal 4** (set-up, step estimates, stability assessments and polish at most 25% "
-            "of a solve on the UR5, chain20, chain100): "
-            + ", ".join(
-                f"{r['name']} {r['fraction']:.0%} ({r['fraction_polish']:.0%} in the default solve)"
-                for r in rows
-            )
-            + (": met." if worst <= 0.25 else ": **not met**.")
+            "of a solve on the UR5, chain20, chain100): " + goal4_verdict(rows)
         )
     done = [r for r in measured_chains(results) if r["profile"]["status"] == "converged"]
     if len(done) >= 2:
         n = [r["n"] for r in done]
         wall = [solve_time(r) for r in done]
-        per = [w / max(r["profile"]["steps"], 1) for w, r in zip(wall, done, strict=True)]
+        per = [w / max(solve_steps(r), 1) for w, r in zip(wall, done, strict=True)]
         unfinished = unfinished_chains(results)
         lines.append(
             f"- **Goal 5** (time no faster than n^2 from 5 to 1,000 links, a step O(n)): time "
@@ -2432,7 +2450,7 @@ def goals_section(results: D.Results) -> str:
                 if unfinished
                 else (": met." if slope(n, wall) <= 2 else ": **not met**.")
             )
-            + goal5_reasons(results, n, [r["profile"]["steps"] for r in done], per, wall)
+            + goal5_reasons(results, n, [solve_steps(r) for r in done], per, wall)
         )
     if results.step_cost:
         ratios = {n: stops_ratio(results, n) for n in ("ur5", "panda") if n in results.step_cost}

@@ -839,7 +839,8 @@ namespace pinsettle
     // found a 'rest' 2.8 rad away and 3.7 J above the start of a bistable pendulum's release.
     const double reach = std::min(newtonReach(report, residual), kTakeoverReach);
     if (isHeldStill(report, residual, tau))
-      return settleByNewton(result, residual, NewtonRun{q_, tau, residual, 0, true}, std::move(report));
+      return settleByNewton(
+        result, residual, NewtonRun{q_, tau, residual, 0, true}, std::move(report));
     if (reach < 0.)
       return false;
     // Only a Newton run that gets to round-off within the reach (iterateNewton gives up as soon

@@ -1867,9 +1867,7 @@ GOAL4_SCENES = ("ur5", "chain20", "chain100")
 def overhead_rows(results: D.Results) -> list[dict]:
     """The overhead split per scene, as fractions of the solve's wall time (medians): of the
     plain solve (polish off), and of the default solve (its set-up, estimates, assessments and
-    Newton's stiffness matrices; Newton's static-force evaluations, O(n) each, are left out).
-    Data without the default solve's parts: the plain solve plus the polish's stiffness and the
-    assessments it adds."""
+    Newton's stiffness matrices; Newton's static-force evaluations, O(n) each, are left out)."""
     out = []
     for name, p in results.overhead.items():
         m = p["median"]
@@ -1880,21 +1878,15 @@ def overhead_rows(results: D.Results) -> list[dict]:
             "assessments": m["assessments"],
         }
         overhead = sum(parts.values())
-        polish = m.get("polish_stiffness", 0.0) + max(
-            m.get("polish_assessments", 0.0) - m["assessments"], 0.0
+        # The default solve's own parts: with Newton's takeover it is not the plain run plus a
+        # polish, but a run that Newton may end at a damping event.
+        default_parts = (
+            m["polish_setup"]
+            + m["polish_estimates"]
+            + m["polish_assessments"]
+            + m["polish_stiffness"]
         )
-        if "polish_setup" in m:
-            # The default solve's own parts: with Newton's takeover it is not the plain run
-            # plus a polish, but a run that Newton may end at a damping event.
-            default_parts = (
-                m["polish_setup"]
-                + m["polish_estimates"]
-                + m["polish_assessments"]
-                + m["polish_stiffness"]
-            )
-            fraction_polish = default_parts / m["polish_wall"]
-        else:
-            fraction_polish = (overhead + polish) / (wall + polish)
+        fraction_polish = default_parts / m["polish_wall"]
         out.append(
             {
                 "name": name,
@@ -1905,12 +1897,11 @@ def overhead_rows(results: D.Results) -> list[dict]:
                 "parts": parts,
                 "estimate_count": p["estimate_count"],
                 "assessment_count": p["assessment_count"],
-                "polish": polish,
                 "polish_iterations": p.get("polish_iterations", 0),
                 "fraction": overhead / wall,
                 "fraction_polish": fraction_polish,
-                "default_wall": m.get("polish_wall", math.nan),
-                "default_steps": p.get("polish_steps", 0),
+                "default_wall": m["polish_wall"],
+                "default_steps": p["polish_steps"],
                 "bare": m["bare_step"] * p["steps"],
             }
         )

@@ -146,13 +146,12 @@ def test_memory_flat_over_10000_solves_with_tracing(libc, name, loops, takeover)
         "newton_takeover": takeover,
     }
     first = pinsettle.solve(scene, **settings)
-    assert first.converged and first.loops == loops
+    assert first.converged and first.loops == loops and first.trace is not None
     if takeover:  # ended by Newton, sooner than the damping alone
         damped = pinsettle.solve(scene, **{**settings, "newton_takeover": False})
         assert first.steps < damped.steps and first.polish_iterations > 0
     else:
         assert first.steps >= 100 and len(first.trace.step) > 100
-    assert first.trace is not None
 
     def same_as_first(result: pinsettle.Result) -> None:
         # Each solve does the whole work: its trace of every step, with configurations.

@@ -750,9 +750,11 @@ namespace pinsettle
       const StabilityReport & here = run.iterations == 0 ? report : at;
       if (restricted && here.basis.cols() == 0)
       {
-        // Clamped onto the stops that hold every motion: nothing is left to move, and a zero
-        // step would only be counted a stall.
-        run.at_round_off = isHeldStill(here, run.residual, run.tau);
+        // The loops and stops hold every motion (the rocker of a four-bar pressed on its stop):
+        // nothing is left to move, a zero step would only be counted a stall, and their forces
+        // balance the rest to round-off.
+        run.at_round_off = here.verdict == Stability::Stable
+                           && run.residual <= kHeldResidual * run.tau.lpNorm<Eigen::Infinity>();
         break;
       }
       // Least squares with a rank cut: neutral directions (K singular there) are left alone.
@@ -837,10 +839,10 @@ namespace pinsettle
     // Within the polish's reach and near where the mechanism stands: far from its rest the
     // reach (residual over the softest stiffness) is long, and Newton, clamped onto a stop,
     // found a 'rest' 2.8 rad away and 3.7 J above the start of a bistable pendulum's release.
-    const double reach = std::min(newtonReach(report, residual), kTakeoverReach);
-    if (isHeldStill(report, residual, tau))
-      return settleByNewton(
-        result, residual, NewtonRun{q_, tau, residual, 0, true}, std::move(report));
+    // With every motion held there is no stiffness to tell a reach: iterateNewton decides.
+    const bool held = (loops_ != nullptr || stops_ != nullptr) && report.basis.cols() == 0;
+    const double reach =
+      held ? kTakeoverReach : std::min(newtonReach(report, residual), kTakeoverReach);
     if (reach < 0.)
       return false;
     // Only a Newton run that gets to round-off within the reach (iterateNewton gives up as soon
@@ -849,32 +851,16 @@ namespace pinsettle
     NewtonRun run = iterateNewton(q_, tau, residual, report, forces_, reach);
     if (!run.at_round_off)
       return false;
-    StabilityReport after = assess(run.q, forces_);
+    // Not moved (held, or a zero residual): the rest is the one just assessed.
+    StabilityReport after = run.iterations == 0 ? report : assess(run.q, forces_);
     if (after.verdict != report.verdict)
       return false;
-    return settleByNewton(result, residual, std::move(run), std::move(after));
-  }
-
-  bool Solver::isHeldStill(
-    const StabilityReport & report, double residual, const Eigen::VectorXd & tau) const
-  {
-    // Loops and stops that hold every motion (the rocker of a four-bar pressed on its stop):
-    // nothing is left for Newton to move, and the stops' and loops' forces balance the rest to
-    // round-off; without this the tries at such a rest failed and only cost their assessment.
-    const bool restricted = loops_ != nullptr || stops_ != nullptr;
-    return restricted && report.basis.cols() == 0 && report.verdict == Stability::Stable
-           && residual <= kHeldResidual * tau.lpNorm<Eigen::Infinity>();
-  }
-
-  bool Solver::settleByNewton(
-    Result & result, double residual_before, NewtonRun run, StabilityReport at_rest)
-  {
-    result.residual_before_polish = residual_before;
+    result.residual_before_polish = residual;
     result.polish_iterations = run.iterations;
     result.polished = run.iterations > 0;
     q_ = std::move(run.q);
     v_.setZero();
-    rest_.record(std::move(at_rest), q_, step_);
+    rest_.record(std::move(after), q_, step_);
     settled_by_newton_ = true;
     return true;
   }

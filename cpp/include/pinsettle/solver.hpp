@@ -243,14 +243,6 @@ namespace pinsettle
     // The farthest (|dq|_inf, rad or m: a radian the length scale, as the step estimates' far
     // move) Newton may take a takeover from where the mechanism stands.
     static constexpr double kTakeoverReach = 0.1;
-    // Whether loops and stops hold every motion at q_ (report's basis empty, stable) with the
-    // residual (tau: the static force there) at round-off: a rest with nothing left to move.
-    bool isHeldStill(
-      const StabilityReport & report, double residual, const Eigen::VectorXd & tau) const;
-    // Ends the run at Newton's rest (run.q, assessed as at_rest); residual_before: where the
-    // mechanism stood.
-    bool settleByNewton(
-      Result & result, double residual_before, NewtonRun run, StabilityReport at_rest);
     // A held rest's residual relative to the static force (|tau|_inf): round-off.
     static constexpr double kHeldResidual = 1e-12;
 

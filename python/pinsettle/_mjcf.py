@@ -340,33 +340,37 @@ class _Reader:
         return c
 
     def _defaults(self) -> tuple[dict[str, dict[str, dict[str, str]]], str]:
-        """Default classes: class -> element tag -> attributes, inherited from the enclosing
-        classes (MuJoCo's nested <default> elements)."""
-        classes: dict[str, dict[str, dict[str, str]]] = {}
+        """Default classes: class -> element tag -> attributes, as MuJoCo builds them. Every
+        top-level <default> (those of included files too) adds to the one class 'main', in
+        file order; a nested class starts as a copy of its parent as the parent stands when
+        the nested class is read (a later top-level <default> does not reach it)."""
+        main = "main"
+        classes: dict[str, dict[str, dict[str, str]]] = {main: {}}
 
-        def visit(el: ET.Element, inherited: Mapping[str, dict[str, str]], name: str) -> None:
-            if name in classes:
-                raise MjcfError(f"{self.path}: default class '{name}' is defined twice")
-            own = {tag: dict(attrs) for tag, attrs in inherited.items()}
+        def visit(el: ET.Element, name: str) -> None:
+            own = classes[name]
             for child in el:
                 if child.tag != "default":
                     own.setdefault(child.tag, {}).update(child.attrib)
-            classes[name] = own
             for child in el:
                 if child.tag == "default":
                     nested = child.get("class")
                     if not nested:
                         raise MjcfError(f"{self.path}: a nested <default> needs a 'class'")
-                    visit(child, own, nested)
+                    if nested in classes:
+                        raise MjcfError(f"{self.path}: default class '{nested}' is defined twice")
+                    classes[nested] = {tag: dict(attrs) for tag, attrs in own.items()}
+                    visit(child, nested)
 
-        tops = self.root.findall("default")
-        if len(tops) > 1:
-            raise MjcfError(f"{self.path}: more than one top-level <default>")
-        main = tops[0].get("class", "main") if tops else "main"
-        if tops:
-            visit(tops[0], {}, main)
-        else:
-            classes[main] = {}
+        for top in self.root.findall("default"):
+            name = top.get("class", main)
+            if name != main:
+                raise MjcfError(
+                    f'{self.path}: <default class="{name}"> at the top level: the top-level '
+                    "class is 'main' and cannot be renamed (MuJoCo refuses this too); drop "
+                    "its 'class' or nest it in a <default>"
+                )
+            visit(top, main)
         return classes, main
 
     def _resolved(
@@ -378,7 +382,7 @@ class _Reader:
         if cls not in self.classes:
             raise MjcfError(
                 f"{self.path}: {_describe(el)} uses the unknown default class '{cls}'; classes: "
-                + ", ".join(self.classes)
+                + _names(list(self.classes), 8)
             )
         attrs = dict(self.classes[cls].get(tag or el.tag, {}))
         attrs.update(el.attrib)

@@ -241,6 +241,7 @@ def test_top_level_defaults_merge_as_in_mujoco(tmp_path, mujoco):
         else:
             assert math.isinf(low) and math.isinf(high), name
     assert [springs[n][0] for n in ("j0", "j1", "j2")] == [5, 2, 5]
+    assert assert_inertias_are_mujocos(mujoco, path) == 3
 
 
 def test_a_renamed_top_level_default_is_refused_as_mujoco_does(tmp_path, mujoco):
@@ -250,3 +251,194 @@ def test_a_renamed_top_level_default_is_refused_as_mujoco_does(tmp_path, mujoco)
         mujoco.MjModel.from_xml_path(str(path))
     with pytest.raises(MjcfError, match="top-level class is 'main' and cannot be renamed"):
         load_mjcf(path)
+
+
+@pytest.mark.parametrize(
+    "package, parts",
+    [
+        ("dm_control", ("third_party", "kinova", "jaco_arm.xml")),
+        ("dm_control", ("third_party", "kinova", "jaco_hand.xml")),
+    ],
+)
+def test_jaco_files_with_two_top_level_defaults(package, parts, mujoco):
+    # jaco_arm.xml and jaco_hand.xml include common.xml, whose <default> is a second top-level
+    # one; their masses come from STL meshes (item 2): every body's mass is MuJoCo's, and the
+    # rest pinsettle finds is one by MuJoCo's forces.
+    path = model_file(package, *parts)
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    mjcf = load_mjcf(path)
+    for j in range(mj.njnt):
+        name = mj.joint(j).name
+        iq = mjcf.model.idx_qs[mjcf.model.getJointId(name)]
+        if mj.jnt_limited[j]:
+            assert mjcf.model.lowerPositionLimit[iq] == pytest.approx(mj.jnt_range[j][0])
+            assert mjcf.model.upperPositionLimit[iq] == pytest.approx(mj.jnt_range[j][1])
+    assert assert_inertias_are_mujocos(mujoco, path) == mj.nbody - 1
+    assert_rest_is_mujocos(mujoco, path, solve_json(str(path)))
+
+
+# --- masses from meshes ----------------------------------------------------------------------
+
+
+def u_prism() -> tuple[np.ndarray, list[list[int]]]:
+    """A closed, outward-facing U-shaped prism whose centre of mass sees the inner faces of
+    its posts from behind: MuJoCo's legacy, exact and convex rules give three different
+    masses. Side faces are quads, the ends triangles."""
+    outline = [(0, 0), (1, 0), (2, 0), (3, 0), (3, 1), (3, 2), (2, 2), (2, 1), (1, 1), (1, 2)]
+    outline += [(0, 2), (0, 1)]  # counter-clockwise
+    n = len(outline)
+    vertices = np.array([(x, y, z) for z in (0.0, 0.5) for x, y in outline], dtype=float)
+    vertices = 0.1 * vertices + [0.3, -0.1, 0.05]
+    cells = [[0, 1, 8, 11], [11, 8, 9, 10], [1, 2, 7, 8], [2, 3, 4, 7], [7, 4, 5, 6]]
+    ends = [t for a, b, c, d in cells for t in ([a, b, c], [a, c, d])]
+    faces = [[a, c, b] for a, b, c in ends] + [[n + a, n + b, n + c] for a, b, c in ends]
+    faces += [[i, (i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
+    return vertices, faces
+
+
+def triangles(faces: list[list[int]]) -> list[list[int]]:
+    return [
+        t for f in faces for t in ([f] if len(f) == 3 else [[f[0], f[1], f[2]], [f[0], f[2], f[3]]])
+    ]
+
+
+def write_stl(path: Path, vertices: np.ndarray, faces: list[list[int]]) -> Path:
+    tris = triangles(faces)
+    records = np.zeros(len(tris), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    records["v"] = vertices[np.array(tris)]
+    path.write_bytes(b"\0" * 80 + np.uint32(len(tris)).tobytes() + records.tobytes())
+    return path
+
+
+def write_obj(path: Path, vertices: np.ndarray, faces: list[list[int]]) -> Path:
+    # Quads as quads; a second object after the first, whose faces MuJoCo does not read.
+    lines = ["# a U prism", "o first"]
+    lines += ["v " + " ".join(repr(float(c)) for c in v) for v in vertices]
+    lines += [
+        "f " + " ".join(f"{i + 1}//" if k % 2 else str(i + 1) for i in f)
+        for k, f in enumerate(faces)
+    ]
+    lines += ["o second", "v 5 5 5", "v 6 5 5", "v 5 6 5", "f -1 -2 -3"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def write_msh(path: Path, vertices: np.ndarray, faces: list[list[int]]) -> Path:
+    tris = np.array(triangles(faces), dtype="<i4")
+    header = np.array([len(vertices), 0, 0, len(tris)], dtype="<i4")
+    path.write_bytes(header.tobytes() + vertices.astype("<f4").tobytes() + tris.tobytes())
+    return path
+
+
+WRITERS = {"stl": write_stl, "obj": write_obj, "msh": write_msh}
+
+
+def mesh_mjcf(file: str, mesh_attrs: str = "", geom_attrs: str = "", extra: str = "") -> str:
+    return f"""<mujoco model="meshes">
+  <compiler angle="radian"/>
+  <asset><mesh file="{file}" {mesh_attrs}/></asset>
+  <worldbody>
+    <body name="arm" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0"/>
+      <geom name="part" type="mesh" mesh="{Path(file).stem}" pos="0.1 0 0" euler="0.3 0.2 0.1"
+        {geom_attrs}/>
+      {extra}
+      <body name="hand" pos="0.4 0 0"><joint name="wrist" axis="0 1 0"/>
+        <geom type="mesh" mesh="{Path(file).stem}" density="300"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>"""
+
+
+@pytest.mark.parametrize(
+    "rule", ["", 'inertia="legacy"', 'inertia="exact"', 'inertia="convex"', 'inertia="shell"']
+)
+@pytest.mark.parametrize("kind", ["stl", "obj", "msh"])
+def test_mesh_masses_are_mujocos(kind, rule, tmp_path, mujoco):
+    vertices, faces = u_prism()
+    WRITERS[kind](tmp_path / f"you.{kind}", vertices, faces)
+    path = tmp_path / "meshes.xml"
+    path.write_text(mesh_mjcf(f"you.{kind}", rule))
+    assert assert_inertias_are_mujocos(mujoco, path) == 2
+    # The rules differ on this mesh: the test tells them apart.
+    masses = {}
+    for other in ("legacy", "exact", "convex"):
+        path.write_text(mesh_mjcf(f"you.{kind}", f'inertia="{other}"'))
+        masses[other] = load_mjcf(path).inertias["hand"][0]
+    assert len({round(m, 9) for m in masses.values()}) == 3, masses
+
+
+@pytest.mark.parametrize(
+    "mesh_attrs, geom_attrs, extra",
+    [
+        ('scale="1 2 -0.5" refpos="0.3 -0.1 0" refquat="0.9 0.1 0.3 -0.2"', "", ""),
+        ('scale="2 2 2"', 'mass="3"', '<geom type="box" size="0.1 0.02 0.03" pos="0 0.1 0"/>'),
+        (
+            'inertia="exact"',
+            'density="50" group="4"',
+            '<geom type="capsule" fromto="0 0 0 0 0 0.2" size="0.02" shellinertia="true"/>',
+        ),
+        (
+            "",
+            'group="2"',
+            '<geom type="cylinder" size="0.02 0.1" mass="0.2" shellinertia="true"/>'
+            '<geom type="ellipsoid" size="0.02 0.03 0.05" euler="1 0 0" shellinertia="true"/>'
+            '<geom type="box" size="0.02 0.03 0.05" shellinertia="true"/>'
+            '<geom type="sphere" size="0.04" shellinertia="true" pos="0 0 0.3"/>'
+            '<geom type="box" fromto="0 0 0 0.1 0.1 0" size="0.02 0.02 0.02"/>',
+        ),
+    ],
+)
+def test_mesh_and_shape_masses_are_mujocos(mesh_attrs, geom_attrs, extra, tmp_path, mujoco):
+    # Scale (a mirroring one too), refpos and refquat, a geom's mass instead of its density,
+    # groups outside the inertia range, primitives beside the mesh, shells.
+    vertices, faces = u_prism()
+    write_stl(tmp_path / "you.stl", vertices, faces)
+    path = tmp_path / "meshes.xml"
+    path.write_text(mesh_mjcf("you.stl", mesh_attrs, geom_attrs, extra))
+    assert assert_inertias_are_mujocos(mujoco, path) == 2
+
+
+def test_mesh_vertices_in_the_file(tmp_path, mujoco):
+    # A mesh given by its vertices only (MuJoCo takes their convex hull) and one with faces.
+    vertices, faces = u_prism()
+    text = " ".join(repr(float(x)) for x in vertices.ravel())
+    face = " ".join(str(i) for t in triangles(faces) for i in t)
+    path = tmp_path / "inline.xml"
+    path.write_text(
+        f"""<mujoco><asset><mesh name="hull" vertex="{text}"/>
+        <mesh name="you" vertex="{text}" face="{face}" inertia="exact"/></asset>
+        <worldbody><body name="a"><joint axis="0 1 0"/><geom type="mesh" mesh="hull"/>
+        <body name="b" pos="0.3 0 0"><joint axis="0 1 0"/><geom type="mesh" mesh="you"/>
+        </body></body></worldbody></mujoco>"""
+    )
+    assert assert_inertias_are_mujocos(mujoco, path) == 2
+
+
+def test_mesh_refusals_name_the_file_and_a_way_forward(tmp_path):
+    body = '<body name="b"><joint name="j"/><geom name="shell" type="mesh" mesh="part"/></body>'
+
+    def refusal(file: str) -> str:
+        path = tmp_path / "mesh.xml"
+        path.write_text(
+            f'<mujoco><asset><mesh name="part" file="{file}"/></asset><worldbody>{body}'
+            "</worldbody></mujoco>"
+        )
+        with pytest.raises(pinsettle.SceneError) as error:
+            pinsettle.load_scene(path)
+        message = str(error.value)
+        assert "<geom name=\"shell\"> of body 'b'" in message and str(tmp_path / file) in message
+        assert "<inertial>" in message and len(message) < 600
+        return message
+
+    (tmp_path / "ascii.stl").write_text("solid part\n facet normal 0 0 1\nendsolid part\n")
+    assert "ASCII STL" in refusal("ascii.stl") and "binary STL" in refusal("ascii.stl")
+    (tmp_path / "part.ply").write_text("ply\nformat ascii 1.0\nend_header\n")
+    message = refusal("part.ply")
+    assert "'.ply'" in message and "STL or OBJ" in message
+    vertices, faces = u_prism()
+    flat = vertices.copy()
+    flat[:, 2] = 0.0  # no volume
+    write_stl(tmp_path / "flat.stl", flat, faces)
+    assert 'inertia="shell"' in refusal("flat.stl")

@@ -15,10 +15,12 @@ What Pinocchio does not carry is taken from the file here: gravity (``<option gr
 the ``gravity`` flag), joint ranges as stops (``limited``/``autolimits``, degrees), joint
 springs (``stiffness``, ``springref``), the reference pose ``qpos0`` (``ref``, the pose of a
 free body) as the start, ``connect`` and ``weld`` equalities as loops, keyframes as named
-poses. What has no place in statics with constant loads (damping, friction loss, armature,
-actuators) is listed in ``notes``. What changes the statics and cannot be honoured (tendons
-with springs or limits, ``joint`` equalities, gravity compensation, buoyancy, masses from
-meshes, ...) is an error that names the element.
+poses. Each body's mass is computed here as MuJoCo compiles it (its ``<inertial>``, or its
+geoms: primitives and meshes, from their volume) and written as an ``<inertial>``. What has
+no place in statics with constant loads (damping, friction loss, armature, actuators) is
+listed in ``notes``. What changes the statics and cannot be honoured (tendons with springs or
+limits, ``joint`` equalities, gravity compensation, buoyancy, ...) is an error that names the
+element.
 """
 
 from __future__ import annotations
@@ -59,6 +61,9 @@ class MjcfModel:
     )
     start: dict[str, float | list[float]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    #: Each body's mass, centre of mass and rotational inertia about it, in the body's frame,
+    #: as MuJoCo compiles them (from its <inertial> or its geoms); massless bodies left out.
+    inertias: dict[str, tuple[float, np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
 def is_mjcf(path: str | Path) -> bool:
@@ -221,6 +226,300 @@ _ASSET_FILES = {
 }
 
 
+# --- masses from meshes, as MuJoCo computes them ----------------------------------------------
+
+# MuJoCo's small numbers (mjMINVAL, mjEPS) and its limit on an STL file's faces.
+_MINVAL = 1e-15
+_EPS = 1e-14
+_STL_MAX_FACES = 200000
+_MESH_INERTIA = ("legacy", "exact", "convex", "shell")
+
+
+@dataclass
+class _MeshAsset:
+    name: str
+    file: Path | None  # None: vertices and faces given in the element
+    attrs: dict[str, str]
+    label: str
+
+
+@dataclass
+class _MeshMass:
+    """A mesh's volume (its area for inertia="shell"), centre of mass and rotational inertia
+    about it per unit density, in the mesh's coordinates (after scale, refpos, refquat)."""
+
+    volume: float
+    com: np.ndarray
+    inertia: np.ndarray  # 3x3
+
+
+@dataclass
+class _GeomMass:
+    """A geom's mass, centre of mass and rotational inertia about it, in its body's frame."""
+
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray  # 3x3
+
+
+def _mesh_refusal(mesh: _MeshAsset, what: str) -> MjcfError:
+    where = f"mesh '{mesh.name}'" + (f" ({mesh.file})" if mesh.file else "")
+    return MjcfError(f"{where}: {what}")
+
+
+def _read_stl(mesh: _MeshAsset, data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """A binary STL file (MuJoCo reads no other kind): its vertices and faces."""
+    ascii_hint = data.lstrip()[:5].lower() == b"solid"
+    count = int(np.frombuffer(data[80:84], "<i4")[0]) if len(data) >= 84 else -1
+    if len(data) < 84 or count * 50 != len(data) - 84:
+        if ascii_hint:
+            raise _mesh_refusal(
+                mesh,
+                "an ASCII STL file; MuJoCo reads binary STL only and refuses it too: save it "
+                "as binary STL (or OBJ)",
+            )
+        raise _mesh_refusal(mesh, "not a binary STL file (its size does not match its header)")
+    if not 1 <= count <= _STL_MAX_FACES:
+        raise _mesh_refusal(
+            mesh,
+            f"{count} faces; MuJoCo reads STL files of 1 to {_STL_MAX_FACES} faces: simplify "
+            "the mesh",
+        )
+    records = np.frombuffer(
+        data[84:], dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    )
+    vertices = records["v"].reshape(-1, 3).astype(np.float64)
+    return vertices, np.arange(len(vertices)).reshape(-1, 3)
+
+
+def _read_obj(mesh: _MeshAsset, text: str) -> tuple[np.ndarray, np.ndarray]:
+    """A Wavefront OBJ file as MuJoCo's reader (tinyobjloader) takes it: every vertex (a
+    convex hull uses them all), the faces of its first group or object only, polygons split
+    into triangles (a quad along its shorter diagonal)."""
+    vertices: list[list[float]] = []
+    faces: list[list[int]] = []
+    first_shape = True  # MuJoCo takes the faces of the first shape and every vertex
+    for number, line in enumerate(text.splitlines(), 1):
+        parts = line.split("#", 1)[0].split()
+        if not parts:
+            continue
+        try:
+            if parts[0] == "v":
+                vertices.append([float(x) for x in parts[1:4]])
+                if len(vertices[-1]) != 3:
+                    raise ValueError
+            elif parts[0] in ("g", "o") and faces:
+                first_shape = False
+            elif parts[0] == "f" and first_shape:
+                index = [int(p.split("/")[0]) for p in parts[1:]]
+                index = [i - 1 if i > 0 else len(vertices) + i for i in index]
+                if len(index) < 3:
+                    raise ValueError
+                faces.extend(_triangles(index, vertices))
+        except ValueError:
+            shown = line.strip()[:60]
+            raise _mesh_refusal(mesh, f"line {number} is not a valid OBJ line: {shown!r}") from None
+    points = np.array(vertices, dtype=np.float32).astype(np.float64).reshape(-1, 3)
+    triangles = np.array(faces, dtype=np.int64).reshape(-1, 3)
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(points)):
+        raise _mesh_refusal(mesh, "a face names a vertex the file does not have")
+    return points, triangles
+
+
+def _triangles(index: list[int], vertices: list[list[float]]) -> list[list[int]]:
+    if len(index) == 3:
+        return [index]
+    if len(index) == 4 and max(index) < len(vertices):
+        v = np.array([vertices[i] for i in index], dtype=np.float32)
+        if np.sum((v[2] - v[0]) ** 2) < np.sum((v[3] - v[1]) ** 2):
+            return [[index[0], index[1], index[2]], [index[0], index[2], index[3]]]
+        return [[index[0], index[1], index[3]], [index[1], index[2], index[3]]]
+    # A fan: for a plane polygon every split gives the same integrals.
+    return [[index[0], index[k], index[k + 1]] for k in range(1, len(index) - 1)]
+
+
+def _read_msh(mesh: _MeshAsset, data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """MuJoCo's own binary MSH format: four counts, then vertices, normals, texture
+    coordinates (float32) and faces (int32)."""
+    if len(data) < 16:
+        raise _mesh_refusal(mesh, "an MSH file without its header")
+    nv, nn, nt, nf = (int(x) for x in np.frombuffer(data[:16], "<i4"))
+    if nv < 4 or min(nn, nt, nf) < 0 or nn not in (0, nv) or nt not in (0, nv):
+        raise _mesh_refusal(mesh, "an MSH file with invalid counts in its header")
+    if len(data) != 16 + 4 * (3 * nv + 3 * nn + 2 * nt + 3 * nf):
+        raise _mesh_refusal(mesh, "an MSH file whose size does not match its header")
+    vertices = np.frombuffer(data, "<f4", 3 * nv, 16).astype(np.float64).reshape(-1, 3)
+    at = 16 + 4 * (3 * nv + 3 * nn + 2 * nt)
+    faces = np.frombuffer(data, "<i4", 3 * nf, at).astype(np.int64).reshape(-1, 3)
+    if faces.size and (faces.min() < 0 or faces.max() >= nv):
+        raise _mesh_refusal(mesh, "a face names a vertex the file does not have")
+    return vertices, faces
+
+
+def _mesh_geometry(mesh: _MeshAsset) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's vertices and faces as given (file or the element's vertex and face)."""
+    if mesh.file is None:
+        if "vertex" not in mesh.attrs:
+            raise _mesh_refusal(mesh, "neither a file nor vertices")
+        where = f"{mesh.label} vertex"
+        values = _floats(mesh.attrs["vertex"], where, (len(mesh.attrs["vertex"].split()),))
+        if len(values) % 3:
+            raise MjcfError(f"{where}: expected 3 numbers per vertex, got {len(values)}")
+        vertices = values.astype(np.float32).astype(np.float64).reshape(-1, 3)
+        faces = np.zeros((0, 3), dtype=np.int64)
+        if "face" in mesh.attrs:
+            try:
+                faces = np.array([int(x) for x in mesh.attrs["face"].split()]).reshape(-1, 3)
+            except ValueError:
+                raise MjcfError(f"{mesh.label} face: expected integers, 3 per face") from None
+            if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+                raise _mesh_refusal(mesh, "a face names a vertex the mesh does not have")
+        return vertices, faces
+    suffix = mesh.file.suffix.lower()
+    readers = {".stl": _read_stl, ".msh": _read_msh}
+    if suffix == ".obj":
+        return _read_obj(mesh, mesh.file.read_text(encoding="utf-8", errors="replace"))
+    if suffix not in readers:
+        raise _mesh_refusal(
+            mesh,
+            f"pinsettle computes masses from STL, OBJ and MSH meshes, not from a "
+            f"'{mesh.file.suffix}' file: convert it to STL or OBJ, or give the body an "
+            "<inertial>",
+        )
+    return readers[suffix](mesh, mesh.file.read_bytes())
+
+
+def _convex_hull(mesh: _MeshAsset, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices' convex hull, its points and its faces each facing out (qhull through
+    coal, Pinocchio's collision library; MuJoCo uses qhull too)."""
+    try:
+        import coal
+    except ImportError:
+        raise _mesh_refusal(
+            mesh,
+            'inertia="convex" needs a convex hull and coal (Pinocchio\'s collision library) is '
+            "not importable: give the body an <inertial>",
+        ) from None
+    points = coal.StdVec_Vec3s()
+    for v in vertices:
+        points.append(np.asarray(v, dtype=float))
+    where = f"{mesh.label} maxhullvert"
+    maxhullvert = int(_floats(mesh.attrs.get("maxhullvert", "-1"), where, (1,))[0])
+    command = "Qt" + (f" Q9 TA{maxhullvert - 4}" if maxhullvert > -1 else "")
+    try:
+        hull = coal.ConvexBase.convexHull(points, True, command)
+    except Exception as error:  # qhull's own reasons (a flat or degenerate point set)
+        raise _mesh_refusal(mesh, f"no convex hull: {error}") from None
+    hull_points = np.array(hull.points(), dtype=float).reshape(-1, 3)
+    faces = np.array(
+        [[hull.polygons(i)[k] for k in range(3)] for i in range(hull.num_polygons)],
+        dtype=np.int64,
+    ).reshape(-1, 3)
+    inside = hull_points.mean(axis=0)
+    a, b, c = (hull_points[faces[:, k]] for k in range(3))
+    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), (a + b + c) / 3 - inside) < 0
+    faces[inward] = faces[inward][:, [0, 2, 1]]
+    return hull_points, faces
+
+
+def _mesh_mass(mesh: _MeshAsset, where: str) -> _MeshMass:
+    """MuJoCo's mass properties of a mesh (user_mesh.cc: ApplyTransformations, ComputeVolume,
+    ComputeInertia), for its ``inertia`` rule: legacy (MuJoCo's default: every face's pyramid
+    counted positive), exact (signed, a closed mesh), convex (the convex hull), shell (mass on
+    the surface)."""
+    a = mesh.attrs
+    rule = _flag(a.get("inertia", "legacy"), f"{mesh.label} inertia", _MESH_INERTIA)
+    vertices, faces = _mesh_geometry(mesh)
+    if len(vertices) < 4:
+        raise _mesh_refusal(mesh, f"{len(vertices)} vertices; MuJoCo needs at least 4")
+    if not np.all(np.isfinite(vertices)):
+        raise _mesh_refusal(mesh, "a vertex coordinate is not finite")
+    # The user's offset, rotation and scale (MuJoCo: minus refpos, by refquat's inverse,
+    # times scale; a mirroring scale turns the faces over).
+    refpos = _floats(a.get("refpos", "0 0 0"), f"{mesh.label} refpos", (3,))
+    w, x, y, z = _floats(a.get("refquat", "1 0 0 0"), f"{mesh.label} refquat", (4,))
+    scale = _floats(a.get("scale", "1 1 1"), f"{mesh.label} scale", (3,))
+    vertices = vertices - refpos
+    if (w, x, y, z) != (1, 0, 0, 0):
+        norm = math.sqrt(w * w + x * x + y * y + z * z)
+        if norm < 1e-14:
+            raise MjcfError(f"{mesh.label} refquat: zero quaternion")
+        rotation = pinocchio.Quaternion(w / norm, x / norm, y / norm, z / norm).matrix()
+        vertices = vertices @ rotation
+    vertices = vertices * scale
+    if scale[0] * scale[1] * scale[2] < 0:
+        faces = faces[:, [0, 2, 1]]
+    if rule == "convex" or not len(faces):
+        vertices, faces = _convex_hull(mesh, vertices)
+    if rule == "exact":
+        edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        if len(np.unique(edges, axis=0)) < len(edges):
+            raise _mesh_refusal(
+                mesh,
+                'inertia="exact" needs consistently oriented faces and two faces run along '
+                "an edge the same way (MuJoCo refuses this too): fix the mesh, or use "
+                'inertia="convex"',
+            )
+    d, e, f = (vertices[faces[:, k]] for k in range(3))
+    cross = np.cross(e - d, f - d)
+    length = np.linalg.norm(cross, axis=1)
+    small = length < _MINVAL
+    area = np.where(small, 0.0, 0.5 * length)
+    normal = cross / np.where(small, 1.0, length)[:, None]
+    center = (d + e + f) / 3
+    total_area = float(area.sum())
+    if total_area < _MINVAL:
+        raise _mesh_refusal(mesh, "its surface area is too small (MuJoCo refuses it too)")
+    facecen = (area[:, None] * center).sum(axis=0) / total_area
+    if rule == "shell":
+        weight = area
+    else:
+        weight = np.einsum("ij,ij->i", center - facecen, normal) * area / 3
+        if rule == "legacy":
+            weight = np.abs(weight)
+    total = float(weight.sum())
+    if rule != "shell" and total < _MINVAL:
+        raise _mesh_refusal(
+            mesh,
+            "its volume is negative (faces turned inwards)"
+            if total < 0
+            else "its volume is too small; MuJoCo refuses it too unless the mesh has "
+            'inertia="shell"',
+        )
+    com = (
+        (weight[:, None] * center).sum(axis=0) / total
+        if rule == "shell"
+        else (weight[:, None] * (center * 0.75 + facecen / 4)).sum(axis=0) / total
+    )
+    # Second moments about the centre of mass, per face (MuJoCo's ComputeInertia).
+    d, e, f, center = d - com, e - com, f - com, center - com
+    if rule == "shell":
+        weight, divisor = area, 12.0
+    else:
+        weight, divisor = np.einsum("ij,ij->i", center, normal) * area / 3, 20.0
+        if rule == "legacy":
+            weight = np.abs(weight)
+    volume = float(weight.sum())
+    products = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            terms = (
+                2 * (d[:, i] * d[:, j] + e[:, i] * e[:, j] + f[:, i] * f[:, j])
+                + d[:, i] * e[:, j]
+                + d[:, j] * e[:, i]
+                + d[:, i] * f[:, j]
+                + d[:, j] * f[:, i]
+                + e[:, i] * f[:, j]
+                + e[:, j] * f[:, i]
+            )
+            products[i, j] = products[j, i] = float((weight / divisor * terms).sum())
+    inertia = np.trace(products) * np.eye(3) - products
+    eigen = np.linalg.eigvalsh(inertia)
+    if eigen[0] <= 0:
+        raise _mesh_refusal(mesh, "its inertia is not positive (MuJoCo refuses it too)")
+    return _MeshMass(volume, com, inertia)
+
+
 class _Reader:
     """One MJCF file read with MuJoCo's rules; refusals are collected, then raised at once."""
 
@@ -238,6 +537,7 @@ class _Reader:
                 self.refuse(f"{_describe(child)} (a section pinsettle does not read)")
         self.compiler = self._compiler()
         self.classes, self.main_class = self._defaults()
+        self.meshes: dict[str, _MeshAsset] = {}
         self._check_assets()
         self.bodies: list[_Body] = []  # top-level bodies
         self.world_sites: dict[str, pinocchio.SE3] = {}
@@ -398,6 +698,7 @@ class _Reader:
             for el in section:
                 if el.tag == "model":
                     self.refuse(f"{_describe(el)} in <asset> (models attached with <attach>)")
+                files: dict[str, Path] = {}
                 for key in _ASSET_FILES.get(el.tag, ()):
                     name = el.get(key)
                     if not name:
@@ -409,13 +710,25 @@ class _Reader:
                         folder = c.texturedir if el.tag == "texture" else c.meshdir
                         folder = folder if folder is not None else c.assetdir
                         file = self.path.parent / (folder or "") / file
+                    files[key] = file
                     if not file.is_file():
                         missing.append(f"{el.tag} {_describe(el)} file '{name}' ({file})")
+                if el.tag == "mesh" and section.tag == "asset":
+                    self._mesh_asset(el, files.get("file"))
         if missing:
             raise MjcfError(
                 f"{self.path}: asset file{'s' if len(missing) > 1 else ''} not found: "
                 + "; ".join(missing)
             )
+
+    def _mesh_asset(self, el: ET.Element, file: Path | None) -> None:
+        """A mesh of <asset>, kept by name for the geoms whose mass comes from it (its name
+        defaults to its file's name without the extension, as in MuJoCo)."""
+        attrs = self._resolved(el, None)
+        name = attrs.get("name") or (Path(attrs.get("file", "")).stem if file else "")
+        if not name:
+            return  # no geom can use it
+        self.meshes[name] = _MeshAsset(name, file, attrs, _describe(el))
 
     # -- poses --
 
@@ -794,6 +1107,9 @@ class _Writer:
     def __init__(self, reader: _Reader, free_root: _Body | None, root_joint: str | None) -> None:
         self.reader = reader
         c = reader.compiler
+        self.mesh_masses: dict[str, _MeshMass] = {}
+        #: Each body's mass, centre of mass and rotational inertia about it (body frame).
+        self.inertias: dict[str, tuple[float, np.ndarray, np.ndarray]] = {}
         self.xml = ET.Element("mujoco", model=reader.root.get("model") or reader.path.stem)
         ET.SubElement(
             self.xml,
@@ -892,50 +1208,24 @@ class _Writer:
             inertial = ET.SubElement(el, "inertial", mass=repr(mass))
             assert body.inertial_pose is not None
             self._place(inertial, body.inertial_pose)
+            rotation = body.inertial_pose.rotation
             if "fullinertia" in a:
-                inertial.set(
-                    "fullinertia", _text(_floats(a["fullinertia"], f"{where} fullinertia", (6,)))
-                )
+                full = _floats(a["fullinertia"], f"{where} fullinertia", (6,))
+                inertial.set("fullinertia", _text(full))
+                xx, yy, zz, xy, xz, yz = full
+                tensor = rotation @ np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
             else:
-                inertial.set(
-                    "diaginertia",
-                    _text(_floats(a.get("diaginertia", ""), f"{where} diaginertia", (3,))),
-                )
-            return
-        low, high = c.inertiagrouprange
-        counted = []
-        for geom in body.geoms:
-            a = geom.attrs
-            where = f"{reader.path}: {geom.label} in body '{body.name}'"
-            group = int(_floats(a.get("group", "0"), f"{where} group", (1,))[0])
-            if not low <= group <= high:
-                continue
-            key = "mass" if "mass" in a else "density"
-            amount = float(_floats(a.get(key, "1000"), f"{where} {key}", (1,))[0])
-            if amount < 0:
-                raise MjcfError(f"{where} {key}: must be >= 0, got {amount:g}")
-            weighs = amount != 0
-            if not weighs:
-                continue
-            kind = a.get("type", "sphere")
-            what = f"{geom.label} of body '{body.name}', whose mass comes from its geoms"
-            if kind not in _MASS_SHAPES or "mesh" in a:
-                reader.refuse(
-                    f"{what}: a {kind}{' fitted to a mesh' if 'mesh' in a else ''} (masses of "
-                    "meshes, height fields and SDFs are not computed: give the body an "
-                    "<inertial>)"
-                )
-                continue
-            if a.get("shellinertia", "false") == "true":
-                reader.refuse(f"{what}: shellinertia")
-                continue
-            counted.append(geom)
-        if counted and c.boundmass > 0:
-            reader.refuse(
-                f"<compiler boundmass> with body '{body.name}' whose mass comes from its geoms"
+                diagonal = _floats(a.get("diaginertia", ""), f"{where} diaginertia", (3,))
+                inertial.set("diaginertia", _text(diagonal))
+                tensor = rotation @ np.diag(diagonal)
+            self.inertias[body.name] = (
+                mass,
+                np.array(body.inertial_pose.translation),
+                tensor @ rotation.T,
             )
             return
-        if not counted:
+        parts = [part for geom in body.geoms if (part := self._geom_mass(body, geom))]
+        if not parts:
             if c.boundmass > 0:
                 ET.SubElement(
                     el,
@@ -945,30 +1235,214 @@ class _Writer:
                     diaginertia=_text([c.boundinertia] * 3),
                 )
             return
-        for geom in counted:
-            a = geom.attrs
-            kind = a.get("type", "sphere")
-            where = f"{reader.path}: {geom.label} in body '{body.name}'"
-            # Pinocchio computes the mass and inertia of these shapes as MuJoCo does (checked by
-            # the tests); contype and conaffinity 1: Pinocchio leaves out geoms it takes for
-            # visual ones, MuJoCo counts them.
-            out = ET.SubElement(el, "geom", type=kind, contype="1", conaffinity="1", group="0")
-            needed = _MASS_SHAPES[kind]
-            if geom.fromto is not None and kind != "sphere":
-                out.set("fromto", _text(geom.fromto))
-                size = _floats(a.get("size", ""), f"{where} size", (1, 2, 3))[:1]
-            else:
-                self._place(out, geom.pose)
-                size = _floats(a.get("size", ""), f"{where} size", tuple(range(needed, 4)))[:needed]
-            if np.any(size <= 0):
-                raise MjcfError(f"{where} size: must be positive, got {a.get('size')}")
-            out.set("size", _text(size))
-            if "mass" in a:
-                out.set("mass", _text(_floats(a["mass"], f"{where} mass", (1,))))
-            else:
-                out.set(
-                    "density", _text(_floats(a.get("density", "1000"), f"{where} density", (1,)))
+        # MuJoCo's InertiaFromGeom: the geoms' masses, centres and inertias summed, then
+        # boundmass and boundinertia on the total and its principal moments.
+        mass = sum(part.mass for part in parts)
+        com: np.ndarray = np.sum([part.mass * part.com for part in parts], axis=0) / mass
+        inertia: np.ndarray = np.sum(
+            [
+                part.inertia + part.mass * (float(d @ d) * np.eye(3) - np.outer(d, d))
+                for part in parts
+                for d in [part.com - com]
+            ],
+            axis=0,
+        )
+        if c.boundinertia > 0:
+            moments, axes = np.linalg.eigh(inertia)
+            inertia = axes @ np.diag(np.maximum(moments, c.boundinertia)) @ axes.T
+        mass = max(mass, c.boundmass)
+        self.inertias[body.name] = (float(mass), com, inertia)
+        ET.SubElement(
+            el,
+            "inertial",
+            pos=_text(com),
+            mass=repr(float(mass)),
+            fullinertia=_text(inertia[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]),
+        )
+
+    def _geom_mass(self, body: _Body, geom: _Geom) -> _GeomMass | None:
+        """A geom's part of its body's mass, as MuJoCo computes it (user_objects.cc:
+        GetVolume, SetInertia); None for a geom outside the inertia group range or of no
+        mass."""
+        reader = self.reader
+        a = geom.attrs
+        where = f"{reader.path}: {geom.label} in body '{body.name}'"
+        low, high = reader.compiler.inertiagrouprange
+        group = int(_floats(a.get("group", "0"), f"{where} group", (1,))[0])
+        if not low <= group <= high:
+            return None
+        key = "mass" if "mass" in a else "density"
+        amount = float(_floats(a.get(key, "1000"), f"{where} {key}", (1,))[0])
+        if amount < 0:
+            raise MjcfError(f"{where} {key}: must be >= 0, got {amount:g}")
+        if amount == 0:
+            return None
+        kind = a.get("type", "sphere")
+        shell = _flag(a.get("shellinertia", "false"), f"{where} shellinertia", ("true", "false"))
+        what = f"{geom.label} of body '{body.name}'"
+        if kind == "mesh":
+            if shell == "true":
+                raise MjcfError(
+                    f"{where}: shellinertia on a mesh geom (MuJoCo refuses it too): give the "
+                    '<mesh> inertia="shell" instead'
                 )
+            return self._mesh_geom_mass(body, geom, key, amount)
+        if "mesh" in a:
+            reader.refuse(
+                f"{what}: a {kind} sized to fit mesh '{a['mesh']}' (pinsettle does not size "
+                "geoms from meshes): give it a size and no mesh, or the body an <inertial>"
+            )
+            return None
+        if kind in ("plane", "hfield", "sdf") or kind not in _MASS_SHAPES:
+            if kind == "plane":
+                return None  # no volume: MuJoCo gives it no mass
+            reader.refuse(
+                f"{what}: the mass of a {kind} geom is not computed: give the body an <inertial>"
+            )
+            return None
+        rotation, center, size = self._shape(geom, kind, where)
+        volume, moments = _shape_mass(kind, size, shell == "true")
+        if volume <= _EPS:
+            return None
+        mass = amount if key == "mass" else amount * volume
+        inertia = rotation @ np.diag(moments * mass) @ rotation.T
+        return _GeomMass(mass, center, inertia)
+
+    def _shape(
+        self, geom: _Geom, kind: str, where: str
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A primitive's rotation and centre in the body frame and its sizes (MuJoCo's
+        fromto: the z axis from end to end, the half length its last size)."""
+        needed = _MASS_SHAPES[kind]
+        text = geom.attrs.get("size", "")
+        if geom.fromto is not None:
+            if kind == "sphere":
+                raise MjcfError(f"{where}: fromto needs a capsule, cylinder, box or ellipsoid")
+            ends = geom.fromto
+            half = float(np.linalg.norm(ends[:3] - ends[3:])) / 2
+            if half < _EPS:
+                raise MjcfError(f"{where} fromto: the two ends are too close")
+            radius = float(_floats(text, f"{where} size", (1, 2, 3))[0])
+            size = np.array([radius, half] if needed == 2 else [radius, radius, half])
+            rotation = _z_to(ends[:3] - ends[3:], f"{where} fromto")
+            center = (ends[:3] + ends[3:]) / 2
+        else:
+            size = _floats(text, f"{where} size", tuple(range(needed, 4)))[:needed]
+            rotation, center = geom.pose.rotation, geom.pose.translation
+        if np.any(size <= 0):
+            raise MjcfError(f"{where} size: must be positive, got {text}")
+        return np.asarray(rotation), np.asarray(center, dtype=float), size
+
+    def _mesh_geom_mass(
+        self, body: _Body, geom: _Geom, key: str, amount: float
+    ) -> _GeomMass | None:
+        reader = self.reader
+        where = f"{reader.path}: {geom.label} in body '{body.name}'"
+        name = geom.attrs.get("mesh")
+        if not name or name not in reader.meshes:
+            known = _names(sorted(reader.meshes), 6) if reader.meshes else "none"
+            raise MjcfError(f"{where}: unknown mesh '{name}' (meshes of <asset>: {known})")
+        if name not in self.mesh_masses:
+            mesh = reader.meshes[name]
+            try:
+                self.mesh_masses[name] = _mesh_mass(mesh, where)
+            except MjcfError as error:
+                reader.refuse(
+                    f"{geom.label} of body '{body.name}', whose mass comes from its geoms: "
+                    f"{error}; or give the body an <inertial>"
+                )
+                return None
+            except OSError as error:
+                raise MjcfError(f"{where}: mesh '{name}': {error}") from None
+        props = self.mesh_masses[name]
+        if props.volume <= _EPS:
+            return None
+        density = amount / props.volume if key == "mass" else amount
+        rotation = np.asarray(geom.pose.rotation)
+        return _GeomMass(
+            density * props.volume,
+            geom.pose.act(props.com),
+            rotation @ (density * props.inertia) @ rotation.T,
+        )
+
+
+def _shape_mass(kind: str, size: np.ndarray, shell: bool) -> tuple[float, np.ndarray]:
+    """A primitive's volume (its area for a shell) and its principal moments per unit mass,
+    MuJoCo's formulas."""
+    pi = math.pi
+    if kind == "sphere":
+        r = size[0]
+        if shell:
+            return 4 * pi * r**2, np.full(3, 2 * r**2 / 3)
+        return 4 * pi * r**3 / 3, np.full(3, 2 * r**2 / 5)
+    if kind in ("capsule", "cylinder"):
+        r, half = size
+        h = 2 * half
+        if kind == "cylinder" and not shell:
+            return pi * r * r * h, np.array([(3 * r * r + h * h) / 12] * 2 + [r * r / 2])
+        if kind == "cylinder":
+            disk, side = pi * r * r, 2 * pi * r * h
+            m_disk = disk / (2 * disk + side)
+            m_side = 1 - 2 * m_disk
+            across = m_side * (6 * r * r + h * h) / 12 + 2 * (m_disk * r * r / 4 + m_disk * half**2)
+            along = m_side * r * r + 2 * m_disk * r * r / 2
+            return 2 * disk + side, np.array([across, across, along])
+        if not shell:
+            m_sphere = 4 * r / (4 * r + 3 * h)
+            m_cyl = 1 - m_sphere
+            across = (
+                m_cyl * (3 * r * r + h * h) / 12
+                + 2 * m_sphere * r * r / 5
+                + m_sphere * h * (3 * r + 2 * h) / 8
+            )
+            along = m_cyl * r * r / 2 + 2 * m_sphere * r * r / 5
+            return pi * (r * r * h + 4 * r**3 / 3), np.array([across, across, along])
+        a_sphere, a_cyl = 4 * pi * r * r, 2 * pi * r * h
+        m_sphere = a_sphere / (a_sphere + a_cyl)
+        m_cyl = 1 - m_sphere
+        hs_com, hs_pos = r / 2, half + r / 2
+        across = (
+            m_cyl * (6 * r * r + h * h) / 12
+            + 2 * m_sphere * r * r / 3
+            + m_sphere * (hs_pos**2 - hs_com**2)
+        )
+        along = m_cyl * r * r + 2 * m_sphere * r * r / 3
+        return a_sphere + a_cyl, np.array([across, across, along])
+    s2 = size**2
+    if kind == "ellipsoid":
+        solid = np.array([s2[1] + s2[2], s2[0] + s2[2], s2[0] + s2[1]]) / 5
+        if not shell:
+            return 4 * pi * size.prod() / 3, solid
+        p = 1.6075
+        area = (
+            4
+            * pi
+            * (((size[0] * size[1]) ** p + (size[1] * size[2]) ** p + (size[2] * size[0]) ** p) / 3)
+            ** (1 / p)
+        )
+        # MuJoCo's approximation: the solid grown by 1e-6 minus the solid, at one density.
+        grown = size + 1e-6
+        v_a, v_b = 4 * pi * size.prod() / 3, 4 * pi * grown.prod() / 3
+        g2 = grown**2
+        outer = np.array([g2[1] + g2[2], g2[0] + g2[2], g2[0] + g2[1]]) / 5
+        return area, (v_b * outer - v_a * solid) / (v_b - v_a)
+    # box
+    if not shell:
+        return 8 * size.prod(), np.array([s2[1] + s2[2], s2[0] + s2[2], s2[0] + s2[1]]) / 3
+    lx, ly, lz = 2 * size
+    a0, a1, a2 = lx * ly, ly * lz, lz * lx
+    total = 2 * (a0 + a1 + a2)
+    m0, m1, m2 = a0 / total, a1 / total, a2 / total
+    ix = 2 * (
+        m0 * s2[2] + m2 * s2[1] + m0 * ly**2 / 12 + m1 * (ly**2 + lz**2) / 12 + m2 * lz**2 / 12
+    )
+    iy = 2 * (
+        m0 * s2[2] + m1 * s2[0] + m0 * lx**2 / 12 + m1 * lz**2 / 12 + m2 * (lx**2 + lz**2) / 12
+    )
+    iz = 2 * (
+        m1 * s2[0] + m2 * s2[1] + m0 * (lx**2 + ly**2) / 12 + m1 * ly**2 / 12 + m2 * lx**2 / 12
+    )
+    return total, np.array([ix, iy, iz])
 
 
 def _structure(reader: _Reader, floating: bool) -> tuple[_Body | None, str | None]:
@@ -1300,4 +1774,5 @@ def load_mjcf(path: str | Path, floating: bool = False) -> MjcfModel:
         loops=loops,
         start=start,
         notes=reader.notes,
+        inertias=writer.inertias,
     )

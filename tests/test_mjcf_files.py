@@ -442,3 +442,81 @@ def test_mesh_refusals_name_the_file_and_a_way_forward(tmp_path):
     flat[:, 2] = 0.0  # no volume
     write_stl(tmp_path / "flat.stl", flat, faces)
     assert 'inertia="shell"' in refusal("flat.stl")
+
+
+# --- <flag limit="disable"/> and tendons ------------------------------------------------------
+
+TENDONS = """<mujoco model="tendons">
+  <compiler angle="radian"/>
+  {option}
+  <worldbody>
+    <body name="upper" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0" range="-0.5 0.5"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02"/>
+      <body name="lower" pos="0.3 0 0">
+        <joint name="elbow" axis="0 1 0" stiffness="2" springref="0.3"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02"/>
+      </body>
+    </body>
+  </worldbody>
+  <tendon>
+    <fixed name="coupling" range="-0.1 0.1" stiffness="{stiffness}">
+      <joint joint="shoulder" coef="1"/><joint joint="elbow" coef="-1"/>
+    </fixed>
+  </tendon>
+</mujoco>"""
+
+
+@pytest.mark.parametrize(
+    "option, stiffness, refused",
+    [
+        ("", "0", "tendon limit"),
+        ('<option><flag limit="disable"/></option>', "0", None),
+        ('<option><flag constraint="disable"/></option>', "0", None),
+        ('<option><flag limit="disable"/></option>', "5", "tendon spring"),
+        ('<option><flag limit="disable" spring="disable"/></option>', "5", None),
+    ],
+)
+def test_disabled_limits_and_springs_reach_tendons(option, stiffness, refused, tmp_path, mujoco):
+    # MuJoCo's limit flag disables tendon ranges as it does joint ranges, its spring flag
+    # tendon springs as joint springs; the rest is then the one MuJoCo's forces hold.
+    path = tmp_path / "tendons.xml"
+    path.write_text(TENDONS.format(option=option, stiffness=stiffness))
+    if refused:
+        with pytest.raises(MjcfError, match=refused):
+            load_mjcf(path)
+        return
+    notes = " | ".join(load_mjcf(path).notes)
+    assert "ranges of tendons coupling not applied: limits are disabled" in notes
+    assert ("springs of tendons coupling not applied" in notes) == (stiffness != "0")
+    out = solve_json(str(path))
+    assert_rest_is_mujocos(mujoco, path, out)
+    # Joint ranges are off too: the shoulder hangs past its range's 0.5.
+    assert out["at_limit"] == {} and abs(out["joints"]["shoulder"]) > 0.5
+
+
+def copy_of_assets(tmp_path: Path, assets: Path, folder: str) -> Path:
+    """A writable copy of a package's model folder, its shared meshes and textures linked."""
+    import shutil
+
+    shutil.copytree(assets / folder, tmp_path / folder)
+    for shared in assets.iterdir():
+        if shared.is_dir() and shared.name != folder:
+            (tmp_path / shared.name).symlink_to(shared, target_is_directory=True)
+    return tmp_path / folder
+
+
+def test_shadow_hand_with_limits_disabled(tmp_path, mujoco):
+    # gymnasium_robotics' Shadow hand (hand/reach.xml) has 44 fixed tendons with ranges: with
+    # <flag limit="disable"/> added, it loads and rests where MuJoCo's forces hold it.
+    assets = require("gymnasium_robotics") / "envs" / "assets"
+    original = model_file("gymnasium_robotics", "envs", "assets", "hand", "reach.xml")
+    folder = copy_of_assets(tmp_path, assets, "hand")
+    text = original.read_text()
+    assert 'limit="disable"' not in text  # the file as shipped: its tendon ranges hold
+    path = folder / "reach_without_limits.xml"
+    flag = '<option><flag limit="disable"/></option>'
+    path.write_text(text.replace("</compiler>", f"</compiler>{flag}", 1))
+    notes = " | ".join(load_mjcf(path).notes)
+    assert "ranges of tendons robot0:T_WRJ1r" in notes and "and 40 more not applied" in notes
+    assert_rest_is_mujocos(mujoco, path, solve_json(str(path)))

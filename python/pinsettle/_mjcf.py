@@ -217,6 +217,7 @@ _TOP_LEVEL = {
 }
 _ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
 _JOINT_KINDS = ("hinge", "slide", "ball", "free")
+_LIMITED = ("true", "false", "auto")
 _MASS_SHAPES = {"sphere": 1, "capsule": 2, "cylinder": 2, "box": 3, "ellipsoid": 3}
 _ASSET_FILES = {
     "mesh": ("file",),
@@ -1062,22 +1063,43 @@ def _joint_statics(reader: _Reader, flags: Mapping[str, bool]) -> _Statics:
     return _Statics(limits, springs)
 
 
-def _other_sections(reader: _Reader) -> None:
-    """Tendons, actuators, deformables: refused when they act at rest, else noted."""
+def _other_sections(reader: _Reader, flags: Mapping[str, bool]) -> None:
+    """Tendons, actuators, deformables: refused when they act at rest, else noted. A tendon's
+    spring and range are off with MuJoCo's spring and limit flags, as a joint's are."""
+    springs_off: list[str] = []
+    ranges_off: list[str] = []
+    tendons: list[str] = []
     for section in reader.root.findall("tendon"):
-        for el in section:
+        for k, el in enumerate(section):
             attrs = reader._resolved(el, None, "tendon")
+            label = el.get("name") or f"{el.tag} tendon {k}"
+            tendons.append(label)
             where = f"{reader.path}: {_describe(el)} in <tendon>"
             if np.any(_floats(attrs.get("stiffness", "0"), f"{where} stiffness", (1, 2, 3))):
-                reader.refuse(f"{_describe(el)} in <tendon> with a stiffness (a tendon spring)")
-            limited = attrs.get("limited", "auto")
+                if flags["spring"]:
+                    reader.refuse(f"{_describe(el)} in <tendon> with a stiffness (a tendon spring)")
+                else:
+                    springs_off.append(label)
+            limited = _flag(attrs.get("limited", "auto"), f"{where} limited", _LIMITED)
             if limited == "true" or (
                 limited == "auto" and reader.compiler.autolimits and "range" in attrs
             ):
-                reader.refuse(f"{_describe(el)} in <tendon> with a range (a tendon limit)")
-    tendons = [el.get("name") or el.tag for s in reader.root.findall("tendon") for el in s]
+                if flags["limit"] and flags["constraint"]:
+                    reader.refuse(f"{_describe(el)} in <tendon> with a range (a tendon limit)")
+                else:
+                    ranges_off.append(label)
     if tendons:
-        reader.notes.append(f"ignored: tendons {_names(tendons)} (no spring, no limit)")
+        reader.notes.append(f"ignored: tendons {_names(tendons)} (no spring, no limit at work)")
+    if ranges_off:
+        reader.notes.append(
+            f"ranges of tendons {_names(ranges_off)} not applied: limits are disabled "
+            '(<option><flag limit|constraint="disable">)'
+        )
+    if springs_off:
+        reader.notes.append(
+            f"springs of tendons {_names(springs_off)} not applied: springs are disabled "
+            '(<option><flag spring="disable">)'
+        )
     actuators = [el.get("name") or el.tag for s in reader.root.findall("actuator") for el in s]
     if actuators:
         reader.notes.append(
@@ -1736,7 +1758,7 @@ def load_mjcf(path: str | Path, floating: bool = False) -> MjcfModel:
     reader = _Reader(path)
     gravity, flags = _option(reader)
     statics = _joint_statics(reader, flags)
-    _other_sections(reader)
+    _other_sections(reader, flags)
     free_root, root_joint = _structure(reader, floating)
     writer = _Writer(reader, free_root, root_joint)
     if reader.refusals:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pinocchio
 
+from ._urdf_mimic import parse_xml
 from .robots import build_urdf_model, robots_dir
 
 if sys.version_info >= (3, 11):
@@ -66,7 +67,7 @@ def file_kind(path: Path) -> str:
         return "scene"
     xml_error = ""
     try:
-        root = ET.parse(path).getroot().tag
+        root = parse_xml(path).tag
     except ET.ParseError as error:
         root, xml_error = None, f"not well-formed XML: {error}"
     except OSError as error:
@@ -99,8 +100,13 @@ def file_kind(path: Path) -> str:
     # reader accepts more, and its MJCF reader can fail hard on what it then finds.
     reason = f"the root element is <{root}>, not <mujoco>" if root is not None else xml_error
     reasons.append(f"as MJCF: {reason}")
+    hint = (
+        ": it is a part of an MJCF file (<include>d by one): solve the file that includes it"
+        if root == "mujocoinclude"
+        else ""
+    )
     raise ValueError(
-        f"{path}: neither a scene, a URDF nor an MJCF file; read " + "; read ".join(reasons)
+        f"{path}: neither a scene, a URDF nor an MJCF file; read " + "; read ".join(reasons) + hint
     )
 
 

@@ -6,16 +6,18 @@ Only the kinematic and inertial model is built: meshes are never loaded for solv
 from __future__ import annotations
 
 import os
+import re
 import site
 import sys
 import tempfile
 import warnings
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pinocchio
 
 from ._checks import unknown_key_message
-from ._urdf_mimic import urdf_mimic_tags
+from ._urdf_mimic import parse_xml, urdf_mimic_tags, xml_bytes
 
 # name -> (URDF path below example-robot-data/robots, root attached by a free-flyer joint)
 ROBOTS: dict[str, tuple[str, bool]] = {
@@ -129,11 +131,74 @@ def warn_of_mimic_tags(path: Path, instead: str) -> None:
         )
 
 
+# The URDF joint types urdfdom knows (PyBullet reads 'spherical' too; urdfdom does not).
+URDF_JOINT_TYPES = "revolute, continuous, prismatic, fixed, floating, planar"
+
+
+def _merge(reasons: list[str]) -> list[str]:
+    """urdfdom's reasons, repeats of one reason on several elements merged into one line
+    ("Could not parse collision element for Link [a] (and on [b], [c] and 5 more)")."""
+    groups: dict[str, list[str]] = {}
+    for reason in reasons:
+        groups.setdefault(re.sub(r"\[[^\]]*\]", "[]", reason), []).append(reason)
+    merged = []
+    for items in groups.values():
+        if len(items) == 1:
+            merged.append(items[0])
+            continue
+        names = [m.group(0) for item in items[1:] for m in [re.search(r"\[[^\]]*\]", item)] if m]
+        more = f" and {len(names) - 2} more" if len(names) > 2 else ""
+        merged.append(f"{items[0]} (and on {', '.join(names[:2])}{more})")
+    return merged
+
+
+def _urdf_fault(path: Path, reasons: list[str], error: BaseException | None) -> str:
+    """One short line for a URDF urdfdom refuses: its first reasons (repeats merged, the
+    consequences of a joint's fault left out) and what to do."""
+    reasons = [" ".join(r.split()).removeprefix("Error:").strip() for r in reasons]
+    if any("XML_ERROR" in reason for reason in reasons):
+        # TinyXML's codes name no cause: ElementTree's reason does, when it has one.
+        try:
+            parse_xml(path)
+        except ET.ParseError as xml_error:
+            reasons = [f"not well-formed XML ({xml_error})"]
+        except OSError:
+            pass
+    reasons = [r for r in reasons if r != "joint xml is not initialized correctly"]
+    merged = _merge(reasons) or [str(error) if error is not None else "no reason given"]
+    text = "; ".join(merged[:2]) + (
+        f" (and {len(merged) - 2} more fault{'s' if len(merged) > 3 else ''})"
+        if len(merged) > 2
+        else ""
+    )
+    joined = " ".join(reasons)
+    if "no known type" in joined:
+        hint = f"URDF joint types: {URDF_JOINT_TYPES}"
+    elif "$(" in joined or "${" in joined:
+        hint = "the file holds xacro substitutions: expand it with xacro first"
+    elif "visual element" in joined or "collision element" in joined:
+        hint = (
+            "urdfdom checks <visual> and <collision> (pinsettle never uses them): fix or drop them"
+        )
+    else:
+        hint = "correct the file there"
+    return f"{path}: the URDF does not parse: {text}; {hint}"
+
+
 def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Model:
     """:func:`load_urdf` without the warning (for callers that apply the tags)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"URDF file not found: {path}")
+    # urdfdom refuses a comment before the XML declaration: such a file is given as text with
+    # its declaration first (Pinocchio's XML-string builder).
+    try:
+        data = xml_bytes(path)
+        text = data.decode("utf-8") if data != path.read_bytes() else None
+    except UnicodeDecodeError:
+        text = None
+    except OSError as os_error:
+        raise ValueError(f"{path}: cannot read the file: {os_error}") from None
     # The URDF parser (urdfdom, C++) prints its reasons on the process's stderr: capture them,
     # to put them in the message on failure, and pass them on (warnings) on success.
     with tempfile.TemporaryFile(mode="w+b") as captured:
@@ -141,10 +206,11 @@ def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Mode
         saved = os.dup(2)
         os.dup2(captured.fileno(), 2)
         try:
-            if floating:
-                model = pinocchio.buildModelFromUrdf(str(path), pinocchio.JointModelFreeFlyer())
+            root = [pinocchio.JointModelFreeFlyer()] if floating else []
+            if text is not None:
+                model = pinocchio.buildModelFromXML(text, *root)
             else:
-                model = pinocchio.buildModelFromUrdf(str(path))
+                model = pinocchio.buildModelFromUrdf(str(path), *root)
             error = None
         except (RuntimeError, ValueError) as e:
             error = e
@@ -164,8 +230,7 @@ def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Mode
     # parse, not solved as a different mechanism.
     dropped = any(reason.startswith("Error:") for reason in reasons)
     if error is not None or dropped:
-        detail = "; ".join(" ".join(reason.split()) for reason in reasons) or str(error)
-        raise ValueError(f"{path}: the URDF does not parse: {detail}")
+        raise ValueError(_urdf_fault(path, reasons, error))
     if parser_says:
         print(parser_says, file=sys.stderr)
     return model

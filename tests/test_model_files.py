@@ -858,8 +858,9 @@ def test_talos_starts_half_sitting(tmp_path):
     # Floating, the free-flyer takes the SRDF's root pose too.
     toml.write_text(toml.read_text().replace("[start]", "floating = true\n[start]"))
     scene = pinsettle.load_scene(toml)
+    x, y, z, qx, qy, qz, qw = expected["root_joint"]  # the SRDF holds Pinocchio's q, w last
     assert scene.joint_values(scene.q0())["root_joint"] == pytest.approx(
-        expected["root_joint"], abs=1e-15
+        [x, y, z, qw, qx, qy, qz], abs=1e-15
     )
     # And through the CLI, with an override on top of the pose.
     proc = run("solve", str(toml), "--start", "arm_left_4_joint=-1.0", "--max-steps", "1")
@@ -927,5 +928,5 @@ def test_mjcf_keyframes_are_poses(tmp_path):
     assert scene.poses == ["home", "qpos0"]
     scene.set_pose("home")
     values = scene.joint_values(scene.q0())
-    assert values["root"] == pytest.approx([1, 2, 3, 1, 0, 0, 0])  # x y z, then x y z w
+    assert values["root"] == pytest.approx([1, 2, 3, 0, 1, 0, 0])  # by name: MuJoCo's qpos
     assert values["shoulder"] == pytest.approx(0.4) and values["twist"] == pytest.approx(-0.2)

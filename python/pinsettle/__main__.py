@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import signal
 import sys
 import time
@@ -92,7 +93,11 @@ def _add_start_flag(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="JOINT=VALUE",
-        help="override a start value (repeatable; comma-separated for a multi-DoF joint)",
+        help="override a joint's start value (repeatable): a number (rad or m), or "
+        "comma-separated values for a multi-DoF joint, a quaternion w first as in MuJoCo's "
+        "qpos: a free joint x,y,z,qw,qx,qy,qz (root=0,0,1.4,1,0,0,0: 1.4 m up, not turned), "
+        "a ball joint qw,qx,qy,qz. The JSON's 'joints' use this order too; its 'q' is "
+        "Pinocchio's (w last)",
     )
 
 
@@ -174,8 +179,9 @@ def _demo(args: argparse.Namespace) -> int:
     return 0 if result.converged else 1
 
 
-def _parse_start(items: list[str]) -> dict[str, float | list[float]]:
-    out: dict[str, float | list[float]] = {}
+def _parse_start(items: list[str]) -> list[tuple[str, str, float | list[float]]]:
+    """(the flag's text, joint name, value) of each --start JOINT=VALUE, in order."""
+    out: list[tuple[str, str, float | list[float]]] = []
     for item in items:
         name, sep, text = item.partition("=")
         if not sep or not name:
@@ -186,7 +192,7 @@ def _parse_start(items: list[str]) -> dict[str, float | list[float]]:
             raise ValueError(
                 f"--start {name}: expected a number or comma-separated numbers, got '{text}'"
             ) from None
-        out[name] = values[0] if len(values) == 1 else values
+        out.append((item, name, values[0] if len(values) == 1 else values))
     return out
 
 
@@ -196,11 +202,34 @@ def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray |
     scene = pinsettle.load_scene(args.scene, floating=True if args.floating else None)
     if not args.start:
         return scene, None
-    try:
-        scene.set_start(_parse_start(args.start))
-    except pinsettle.SceneError as error:
-        raise pinsettle.SceneError(f"--start: {error}") from None
+    for item, name, value in _parse_start(args.start):
+        # An error names the flag as typed: "--start root=0,0,1,2,0,0,0: the quaternion ..."
+        scene._set_joint_start(name, value, f"--start {item}")
     return scene, scene.q0()
+
+
+# The C++ configuration check's message (Python API users pass Pinocchio's q, and read this):
+# "q0[0:7] (joint 'root', JointModelFreeFlyer) = [...] holds a quaternion or cos/sin pair of
+# norm 2; it must be 1 within 1e-6 (e.g. pinocchio.normalize)".
+_UNIT_NORM = re.compile(
+    r"^q0?\[\d+:\d+\] \(joint '(?P<joint>[^']*)', (?P<kind>\w+)\) = \[[^\]]*\] holds a "
+    r"quaternion or cos/sin pair of norm (?P<norm>\S+); it must be 1 within \S+ "
+    r"\(e\.g\. pinocchio\.normalize\)$"
+)
+
+
+def _for_the_command_line(message: str) -> str:
+    """An error of the Python layer as a command-line user reads it: the start of a joint by
+    name, its value w first, instead of Pinocchio's configuration indices."""
+    found = _UNIT_NORM.match(message)
+    if found is None:
+        return message
+    joint, kind, norm = found.group("joint", "kind", "norm")
+    return (
+        f"the start of joint '{joint}' ({kind}) holds a quaternion or cos/sin pair of norm "
+        f"{norm}; give it unit norm, a quaternion w first (--start {joint}=... as in MuJoCo's "
+        "qpos: x,y,z,qw,qx,qy,qz for a free joint, qw,qx,qy,qz for a ball joint)"
+    )
 
 
 def _solve(args: argparse.Namespace) -> int:
@@ -387,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
         status: int = args.func(args)
         return status
     except (ValueError, TypeError, FileNotFoundError, IsADirectoryError) as error:
-        print(f"pinsettle: error: {error}", file=sys.stderr)
+        print(f"pinsettle: error: {_for_the_command_line(str(error))}", file=sys.stderr)
         return 2
     except ImportError as error:  # pinsettle play without its optional extra
         from pinsettle.play import MissingDependencyError

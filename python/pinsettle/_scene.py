@@ -162,11 +162,75 @@ def _vector(value: Any, name: str, size: int) -> tuple[float, ...]:
 def _close(name: str, known: Sequence[str], kind: str) -> str:
     close = difflib.get_close_matches(name, known, n=1)
     hint = f" (did you mean '{close[0]}'?)" if close else ""
-    return f"unknown {kind} '{name}'{hint}; {kind}s: {', '.join(known)}"
+    # A hand or a humanoid has 30 to 90 joints and more frames: the first few, then a count.
+    shown = ", ".join(known[:8]) + (f" and {len(known) - 8} more" if len(known) > 8 else "")
+    return f"unknown {kind} '{name}'{hint}; {kind}s: {shown}"
 
 
 def _joint_kind(model: pinocchio.Model, j: int) -> str:
     return str(model.joints[j].shortname())
+
+
+# --- per-joint values by name ------------------------------------------------------------------
+#
+# Everywhere a joint's value is given or shown by name (set_start, [start], --start, set_pose,
+# Result.joints, the JSON's "joints") a quaternion is written w first, (w, x, y, z), as MuJoCo's
+# qpos: a free-flyer is (x, y, z, qw, qx, qy, qz), a spherical (ball) joint (qw, qx, qy, qz).
+# Pinocchio's configuration q (Result.q, q0) keeps its own order, (x, y, z, w).
+
+#: A quaternion given by name may be off unit norm by this much (values typed to 4 digits,
+#: 0.7071 for cos 45 degrees): it is normalised. Further off it is an error.
+UNIT_NORM_SLACK = 1e-3
+
+#: What the value of a joint given as a list holds, for messages.
+_LAYOUTS = {
+    "JointModelFreeFlyer": "a free joint's value is x, y, z, qw, qx, qy, qz (m, then a unit "
+    "quaternion w first)",
+    "JointModelSpherical": "a ball joint's value is qw, qx, qy, qz (a unit quaternion, w first)",
+    "JointModelPlanar": "a planar joint's value is x, y, cos, sin (m, then a unit cos/sin pair)",
+}
+
+
+def _unit_parts(model: pinocchio.Model, j: int) -> list[tuple[int, int]]:
+    """(offset, size) in joint j's configuration segment of each part that has unit norm: a
+    quaternion (4 entries, Pinocchio's x, y, z, w) or a cos/sin pair (2)."""
+    base = int(model.idx_qs[j])
+
+    def parts(joint: Any) -> list[tuple[int, int]]:
+        kind = str(joint.shortname())
+        at = int(joint.idx_q) - base
+        if kind == "JointModelFreeFlyer":
+            return [(at + 3, 4)]
+        if kind == "JointModelSpherical":
+            return [(at, 4)]
+        if kind == "JointModelPlanar":
+            return [(at + 2, 2)]
+        if kind == "JointModelComposite":
+            return [p for part in joint.extract().joints for p in parts(part)]
+        if joint.nq == 2 and joint.nv == 1:  # a continuous joint's (cos, sin)
+            return [(at, 2)]
+        return []
+
+    return parts(model.joints[j])
+
+
+def named_value(model: pinocchio.Model, j: int, segment: Any) -> float | list[float]:
+    """Joint j's value by name from its configuration segment (Pinocchio's order): a number
+    (rad or m) for a 1-DoF joint (the angle of a continuous one), else a list with each
+    quaternion w first."""
+    x = [float(v) for v in segment]
+    if model.nvs[j] == 1 and len(x) == 2:
+        return math.atan2(x[1], x[0])
+    if len(x) == 1:
+        return x[0]
+    for at, size in _unit_parts(model, j):
+        if size == 4:
+            x[at : at + 4] = [x[at + 3], *x[at : at + 3]]
+    return x
+
+
+def _show(values: Any) -> str:
+    return ", ".join(f"{v:g}" for v in values)
 
 
 def _is_angle_pair(model: pinocchio.Model, j: int) -> bool:
@@ -362,7 +426,10 @@ class Scene:
             try:
                 self.add_coupling(tag.follower, tag.leader, tag.multiplier, tag.offset)
             except SceneError as error:
-                raise SceneError(f"the <mimic> tag of joint '{tag.follower}': {error}") from None
+                raise SceneError(
+                    f"{path}: the <mimic> tag of joint '{tag.follower}': {error}; correct the "
+                    "tag, or leave the tags out ([model] mimic = false, mimic=False)"
+                ) from None
         self.notes.append(
             "URDF <mimic> tags honoured as joint couplings (mimic = true): "
             + "; ".join(c.text() for c in self.couplings[-len(tags) :])
@@ -392,7 +459,17 @@ class Scene:
             scene.add_joint_spring(joint, stiffness, rest)
         for frame_a, point_a, frame_b, point_b, kind in mjcf.loops:
             scene.add_loop((frame_a, point_a), (frame_b, point_b), kind)
-        scene.set_start(mjcf.start)
+        # The reader gives a multi-DoF joint's start as its configuration entries in
+        # Pinocchio's order (a quaternion w last): set_start takes the by-name order.
+        model = scene.model
+        scene.set_start(
+            {
+                joint: named_value(model, model.getJointId(joint), value)
+                if isinstance(value, list)
+                else value
+                for joint, value in mjcf.start.items()
+            }
+        )
         return scene
 
     @property
@@ -441,16 +518,16 @@ class Scene:
             )
         model = self.model
         q = pinocchio.normalize(model, self.model.referenceConfigurations[name])
-        values: dict[str, Any] = {}
-        for j in range(1, model.njoints):
-            segment = q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]]
-            if _is_angle_pair(model, j):
-                values[model.names[j]] = math.atan2(segment[1], segment[0])
-            elif model.nqs[j] == 1:
-                values[model.names[j]] = float(segment[0])
-            else:
-                values[model.names[j]] = [float(x) for x in segment]
-        self.set_start(values)
+        # Each joint's value in the by-name convention (quaternions w first), as set_start
+        # takes it: a pose is a start like any other.
+        self.set_start(
+            {
+                model.names[j]: named_value(
+                    model, j, q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]]
+                )
+                for j in range(1, model.njoints)
+            }
+        )
         if name in self._pose_notes and self._pose_notes[name] not in self.notes:
             self.notes.append(self._pose_notes[name])
         return self
@@ -498,35 +575,79 @@ class Scene:
         self._compiled = None
 
     def set_start(self, values: Mapping[str, Any] | None = None, **kwargs: Any) -> Scene:
-        """Start values by joint name: a number (rad or m) for a 1-DoF joint, a list of its
-        configuration entries for a multi-DoF joint. Joints not named start at neutral."""
+        """Start values by joint name: a number (rad or m) for a 1-DoF joint (the angle of a
+        continuous one), a list for a multi-DoF joint, each quaternion w first as in MuJoCo's
+        qpos: a free-flyer (x, y, z, qw, qx, qy, qz), a spherical joint (qw, qx, qy, qz). A
+        quaternion within 1e-3 of unit norm is normalised. Joints not named start at neutral.
+
+        Raises:
+            SceneError: an unknown joint, a value of the wrong kind or count, a quaternion or
+                cos/sin pair far from unit norm (the message names the joint).
+        """
         for joint, value in {**(values or {}), **kwargs}.items():
-            j = self._joint_id(joint, f"start '{joint}'")
-            self._start[joint] = self._joint_start(j, value, f"start '{joint}'")
+            self._set_joint_start(joint, value, f"start '{joint}'")
         self._changed()
         return self
 
+    def _set_joint_start(self, joint: Any, value: Any, where: str) -> None:
+        """One joint's start by name; errors begin with ``where`` (the key the user wrote)."""
+        j = self._joint_id(joint, where)
+        self._start[joint] = self._joint_start(j, value, where)
+        self._changed()
+
     @property
     def start(self) -> dict[str, Any]:
-        return dict(self._start)
+        """The start values set, by joint name, as ``set_start`` takes them: a number for a
+        1-DoF joint, an array (quaternions w first) for a multi-DoF joint."""
+        out: dict[str, Any] = {}
+        for joint, segment in self._start.items():
+            value = named_value(self.model, self.model.getJointId(joint), segment)
+            out[joint] = np.array(value) if isinstance(value, list) else value
+        return out
 
     def _joint_start(self, j: int, value: Any, name: str) -> np.ndarray:
+        """Joint j's configuration segment (Pinocchio's order) from its value by name."""
         model = self.model
         nq = model.nqs[j]
+        kind = _joint_kind(model, j)
+        layout = _LAYOUTS.get(kind)
         if model.nvs[j] == 1:
             if isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str):
                 raise SceneError(
-                    f"{name}: joint '{model.names[j]}' ({_joint_kind(model, j)}) has one degree "
-                    f"of freedom: give one number (rad or m), got {value!r}"
+                    f"{name}: joint '{model.names[j]}' ({kind}) has one degree of freedom: give "
+                    f"one number (rad or m), got {value!r}"
                 )
             x = _number(value, name)
             return np.array([math.cos(x), math.sin(x)]) if nq == 2 else np.array([x])
         if not isinstance(value, (Sequence, np.ndarray)) or isinstance(value, str):
             raise SceneError(
-                f"{name}: joint '{model.names[j]}' ({_joint_kind(model, j)}) has {nq} "
-                f"configuration entries: give a list of {nq} numbers, got {value!r}"
+                f"{name}: joint '{model.names[j]}' ({kind}) has {nq} configuration entries: "
+                f"give a list of {nq} numbers, got {value!r}" + (f"; {layout}" if layout else "")
             )
-        return np.array(_vector(value, name, nq))
+        if layout and not isinstance(value, (str, bytes, Mapping)) and len(value) != nq:
+            raise SceneError(
+                f"{name}: joint '{model.names[j]}' must have {nq} entries, got {len(value)}: "
+                f"{list(value)!r}; {layout}"
+            )
+        segment = np.array(_vector(value, name, nq))
+        for at, size in _unit_parts(model, j):
+            part = segment[at : at + size]
+            norm = float(np.linalg.norm(part))
+            if abs(norm - 1.0) > UNIT_NORM_SLACK:
+                if size == 4:
+                    raise SceneError(
+                        f"{name}: the quaternion (qw, qx, qy, qz) = ({_show(part)}) has norm "
+                        f"{norm:.6g}; give a unit quaternion, w first (1, 0, 0, 0: no rotation)"
+                    )
+                raise SceneError(
+                    f"{name}: the cos/sin pair ({_show(part)}) of joint '{model.names[j]}' has "
+                    f"norm {norm:.6g}; give a unit pair (1, 0: angle 0)"
+                    + (f"; {layout}" if layout else "")
+                )
+            segment[at : at + size] = part / norm
+            if size == 4:  # w first by name, last in Pinocchio's q
+                segment[at : at + 4] = segment[[at + 1, at + 2, at + 3, at]]
+        return segment
 
     def lock(self, *joints: str) -> Scene:
         """Hold joints at their start value and leave them out of the solve."""
@@ -958,7 +1079,12 @@ class _Compiled:
         else:
             model = full
         if model.nv == 0:
-            raise SceneError("every joint is locked: nothing to settle")
+            raise SceneError(
+                "every joint is locked: nothing to settle"
+                if locked_ids
+                else "no joint moves (the model's joints are all fixed): nothing to settle; "
+                "a free-flyer on the root (--floating, [model] floating = true) lets it fall"
+            )
         self.model = model
         kept = [j for j in range(1, full.njoints) if j not in locked_ids]
         # Reduced coordinates are the kept joints' segments, in the same order.
@@ -1118,19 +1244,12 @@ class _Compiled:
 
 
 def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | list[float]]:
-    """Joint values by name: a number for a 1-DoF joint (the angle of a continuous joint), a
-    list of configuration entries for a multi-DoF joint."""
-    out: dict[str, float | list[float]] = {}
-    for j in range(1, model.njoints):
-        iq, nq = model.idx_qs[j], model.nqs[j]
-        segment = q[iq : iq + nq]
-        if model.nvs[j] == 1 and nq == 2:
-            out[model.names[j]] = math.atan2(segment[1], segment[0])
-        elif nq == 1:
-            out[model.names[j]] = float(segment[0])
-        else:
-            out[model.names[j]] = [float(x) for x in segment]
-    return out
+    """Joint values by name (``named_value``): a number for a 1-DoF joint (the angle of a
+    continuous joint), a list for a multi-DoF joint, each quaternion w first."""
+    return {
+        model.names[j]: named_value(model, j, q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]])
+        for j in range(1, model.njoints)
+    }
 
 
 # --- the scene file ----------------------------------------------------------------------------

@@ -93,7 +93,9 @@ class Result:
     scene, locked joints included); ``status`` is one of 'converged', 'max_steps',
     'time_limit', 'aborted', 'diverged'; ``residual`` is max |rnea(q, 0, 0) - applied efforts|
     over the free joints in N m or N; energies are those of the final state; ``joints`` maps
-    each joint name to its final value (a number for a 1-DoF joint, a list otherwise).
+    each joint name to its final value (a number for a 1-DoF joint, a list otherwise, each
+    quaternion w first as ``Scene.set_start`` takes it: a free-flyer x, y, z, qw, qx, qy, qz,
+    a spherical joint qw, qx, qy, qz; ``q`` keeps Pinocchio's order, w last).
     ``stability`` is 'stable', 'neutral' or 'unstable' from the eigenvalues of the stiffness
     matrix at ``q`` (``min_stiffness_eigenvalue`` the smallest, N m/rad or N/m;
     ``neutral_directions`` how many are zero within the tolerance); ``pushes`` counts the

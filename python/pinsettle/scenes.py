@@ -3,10 +3,9 @@ package, by name."""
 
 from __future__ import annotations
 
+import difflib
 import os
 from pathlib import Path
-
-from ._checks import unknown_key_message
 
 
 def scenes_dir() -> Path:
@@ -33,7 +32,12 @@ def scene_path(scene: str | os.PathLike[str]) -> Path:
         return scenes_dir() / f"{name}.toml"
     if path.suffix == ".toml" or path.parent != Path("."):
         raise FileNotFoundError(f"scene file not found: {path}")
+    names = scene_names()
+    close = difflib.get_close_matches(name, names, n=1)
+    # The library has 20-odd scenes: the first few, and the command that lists them all.
+    shown = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
     raise FileNotFoundError(
-        f"no scene file '{scene}' here and no such scene in the library: "
-        + unknown_key_message("scene", name, scene_names())
+        f"no scene file '{scene}' here and no such scene in the library: unknown scene "
+        f"'{name}'" + (f" (did you mean '{close[0]}'?)" if close else "") + f"; scenes: "
+        f"{shown} (`pinsettle scenes` lists them)"
     )

@@ -114,7 +114,7 @@ def assert_inertias_are_mujocos(mujoco, path: Path, **options) -> int:
         scale = max(1.0, float(np.abs(mj.body_ipos[b]).max()))
         assert mass == pytest.approx(mj.body_mass[b], rel=1e-12), name
         assert np.abs(com - mj.body_ipos[b]).max() < 1e-12 * scale, name
-        assert np.abs(inertia - expected).max() < 1e-7 * np.abs(expected).max(), name
+        assert np.abs(inertia - expected).max() <= 1e-7 * np.abs(expected).max(), name
         moments = np.sort(np.linalg.eigvalsh(inertia))
         assert moments == pytest.approx(np.sort(mj.body_inertia[b]), rel=1e-6), name
         compared += 1
@@ -122,11 +122,14 @@ def assert_inertias_are_mujocos(mujoco, path: Path, **options) -> int:
 
 
 def to_qpos(mj, model: pinocchio.Model, q: np.ndarray) -> np.ndarray:
-    """MuJoCo's qpos of Pinocchio's q, joint by joint (by name; quaternions w first)."""
+    """MuJoCo's qpos of Pinocchio's q, joint by joint (by name; quaternions w first); a joint
+    pinsettle's model lacks (a locked free object's) stays at qpos0, where the file puts it."""
     qpos = mj.qpos0.copy()
     for j in range(mj.njnt):
         name = mj.joint(j).name
         adr = mj.jnt_qposadr[j]
+        if not model.existJointName(name):
+            continue
         iq = model.idx_qs[model.getJointId(name)]
         kind = mj.jnt_type[j]
         if kind == 0:  # free: x y z, then w x y z
@@ -520,3 +523,163 @@ def test_shadow_hand_with_limits_disabled(tmp_path, mujoco):
     notes = " | ".join(load_mjcf(path).notes)
     assert "ranges of tendons robot0:T_WRJ1r" in notes and "and 40 more not applied" in notes
     assert_rest_is_mujocos(mujoco, path, solve_json(str(path)))
+
+
+# --- free objects beside a robot; a file's own free joint ---------------------------------------
+
+OBJECTS = """<mujoco model="objects">
+  <compiler angle="radian"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="2 2 0.1"/>
+    <body name="table" pos="0.6 0 0.2"><geom type="box" size="0.3 0.3 0.2"/></body>
+    <body name="upper" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0" stiffness="30" springref="0.2"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>
+      <body name="lower" pos="0.3 0 0">
+        <joint name="elbow" axis="0 1 0" stiffness="10"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>
+      </body>
+    </body>
+    <body name="crate" pos="0.6 0.1 0.45" euler="0.1 0.2 0.3">
+      <freejoint name="crate_free"/>
+      <geom type="box" size="0.05 0.05 0.05"/>
+    </body>
+    <body name="ball" pos="0.5 -0.1 0.45" quat="0.9 0.1 0.2 0.3">
+      <joint name="ball_free" type="free"/>
+      <geom type="sphere" size="0.04"/>
+      <body name="handle" pos="0 0 0.05"><geom type="capsule" size="0.01 0.03"/></body>
+    </body>
+  </worldbody>
+  <keyframe><key name="raised" qpos="0.5 -0.3 0.6 0.1 0.45 1 0 0 0 0.5 -0.1 0.45 1 0 0 0"/>
+  </keyframe>
+</mujoco>"""
+
+
+def assert_bodies_where_mujoco_puts_them(mujoco, path: Path, scene, qpos) -> None:
+    """Every body's world pose in pinsettle's model at the scene's start equals MuJoCo's at
+    qpos (locked objects: where the file places them)."""
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(mj)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(mj, data)
+    model = scene.model
+    pdata = model.createData()
+    pinocchio.framesForwardKinematics(model, pdata, scene.q0())
+    for b in range(1, mj.nbody):
+        frame = model.getFrameId(body_name(mj, b), pinocchio.FrameType.BODY)
+        placement = pdata.oMf[frame]
+        assert np.abs(placement.translation - data.xpos[b]).max() < 1e-12, body_name(mj, b)
+        assert np.abs(placement.rotation - data.xmat[b].reshape(3, 3)).max() < 1e-12
+
+
+def test_free_objects_kept_fall(tmp_path, mujoco):
+    path = tmp_path / "objects.xml"
+    path.write_text(OBJECTS)
+    scene = pinsettle.load_scene(path)
+    kinds = {scene.model.names[j]: scene.model.joints[j].shortname() for j in range(1, 5)}
+    assert kinds["crate_free"] == kinds["ball_free"] == "JointModelFreeFlyer"
+    notes = " | ".join(scene.notes)
+    assert "free objects crate, ball kept free" in notes and "--free-objects lock" in notes
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    assert_bodies_where_mujoco_puts_them(mujoco, path, scene, mj.qpos0)
+    out = solve_json(str(path))
+    assert out["status"] == "no_equilibrium"
+    assert "crate_free" in out["reason"] or "ball_free" in out["reason"], out["reason"]
+
+
+def test_free_objects_locked_where_the_file_places_them(tmp_path, mujoco):
+    path = tmp_path / "objects.xml"
+    path.write_text(OBJECTS)
+    scene = pinsettle.load_scene(path, free_objects="lock")
+    assert list(scene.model.names)[1:] == ["shoulder", "elbow"]
+    assert "free objects crate, ball locked where the file places them" in scene.notes[-1]
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    assert_bodies_where_mujoco_puts_them(mujoco, path, scene, mj.qpos0)
+    # A keyframe moves the arm; the locked objects stay where the file places them.
+    scene.set_pose("raised")
+    key = mj.key("raised").qpos.copy()
+    key[2:] = mj.qpos0[2:]
+    assert_bodies_where_mujoco_puts_them(mujoco, path, scene, key)
+    out = solve_json(str(path), "--free-objects", "lock")
+    assert_rest_is_mujocos(mujoco, path, out, free_objects="lock")
+    # The same through a scene file's [model] free_objects.
+    toml = tmp_path / "objects.toml"
+    toml.write_text('[model]\nmjcf = "objects.xml"\nfree_objects = "lock"\n')
+    assert solve_json(str(toml))["joints"] == out["joints"]
+
+
+def test_free_objects_errors(tmp_path):
+    path = tmp_path / "objects.xml"
+    path.write_text(OBJECTS)
+    line = one_line_error(run("solve", str(path), "--free-objects", "lock", "--floating"))
+    assert "floating: 2 top-level bodies (table, upper) beside the free objects" in line
+    toml = tmp_path / "bad.toml"
+    toml.write_text('[model]\nmjcf = "objects.xml"\nfree_objects = "hold"\n')
+    line = one_line_error(run("solve", str(toml)))
+    assert "[model] free_objects must be 'keep'" in line and "'hold'" in line
+    only = tmp_path / "only.xml"  # nothing but a free object: locked, nothing is left
+    only.write_text(
+        '<mujoco><worldbody><body name="box" pos="0 0 1"><freejoint/><geom size="0.1"/>'
+        "</body></worldbody></mujoco>"
+    )
+    line = one_line_error(run("solve", str(only), "--free-objects", "lock"))
+    assert "nothing to settle" in line and 'free_objects = "keep"' in line
+    urdf = Path(pinsettle.robot_urdf("ur5"))
+    line = one_line_error(run("solve", str(urdf), "--free-objects", "lock"))
+    assert "free_objects applies to an MJCF file" in line
+
+
+def test_thrower_with_its_free_object(mujoco):
+    # pybullet's thrower.xml: an arm beside a free ball ('object'). Kept, the ball falls and
+    # the solve names it; locked, the arm rests where MuJoCo's forces hold it.
+    path = model_file("pybullet_data", "mjcf", "thrower.xml")
+    out = solve_json(str(path))
+    assert out["status"] == "no_equilibrium" and "'object_free'" in out["reason"]
+    locked = solve_json(str(path), "--free-objects", "lock")
+    assert_rest_is_mujocos(mujoco, path, locked, free_objects="lock")
+
+
+@pytest.mark.parametrize("task", ["pick_and_place.xml", "push.xml", "slide.xml"])
+def test_fetch_tasks_with_a_free_object(task, mujoco):
+    # gymnasium_robotics' Fetch tasks: the robot of reach.xml beside a free block. They load;
+    # locked, the block is where MuJoCo puts it, and the robot is reach.xml's (same joints,
+    # the same masses as MuJoCo's).
+    path = model_file("gymnasium_robotics", "envs", "assets", "fetch", task)
+    reach = model_file("gymnasium_robotics", "envs", "assets", "fetch", "reach.xml")
+    kept = pinsettle.load_scene(path)
+    assert kept.model.names[-1] == "object0:joint" and "object0 kept free" in kept.notes[-1]
+    locked = pinsettle.load_scene(path, free_objects="lock")
+    assert list(locked.model.names) == list(pinsettle.load_scene(reach).model.names)
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    assert_bodies_where_mujoco_puts_them(mujoco, path, locked, mj.qpos0)
+    assert assert_inertias_are_mujocos(mujoco, path, free_objects="lock") == 20
+
+
+FREE_ROBOT = """<mujoco model="free">
+  <worldbody>
+    <body name="torso" pos="0 0 1.2" quat="0.9 0 0.3 0.1">
+      <freejoint name="root"/>
+      <geom type="capsule" size="0.1 0.2"/>
+      <body name="arm" pos="0 0 -0.3"><joint name="shoulder" axis="0 1 0"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.04"/></body>
+    </body>
+  </worldbody>
+</mujoco>"""
+
+
+def test_a_files_own_free_joint_floats_as_the_help_says(tmp_path, mujoco):
+    # The file's <freejoint> floats without --floating (MuJoCo's meaning); --floating adds
+    # nothing to it and says so; the help says both.
+    path = tmp_path / "free.xml"
+    path.write_text(FREE_ROBOT)
+    help_text = " ".join(run("solve", "--help").stdout.split())
+    assert "free by an MJCF <freejoint>, which floats without this flag" in help_text
+    for flags in [(), ("--floating",)]:
+        scene = pinsettle.load_scene(path, floating=True if flags else None)
+        assert scene.model.names[1] == "root" and scene.model.nq == 8
+        mj = mujoco.MjModel.from_xml_path(str(path))
+        assert_bodies_where_mujoco_puts_them(mujoco, path, scene, mj.qpos0)
+        floats = any("floats by the file's own free joint 'root'" in n for n in scene.notes)
+        assert floats == bool(flags)
+        out = solve_json(str(path), "--max-steps", "200", *flags)
+        assert len(out["joints"]["root"]) == 7 and out["notes"] == scene.notes

@@ -78,12 +78,20 @@ def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_floating_flag(parser: argparse.ArgumentParser) -> None:
+def _add_model_file_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--floating",
         action="store_true",
-        help="with a model file (URDF, MJCF): a free-flyer joint on the root body "
-        "(default: root fixed)",
+        help="with a model file (URDF, MJCF): a free-flyer joint on the root body of a file "
+        "that has none (default: the root as the file has it: fixed, or free by an MJCF "
+        "<freejoint>, which floats without this flag)",
+    )
+    parser.add_argument(
+        "--free-objects",
+        choices=["keep", "lock"],
+        help="with an MJCF file: its free objects (bodies whose only joint is a free joint, "
+        "beside the mechanism) stay free and fall (keep, the default) or are fixed where the "
+        "file places them (lock)",
     )
 
 
@@ -199,7 +207,9 @@ def _parse_start(items: list[str]) -> list[tuple[str, str, float | list[float]]]
 def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray | None]:
     """The scene of args.scene (a scene file or name, a URDF or an MJCF file) and the start of
     its --start flags (None: the scene's own)."""
-    scene = pinsettle.load_scene(args.scene, floating=True if args.floating else None)
+    scene = pinsettle.load_scene(
+        args.scene, floating=True if args.floating else None, free_objects=args.free_objects
+    )
     if not args.start:
         return scene, None
     for item, name, value in _parse_start(args.start):
@@ -366,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--json", action="store_true", help="print one JSON object")
     _add_limits_flag(solve, "scene model")
     _add_quiet_flag(solve)
-    _add_floating_flag(solve)
+    _add_model_file_flags(solve)
     _add_start_flag(solve)
     _add_setting_flags(solve)
     solve.set_defaults(func=_solve)
@@ -393,7 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument("--no-open", action="store_true", help="do not open a browser")
     _add_limits_flag(play, "scene model")
     _add_quiet_flag(play)
-    _add_floating_flag(play)
+    _add_model_file_flags(play)
     _add_start_flag(play)
     _add_setting_flags(play)
     play.set_defaults(func=_play)

@@ -1126,7 +1126,7 @@ def _joint_motion(joint: _Joint, value: float) -> pinocchio.SE3:
 class _Writer:
     """The plain MJCF: one root, one joint per body, no defaults, positions and quaternions."""
 
-    def __init__(self, reader: _Reader, free_root: _Body | None, root_joint: str | None) -> None:
+    def __init__(self, reader: _Reader, structure: _Structure) -> None:
         self.reader = reader
         c = reader.compiler
         self.mesh_masses: dict[str, _MeshMass] = {}
@@ -1142,19 +1142,25 @@ class _Writer:
             boundinertia=repr(c.boundinertia),
         )
         world = ET.SubElement(self.xml, "worldbody")
-        if free_root is not None:
-            # The free body is the root, at the origin: Pinocchio misplaces a free body that has
-            # a pose of its own; its pose in the file becomes the start.
-            root = ET.SubElement(world, "body", name=free_root.name)
-            ET.SubElement(root, "freejoint", name=root_joint or free_root.joints[0].name)
-            self._fill(root, free_root)
-        else:
-            # A massless root at the world's origin holds the top-level bodies: Pinocchio reads
-            # only the first top-level body and drops the placement of a fixed root.
-            root = ET.SubElement(world, "body", name="world")
-            self._zero_inertial(root)
-            for body in reader.bodies:
+        if structure.single:
+            self._free(world, reader.bodies[0], structure.free[reader.bodies[0].name])
+            return
+        # A massless root at the world's origin holds the top-level bodies: Pinocchio reads
+        # only the first top-level body and drops the placement of a fixed root.
+        root = ET.SubElement(world, "body", name="world")
+        self._zero_inertial(root)
+        for body in reader.bodies:
+            if body.name in structure.free:
+                self._free(root, body, structure.free[body.name])
+            else:  # fixed, or a locked free object (its free joint left out)
                 self._body(root, body, body.pose)
+
+    def _free(self, parent: ET.Element, body: _Body, joint: str) -> None:
+        """A free body at the origin: Pinocchio misplaces a free body that has a pose of its
+        own; its pose in the file becomes the start."""
+        el = ET.SubElement(parent, "body", name=body.name)
+        ET.SubElement(el, "freejoint", name=joint)
+        self._fill(el, body)
 
     @staticmethod
     def _zero_inertial(el: ET.Element) -> None:
@@ -1166,12 +1172,7 @@ class _Writer:
         el.set("quat", _text(_quat_wxyz(pose.rotation)))
 
     def _body(self, parent: ET.Element, body: _Body, pose: pinocchio.SE3) -> None:
-        joints = body.joints
-        if any(j.kind == "free" for j in joints):
-            raise MjcfError(
-                f"{self.reader.path}: body '{body.name}' has a free joint but is not a top-level "
-                "body"
-            )
+        joints = [j for j in body.joints if j.kind != "free"]  # free: a locked object's
         el = parent
         for k, joint in enumerate(joints):
             last = k == len(joints) - 1
@@ -1467,36 +1468,108 @@ def _shape_mass(kind: str, size: np.ndarray, shell: bool) -> tuple[float, np.nda
     return total, np.array([ix, iy, iz])
 
 
-def _structure(reader: _Reader, floating: bool) -> tuple[_Body | None, str | None]:
-    """The free root body, if any, and the name of a free joint added by ``floating``."""
-    free = [b for b in reader.bodies if any(j.kind == "free" for j in b.joints)]
+FREE_OBJECTS = ("keep", "lock")
+
+
+@dataclass
+class _Structure:
+    """Which top-level bodies float, and how."""
+
+    #: Top-level bodies with a free joint in the model: body -> the joint's name (the file's
+    #: own, or ``added``).
+    free: dict[str, str]
+    #: The free joint ``floating`` adds to the root body, if any.
+    added: str | None = None
+    #: Free objects locked where the file places them (their free joint left out).
+    locked: list[str] = field(default_factory=list)
+    #: The model is a single free body and its subtree (written as Pinocchio's root).
+    single: bool = False
+
+
+def _has_joints(body: _Body) -> bool:
+    return bool(body.joints) or any(_has_joints(child) for child in body.children)
+
+
+def _structure(reader: _Reader, floating: bool, free_objects: str) -> _Structure:
+    """The file's free bodies and free objects, and the free joint ``floating`` adds.
+
+    A free object is a top-level body whose only joint (in its subtree too) is its free joint:
+    a box or a ball beside a robot. ``free_objects`` 'keep' leaves it free (nothing holds it:
+    it falls), 'lock' fixes it where the file places it. A free body with joints below it (a
+    humanoid) floats, as in MuJoCo. ``floating`` adds a free joint to the root body of a file
+    that has none: the single top-level body other than the free objects, without a joint of
+    its own."""
+    path = reader.path
+    if free_objects not in FREE_OBJECTS:
+        raise MjcfError(
+            f"free_objects: expected 'keep' or 'lock', got {free_objects!r} ('keep': free "
+            "objects stay free and fall; 'lock': they are fixed where the file places them)"
+        )
+    top = reader.bodies
     for body in reader.all_bodies():
-        if any(j.kind == "free" for j in body.joints) and len(body.joints) > 1:
-            raise MjcfError(f"{reader.path}: body '{body.name}' has a free joint and other joints")
-    if free:
-        if len(reader.bodies) > 1:
-            raise MjcfError(
-                f"{reader.path}: {len(free)} free bod{'ies' if len(free) > 1 else 'y'} ("
-                + _names([b.name for b in free])
-                + f") among {len(reader.bodies)} top-level bodies; a Pinocchio model has one "
-                "root: one free body, or fixed bodies only"
+        if any(j.kind == "free" for j in body.joints):
+            if len(body.joints) > 1:
+                raise MjcfError(f"{path}: body '{body.name}' has a free joint and other joints")
+            if body not in top:
+                raise MjcfError(
+                    f"{path}: body '{body.name}' has a free joint but is not a top-level body "
+                    "(MuJoCo refuses this too): move it to <worldbody>"
+                )
+    free_top = [b for b in top if b.joints]
+    free_top = [b for b in free_top if b.joints[0].kind == "free"]
+    objects = [b for b in free_top if not any(_has_joints(c) for c in b.children)]
+    structure = _Structure({b.name: b.joints[0].name for b in free_top})
+    if objects:
+        names = _names([b.name for b in objects])
+        plural = len(objects) > 1
+        if free_objects == "lock":
+            structure.locked = [b.name for b in objects]
+            for b in objects:
+                del structure.free[b.name]
+            reader.notes.append(
+                f"free object{'s' if plural else ''} {names} locked where the file places "
+                f'{"them" if plural else "it"} (free_objects = "lock")'
             )
-        return free[0], None
-    if not floating:
-        return None, None
-    if len(reader.bodies) != 1:
-        raise MjcfError(
-            f"{reader.path}: floating: {len(reader.bodies)} top-level bodies ("
-            + _names([b.name for b in reader.bodies])
-            + "); a free-flyer goes on a single root body (or give a body a <freejoint/>)"
-        )
-    root = reader.bodies[0]
-    if root.joints:
-        raise MjcfError(
-            f"{reader.path}: floating: the root body '{root.name}' is attached by joint "
-            f"'{root.joints[0].name}' already; give it a <freejoint/> in the file instead"
-        )
-    return root, "root_joint"
+        else:
+            reader.notes.append(
+                f"free object{'s' if plural else ''} {names} kept free (free_objects = "
+                f'"keep"): nothing holds {"them" if plural else "it"} (contacts play no '
+                f"part): under gravity {'they fall' if plural else 'it falls'} and the solve "
+                'ends no_equilibrium; free_objects = "lock" (--free-objects lock) fixes '
+                f"{'them' if plural else 'it'} where the file places {'them' if plural else 'it'}"
+            )
+    if floating:
+        robots = [b for b in top if b not in objects]
+        own = [b for b in robots if b.name in structure.free]
+        if own:
+            reader.notes.append(
+                f"floating: body '{own[0].name}' floats by the file's own free joint "
+                f"'{structure.free[own[0].name]}'; nothing added"
+            )
+        elif len(robots) != 1:
+            raise MjcfError(
+                f"{path}: floating: {len(robots)} top-level bodies ("
+                + _names([b.name for b in robots])
+                + ")"
+                + (
+                    f" beside the free objects ({_names([b.name for b in objects])})"
+                    if objects
+                    else ""
+                )
+                + "; a free joint goes on a single root body: give one a <freejoint/> in the "
+                "file instead"
+            )
+        elif robots[0].joints:
+            raise MjcfError(
+                f"{path}: floating: the root body '{robots[0].name}' is attached by joint "
+                f"'{robots[0].joints[0].name}' already; give it a <freejoint/> in the file "
+                "instead"
+            )
+        else:
+            structure.added = "root_joint"
+            structure.free[robots[0].name] = "root_joint"
+    structure.single = len(top) == 1 and top[0].name in structure.free
+    return structure
 
 
 def _build(xml: ET.Element, path: Path) -> pinocchio.Model:
@@ -1510,12 +1583,13 @@ def _build(xml: ET.Element, path: Path) -> pinocchio.Model:
             raise MjcfError(f"{path}: Pinocchio's MJCF parser: {message}") from None
 
 
-def _qpos_order(reader: _Reader, free_root: _Body | None, root_joint: str | None) -> list[_Joint]:
-    """The joints in MuJoCo's qpos order (depth first, in body order), a free-flyer added by
-    ``floating`` first."""
+def _qpos_order(reader: _Reader, structure: _Structure) -> list[_Joint]:
+    """The file's joints in MuJoCo's qpos order (depth first, in body order), a free joint
+    added by ``floating`` first; locked free objects' joints included (keyframes hold them)."""
     joints = [j for body in reader.all_bodies() for j in body.joints]
-    if root_joint is not None and free_root is not None:
-        joints.insert(0, _Joint(root_joint, "free", np.zeros(3), np.zeros(3), {}, free_root.name))
+    if structure.added is not None:
+        body = next(b for b, j in structure.free.items() if j == structure.added)
+        joints.insert(0, _Joint(structure.added, "free", np.zeros(3), np.zeros(3), {}, body))
     return joints
 
 
@@ -1541,16 +1615,20 @@ def _reference(
     reader: _Reader,
     model: pinocchio.Model,
     joints: list[_Joint],
-    free_root: _Body | None,
+    structure: _Structure,
 ) -> tuple[np.ndarray, dict[str, float | list[float]]]:
-    """MuJoCo's qpos0 in Pinocchio's configuration, and by joint name where not neutral."""
+    """MuJoCo's qpos0 in Pinocchio's configuration, and by joint name where not neutral (a
+    free joint's value as its configuration entries, Pinocchio's order)."""
     q: np.ndarray = pinocchio.neutral(model)
     start: dict[str, float | list[float]] = {}
+    floats = {joint: body for body, joint in structure.free.items()}
     for joint in joints:
+        if not model.existJointName(joint.name):
+            continue  # a locked free object's
         j = model.getJointId(joint.name)
         iq = model.idx_qs[j]
-        if joint.kind == "free" and free_root is not None:
-            pose = _world_pose(reader, free_root)
+        if joint.kind == "free" and joint.name in floats:
+            pose = _world_pose(reader, reader.body_names[floats[joint.name]])
             value = [*pose.translation, *pinocchio.Quaternion(pose.rotation).coeffs()]
             q[iq : iq + 7] = value
             start[joint.name] = [float(x) for x in value]
@@ -1585,6 +1663,8 @@ def _keyframes(
                 n = sizes[joint.kind]
                 values = qpos[at : at + n]
                 at += n
+                if not model.existJointName(joint.name):
+                    continue  # a locked free object stays where the file places it
                 iq = model.idx_qs[model.getJointId(joint.name)]
                 if n == 7:
                     values = np.concatenate([values[:3], values[4:], values[3:4]])
@@ -1743,11 +1823,15 @@ def _weld_as_point(attrs: Mapping[str, str], where: str) -> bool:
 # --- the entry point ---------------------------------------------------------------------------
 
 
-def load_mjcf(path: str | Path, floating: bool = False) -> MjcfModel:
+def load_mjcf(path: str | Path, floating: bool = False, free_objects: str = "keep") -> MjcfModel:
     """Read an MJCF file for statics (see the module docstring).
 
-    ``floating``: a free-flyer on the root body (the file's single top-level body, which must
-    have no joint); a file with a ``<freejoint>`` is free already.
+    A body with a ``<freejoint>`` floats, as in MuJoCo. ``floating``: a free joint added to
+    the root body of a file that has none (the single top-level body beside the free objects,
+    which must have no joint; a note says so when the file's own free joint floats it
+    already). ``free_objects``: the free objects (top-level bodies whose only joint is their
+    free joint, a box beside a robot) stay free and fall ('keep') or are fixed where the file
+    places them ('lock').
 
     Raises:
         FileNotFoundError: no such file.
@@ -1759,22 +1843,27 @@ def load_mjcf(path: str | Path, floating: bool = False) -> MjcfModel:
     gravity, flags = _option(reader)
     statics = _joint_statics(reader, flags)
     _other_sections(reader, flags)
-    free_root, root_joint = _structure(reader, floating)
-    writer = _Writer(reader, free_root, root_joint)
+    structure = _structure(reader, floating, free_objects)
+    writer = _Writer(reader, structure)
     if reader.refusals:
         raise MjcfError(f"{path}: cannot be honoured in statics: " + "; ".join(reader.refusals))
     if not reader.bodies:
         raise MjcfError(f"{path}: no body in <worldbody>: nothing to settle")
     model = _build(writer.xml, path)
-    joints = _qpos_order(reader, free_root, root_joint)
-    missing = [j.name for j in joints if not model.existJointName(j.name)]
-    if missing or model.njoints - 1 != len(joints):
+    joints = _qpos_order(reader, structure)
+    locked = {j.name for j in joints if j.body in structure.locked}
+    expected = [j for j in joints if j.name not in locked]
+    missing = [j.name for j in expected if not model.existJointName(j.name)]
+    if missing or model.njoints - 1 != len(expected):
         raise MjcfError(
             f"{path}: Pinocchio's model has {model.njoints - 1} joints for the file's "
-            f"{len(joints)}" + (f"; missing: {_names(missing)}" if missing else "")
+            f"{len(expected)}" + (f"; missing: {_names(missing)}" if missing else "")
         )
     if model.nv == 0:
-        raise MjcfError(f"{path}: no joint: every body is fixed, nothing to settle")
+        raise MjcfError(
+            f"{path}: no joint: every body is fixed, nothing to settle"
+            + ('; free_objects = "keep" lets the free objects fall' if locked else "")
+        )
     lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
     for joint in joints:
         if joint.kind in ("hinge", "slide"):
@@ -1782,8 +1871,8 @@ def load_mjcf(path: str | Path, floating: bool = False) -> MjcfModel:
             lower[iq], upper[iq] = statics.limits.get(joint.name, (-math.inf, math.inf))
     model.lowerPositionLimit, model.upperPositionLimit = lower, upper
     model.gravity = pinocchio.Motion(gravity, np.zeros(3))
-    q0, start = _reference(reader, model, joints, free_root)
-    for name, q in _keyframes(reader, model, joints, q0, root_joint is not None).items():
+    q0, start = _reference(reader, model, joints, structure)
+    for name, q in _keyframes(reader, model, joints, q0, structure.added is not None).items():
         model.referenceConfigurations[name] = q
     model.referenceConfigurations["qpos0"] = q0
     loops = _loops(reader, model, q0, flags)

@@ -436,20 +436,26 @@ class Scene:
         )
 
     @classmethod
-    def from_mjcf(cls, path: str | Path, *, floating: bool = False, **kwargs: Any) -> Scene:
+    def from_mjcf(
+        cls, path: str | Path, *, floating: bool = False, free_objects: str = "keep", **kwargs: Any
+    ) -> Scene:
         """A scene of a MuJoCo MJCF file: its bodies and joints, gravity (``<option
         gravity>``), joint ranges as stops, joint springs (``stiffness``, ``springref``),
         ``connect`` and ``weld`` equalities as loops, its reference pose ``qpos0`` as the
         start and its keyframes as poses (``set_pose``). What it says that has no force at rest
         (damping, actuators, ...) is listed in ``notes``; what would change the rest and cannot
-        be honoured is an error naming the element. ``floating``: a free-flyer on the root body.
+        be honoured is an error naming the element. A body with a ``<freejoint>`` floats, as
+        in MuJoCo; ``floating``: a free-flyer added to the root body of a file that has none.
+        ``free_objects``: free objects beside the mechanism (bodies whose only joint is their
+        free joint) stay free and fall ('keep') or are fixed where the file places them
+        ('lock').
 
         Raises:
             FileNotFoundError: no such file, or an included file or asset missing.
             SceneError: the file cannot be read or honoured (the message names the element).
         """
         try:
-            mjcf = load_mjcf(path, floating=floating)
+            mjcf = load_mjcf(path, floating=floating, free_objects=free_objects)
         except MjcfError as error:
             raise SceneError(str(error)) from None
         scene = cls(mjcf.model, **kwargs)
@@ -1256,6 +1262,7 @@ def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | lis
 
 _TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "limit", "solver"]
 _MODEL_KEYS = ["urdf", "robot", "mjcf", "srdf", "floating", "locked", "gravity", "limits", "mimic"]
+_MODEL_KEYS += ["free_objects"]
 _JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
 _SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
 _LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
@@ -1289,11 +1296,15 @@ def _required(table: Mapping[str, Any], key: str, where: str) -> Any:
     return table[key]
 
 
-def load_scene(path: str | Path, *, floating: bool | None = None) -> Scene:
+def load_scene(
+    path: str | Path, *, floating: bool | None = None, free_objects: str | None = None
+) -> Scene:
     """Read a scene: a scene file (TOML; the format is documented in the README), a scene of
     the library by name (``pinsettle.scene_names()``), or a model file as a scene with only
-    ``[model]``: a URDF or a MuJoCo MJCF file, told apart by content (root fixed unless
-    ``floating``).
+    ``[model]``: a URDF or a MuJoCo MJCF file, told apart by content (the root as the file
+    has it: fixed, or free by an MJCF ``<freejoint>``; ``floating`` adds a free-flyer where
+    there is none). ``free_objects`` ('keep' or 'lock'): an MJCF file's free objects, as in
+    ``Scene.from_mjcf``.
 
     Raises:
         FileNotFoundError: no such file or scene name.
@@ -1307,11 +1318,16 @@ def load_scene(path: str | Path, *, floating: bool | None = None) -> Scene:
     except ValueError as error:
         raise SceneError(str(error)) from None
     if kind != "scene":
-        return _scene_from_model_file(path, kind, bool(floating))
+        return _scene_from_model_file(path, kind, bool(floating), free_objects)
     if floating is not None:
         raise SceneError(
             f"{path}: floating applies to a model file (URDF, MJCF); a scene file says it in "
             "[model] floating"
+        )
+    if free_objects is not None:
+        raise SceneError(
+            f"{path}: free_objects applies to an MJCF file; a scene file says it in [model] "
+            "free_objects"
         )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -1339,13 +1355,19 @@ def _check_loops(scene: Scene, where: str) -> None:
         )
 
 
-def _scene_from_model_file(path: Path, kind: str, floating: bool) -> Scene:
+def _scene_from_model_file(
+    path: Path, kind: str, floating: bool, free_objects: str | None = None
+) -> Scene:
     """A URDF or MJCF file as a scene with only [model]."""
+    if kind == "urdf" and free_objects is not None:
+        raise SceneError(
+            f"{path}: free_objects applies to an MJCF file's free objects; a URDF has one root"
+        )
     try:
         if kind == "urdf":
             scene = Scene.from_urdf(path, floating=floating)
         else:
-            scene = Scene.from_mjcf(path, floating=floating)
+            scene = Scene.from_mjcf(path, floating=floating, free_objects=free_objects or "keep")
     except SceneError:
         raise
     except ValueError as error:  # load_urdf's reasons name the file already
@@ -1396,6 +1418,14 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
             "[model] mimic is for a URDF's <mimic> tags ('urdf' or 'robot'); an MJCF file "
             "couples joints with <equality><joint>"
         )
+    free_objects = m.get("free_objects", "keep")
+    if free_objects not in ("keep", "lock"):
+        raise SceneError(
+            f"[model] free_objects must be 'keep' (free objects fall) or 'lock' (fixed where "
+            f"the file places them), got {free_objects!r}"
+        )
+    if "free_objects" in m and "mjcf" not in m:
+        raise SceneError("[model] free_objects is for an MJCF file's free objects ('mjcf')")
     sources = [key for key in ("urdf", "robot", "mjcf") if key in m]
     if len(sources) != 1:
         raise SceneError(
@@ -1420,7 +1450,9 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         if not isinstance(mjcf, str):
             raise SceneError(f"[model] mjcf must be a path (str), got {mjcf!r}")
         try:
-            mjcf_scene = Scene.from_mjcf(path.parent / mjcf, floating=floating)
+            mjcf_scene = Scene.from_mjcf(
+                path.parent / mjcf, floating=floating, free_objects=free_objects
+            )
         except (FileNotFoundError, SceneError) as error:
             raise SceneError(f"[model] mjcf: {error}") from None
         model = mjcf_scene.model

@@ -149,12 +149,25 @@ def static_force(mujoco, mj, qpos: np.ndarray, ctrl: np.ndarray | None = None) -
     data.qvel[:] = 0
     if ctrl is not None:
         data.ctrl[:] = ctrl
+        steady_activation(mj, data)
     mj.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     mj.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
     if ctrl is None:
         mj.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_ACTUATION
     mujoco.mj_forward(mj, data)
     return np.array(data.qfrc_passive + data.qfrc_actuator - data.qfrc_bias)
+
+
+def steady_activation(mj, data) -> None:
+    """At rest a filtered actuator's activation has reached its control (clamped as MuJoCo
+    clamps it): set it there, as mj_forward reads the activation, not the control."""
+    for i in range(mj.nu):
+        adr = mj.actuator_actadr[i]
+        if adr >= 0:
+            low, high = mj.actuator_ctrlrange[i]
+            data.act[adr] = (
+                np.clip(data.ctrl[i], low, high) if mj.actuator_ctrllimited[i] else data.ctrl[i]
+            )
 
 
 def gravity_scale(mujoco, mj) -> float:
@@ -170,15 +183,18 @@ def gravity_scale(mujoco, mj) -> float:
     return top
 
 
-def assert_rest_is_mujocos(mujoco, path: Path, out: dict, **options) -> None:
-    """A converged answer is a rest by MuJoCo's forces: the net force is zero off the stops
-    (1e-8 of the model's force scale), and pushes into the stop where the answer is at one."""
+def assert_rest_is_mujocos(
+    mujoco, path: Path, out: dict, ctrl: np.ndarray | None = None, **options
+) -> None:
+    """A converged answer is a rest by MuJoCo's forces (with the actuators at ctrl, if given):
+    the net force is zero off the stops (1e-8 of the model's force scale), and pushes into the
+    stop where the answer is at one."""
     assert out["status"] == "converged", out["reason"]
     mj = mujoco.MjModel.from_xml_path(str(path))
     scene = pinsettle.Scene.from_mjcf(path, **options)
     model = scene.model
     q = np.array(out["q"])
-    force = static_force(mujoco, mj, to_qpos(mj, model, q))
+    force = static_force(mujoco, mj, to_qpos(mj, model, q), ctrl)
     bound = 1e-8 * max(gravity_scale(mujoco, mj), 1e-3)
     at_limit = out["at_limit"]
     for j in range(mj.njnt):
@@ -683,3 +699,137 @@ def test_a_files_own_free_joint_floats_as_the_help_says(tmp_path, mujoco):
         assert floats == bool(flags)
         out = solve_json(str(path), "--max-steps", "200", *flags)
         assert len(out["joints"]["root"]) == 7 and out["notes"] == scene.notes
+
+
+# --- position actuators as joint springs ------------------------------------------------------
+
+ACTUATED = """<mujoco model="actuated">
+  <compiler angle="degree"/>
+  <default>
+    <position kp="25"/>
+    <default class="stiff"><position kp="60" ctrlrange="-0.3 0.4"/></default>
+  </default>
+  <worldbody>
+    <body name="upper" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0" stiffness="3" range="-120 120"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>
+      <body name="lower" pos="0.3 0 0">
+        <joint name="elbow" axis="0 1 0" range="-90 150"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>
+        <body name="slider" pos="0.3 0 0">
+          <joint name="slide" type="slide" axis="1 0 1"/>
+          <geom type="box" size="0.03 0.03 0.03"/>
+          <body name="tip" pos="0.1 0 0">
+            <joint name="wrist" axis="0 1 0"/>
+            <geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.02"/>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="shoulder_servo" joint="shoulder" class="stiff" gear="2" kv="3"/>
+    <position name="elbow_servo" joint="elbow" timeconst="0.02" inheritrange="0.5"/>
+    <general name="slide_servo" joint="slide" gainprm="40" biastype="affine"
+      biasprm="1 -40 -2" ctrlrange="-1 1"/>
+    <position name="wrist_servo" jointinparent="wrist" kp="2" forcerange="-1 1"/>
+    <motor name="wrist_motor" joint="wrist"/>
+  </actuator>
+  <keyframe>
+    <key name="reach" qpos="0.2 0.3 0 0" ctrl="0.9 0.5 0.2 -0.4 0.3"/>
+  </keyframe>
+</mujoco>"""
+
+
+def spring_forces(scene, q: np.ndarray) -> dict[str, float]:
+    """Each joint's force from pinsettle's joint springs at q."""
+    model = scene.model
+    out: dict[str, float] = {}
+    for spring in scene.joint_springs:
+        iq = model.idx_qs[model.getJointId(spring.joint)]
+        out[spring.joint] = out.get(spring.joint, 0.0) - spring.stiffness * (q[iq] - spring.rest)
+    return out
+
+
+@pytest.mark.parametrize("pose", [None, "reach"])
+def test_position_actuators_are_mujocos_force(pose, tmp_path, mujoco):
+    # pinsettle's springs give MuJoCo's qfrc_passive + qfrc_actuator at rest (qvel = 0), at
+    # random positions, for ctrl 0 and a keyframe's ctrl (clamped to ctrlrange as MuJoCo
+    # clamps it; inheritrange; a general affine actuator; gear; jointinparent).
+    path = tmp_path / "actuated.xml"
+    path.write_text(ACTUATED)
+    scene = pinsettle.Scene.from_mjcf(path, actuator_springs=True)
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    ctrl = np.zeros(mj.nu)
+    if pose:
+        scene.set_pose(pose)
+        ctrl = mj.key(pose).ctrl.copy()
+    ctrl[mj.actuator("wrist_motor").id] = 0  # a motor is no spring: left out
+    data = mujoco.MjData(mj)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        q = rng.uniform(-0.4, 0.4, mj.nq)
+        data.qpos[:] = q
+        data.qvel[:] = 0
+        data.ctrl[:] = ctrl
+        steady_activation(mj, data)
+        mujoco.mj_forward(mj, data)
+        ours = spring_forces(scene, q)  # Pinocchio's q is MuJoCo's qpos here: hinges, a slide
+        for j in range(mj.njnt):
+            name = mj.joint(j).name
+            expected = data.qfrc_passive[j] + data.qfrc_actuator[j]
+            if name == "wrist" and abs(data.actuator_force[mj.actuator("wrist_servo").id]) >= 1:
+                continue  # its force range clamps MuJoCo's force: a note says so
+            assert ours.get(name, 0.0) == pytest.approx(expected, abs=1e-12), name
+    notes = " | ".join(scene.notes)
+    assert "shoulder_servo on shoulder (240)" in notes and "wrist_motor" in notes
+    assert "forcerange of actuators wrist_servo not applied" in notes
+
+
+def test_position_actuator_rest_is_mujocos(tmp_path, mujoco):
+    path = tmp_path / "actuated.xml"
+    path.write_text(ACTUATED)
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    out = solve_json(str(path), "--actuator-springs")
+    assert_rest_is_mujocos(mujoco, path, out, np.zeros(mj.nu), actuator_springs=True)
+    # From a scene file, at the keyframe's controls (the motor's left out: no spring).
+    toml = tmp_path / "reach.toml"
+    toml.write_text(
+        '[model]\nmjcf = "actuated.xml"\nactuator_springs = true\n[start]\npose = "reach"\n'
+    )
+    ctrl = mj.key("reach").ctrl.copy()
+    ctrl[mj.actuator("wrist_motor").id] = 0
+    assert_rest_is_mujocos(mujoco, path, solve_json(str(toml)), ctrl, actuator_springs=True)
+    # Without the option the actuators are left out, and a note says how to keep them.
+    notes = " | ".join(pinsettle.load_scene(path).notes)
+    assert "--actuator-springs" in notes and "ignored: 5 actuators" in notes
+
+
+def test_position_actuators_that_cannot_be_springs_are_refused(tmp_path):
+    path = tmp_path / "tendon.xml"
+    path.write_text(
+        TENDONS.format(option='<option><flag limit="disable"/></option>', stiffness="0").replace(
+            "</mujoco>",
+            '<actuator><position name="pull" tendon="coupling" kp="3"/>'
+            '<position name="spot" site="nowhere" kp="3"/></actuator></mujoco>',
+        )
+    )
+    assert "ignored: 2 actuators (pull, spot)" in " | ".join(load_mjcf(path).notes)
+    line = one_line_error(run("solve", str(path), "--actuator-springs"))
+    assert '<position name="pull"> in <actuator>: a position actuator on a tendon' in line
+    assert "a position actuator on a site" in line and "leave actuator_springs off" in line
+
+
+def test_shadow_hand_position_actuators(tmp_path, mujoco):
+    # gymnasium_robotics' Shadow hand (limits disabled as above): its 20 position actuators as
+    # springs towards ctrl 0; the rest is one by MuJoCo's forces with the actuators on.
+    assets = require("gymnasium_robotics") / "envs" / "assets"
+    original = model_file("gymnasium_robotics", "envs", "assets", "hand", "reach.xml")
+    folder = copy_of_assets(tmp_path, assets, "hand")
+    path = folder / "reach_without_limits.xml"
+    flag = '<option><flag limit="disable"/></option>'
+    path.write_text(original.read_text().replace("</compiler>", f"</compiler>{flag}", 1))
+    out = solve_json(str(path), "--actuator-springs")
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    assert mj.nu == 20 and "robot0:A_WRJ1 on robot0:WRJ1 (5)" in " | ".join(out["notes"])
+    assert_rest_is_mujocos(mujoco, path, out, np.zeros(mj.nu), actuator_springs=True)

@@ -93,6 +93,13 @@ def _add_model_file_flags(parser: argparse.ArgumentParser) -> None:
         "beside the mechanism) stay free and fall (keep, the default) or are fixed where the "
         "file places them (lock)",
     )
+    parser.add_argument(
+        "--actuator-springs",
+        action="store_true",
+        help="with an MJCF file: each position actuator on a hinge or slide joint is a joint "
+        "spring of stiffness kp towards its control (0, or the ctrl of the keyframe a scene "
+        "file's [start] pose names) (default: actuators left out)",
+    )
 
 
 def _add_start_flag(parser: argparse.ArgumentParser) -> None:
@@ -208,7 +215,10 @@ def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray |
     """The scene of args.scene (a scene file or name, a URDF or an MJCF file) and the start of
     its --start flags (None: the scene's own)."""
     scene = pinsettle.load_scene(
-        args.scene, floating=True if args.floating else None, free_objects=args.free_objects
+        args.scene,
+        floating=True if args.floating else None,
+        free_objects=args.free_objects,
+        actuator_springs=True if args.actuator_springs else None,
     )
     if not args.start:
         return scene, None

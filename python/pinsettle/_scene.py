@@ -11,7 +11,7 @@ import difflib
 import math
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -357,6 +357,8 @@ class Scene:
         #: actuators, ...), one line each; ``pinsettle solve`` prints them.
         self.notes: list[str] = notes
         self._pose_notes: dict[str, str] = {}
+        #: Joint springs whose rest a pose sets: pose -> (index in joint_springs, rest).
+        self._pose_springs: dict[str, list[tuple[int, float]]] = {}
         self.settings = make_settings(settings, {})
         self.joint_springs: list[JointSpring] = []
         self.springs: list[Spring] = []
@@ -437,7 +439,13 @@ class Scene:
 
     @classmethod
     def from_mjcf(
-        cls, path: str | Path, *, floating: bool = False, free_objects: str = "keep", **kwargs: Any
+        cls,
+        path: str | Path,
+        *,
+        floating: bool = False,
+        free_objects: str = "keep",
+        actuator_springs: bool = False,
+        **kwargs: Any,
     ) -> Scene:
         """A scene of a MuJoCo MJCF file: its bodies and joints, gravity (``<option
         gravity>``), joint ranges as stops, joint springs (``stiffness``, ``springref``),
@@ -448,14 +456,21 @@ class Scene:
         in MuJoCo; ``floating``: a free-flyer added to the root body of a file that has none.
         ``free_objects``: free objects beside the mechanism (bodies whose only joint is their
         free joint) stay free and fall ('keep') or are fixed where the file places them
-        ('lock').
+        ('lock'). ``actuator_springs``: each position actuator on a hinge or slide joint is a
+        joint spring (stiffness kp) towards its control: 0, or the ctrl of the keyframe
+        ``set_pose`` starts from.
 
         Raises:
             FileNotFoundError: no such file, or an included file or asset missing.
             SceneError: the file cannot be read or honoured (the message names the element).
         """
         try:
-            mjcf = load_mjcf(path, floating=floating, free_objects=free_objects)
+            mjcf = load_mjcf(
+                path,
+                floating=floating,
+                free_objects=free_objects,
+                actuator_springs=bool(as_flag(actuator_springs, "actuator_springs")),
+            )
         except MjcfError as error:
             raise SceneError(str(error)) from None
         scene = cls(mjcf.model, **kwargs)
@@ -463,6 +478,14 @@ class Scene:
         scene.notes = list(mjcf.notes)
         for joint, stiffness, rest in mjcf.joint_springs:
             scene.add_joint_spring(joint, stiffness, rest)
+        first = len(scene.joint_springs)
+        for joint, stiffness, rest in mjcf.actuator_springs:
+            scene.add_joint_spring(joint, stiffness, rest)
+        # A pose moves the actuator springs' rests to its keyframe's ctrl (set_pose).
+        scene._pose_springs = {
+            pose: [(first + k, rest) for k, rest in enumerate(rests)]
+            for pose, rests in mjcf.actuator_rests.items()
+        }
         for frame_a, point_a, frame_b, point_b, kind in mjcf.loops:
             scene.add_loop((frame_a, point_a), (frame_b, point_b), kind)
         # The reader gives a multi-DoF joint's start as its configuration entries in
@@ -534,6 +557,9 @@ class Scene:
                 for j in range(1, model.njoints)
             }
         )
+        for index, rest in self._pose_springs.get(name, []):
+            self.joint_springs[index] = replace(self.joint_springs[index], rest=rest)
+            self._changed()
         if name in self._pose_notes and self._pose_notes[name] not in self.notes:
             self.notes.append(self._pose_notes[name])
         return self
@@ -1262,7 +1288,7 @@ def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | lis
 
 _TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "limit", "solver"]
 _MODEL_KEYS = ["urdf", "robot", "mjcf", "srdf", "floating", "locked", "gravity", "limits", "mimic"]
-_MODEL_KEYS += ["free_objects"]
+_MODEL_KEYS += ["free_objects", "actuator_springs"]
 _JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
 _SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
 _LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
@@ -1297,14 +1323,18 @@ def _required(table: Mapping[str, Any], key: str, where: str) -> Any:
 
 
 def load_scene(
-    path: str | Path, *, floating: bool | None = None, free_objects: str | None = None
+    path: str | Path,
+    *,
+    floating: bool | None = None,
+    free_objects: str | None = None,
+    actuator_springs: bool | None = None,
 ) -> Scene:
     """Read a scene: a scene file (TOML; the format is documented in the README), a scene of
     the library by name (``pinsettle.scene_names()``), or a model file as a scene with only
     ``[model]``: a URDF or a MuJoCo MJCF file, told apart by content (the root as the file
     has it: fixed, or free by an MJCF ``<freejoint>``; ``floating`` adds a free-flyer where
-    there is none). ``free_objects`` ('keep' or 'lock'): an MJCF file's free objects, as in
-    ``Scene.from_mjcf``.
+    there is none). ``free_objects`` ('keep' or 'lock') and ``actuator_springs``: an MJCF
+    file's free objects and position actuators, as in ``Scene.from_mjcf``.
 
     Raises:
         FileNotFoundError: no such file or scene name.
@@ -1318,17 +1348,17 @@ def load_scene(
     except ValueError as error:
         raise SceneError(str(error)) from None
     if kind != "scene":
-        return _scene_from_model_file(path, kind, bool(floating), free_objects)
+        return _scene_from_model_file(path, kind, bool(floating), free_objects, actuator_springs)
     if floating is not None:
         raise SceneError(
             f"{path}: floating applies to a model file (URDF, MJCF); a scene file says it in "
             "[model] floating"
         )
-    if free_objects is not None:
-        raise SceneError(
-            f"{path}: free_objects applies to an MJCF file; a scene file says it in [model] "
-            "free_objects"
-        )
+    for key, value in (("free_objects", free_objects), ("actuator_springs", actuator_springs)):
+        if value is not None:
+            raise SceneError(
+                f"{path}: {key} applies to an MJCF file; a scene file says it in [model] {key}"
+            )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
@@ -1356,18 +1386,29 @@ def _check_loops(scene: Scene, where: str) -> None:
 
 
 def _scene_from_model_file(
-    path: Path, kind: str, floating: bool, free_objects: str | None = None
+    path: Path,
+    kind: str,
+    floating: bool,
+    free_objects: str | None = None,
+    actuator_springs: bool | None = None,
 ) -> Scene:
     """A URDF or MJCF file as a scene with only [model]."""
     if kind == "urdf" and free_objects is not None:
         raise SceneError(
             f"{path}: free_objects applies to an MJCF file's free objects; a URDF has one root"
         )
+    if kind == "urdf" and actuator_springs is not None:
+        raise SceneError(f"{path}: actuator_springs applies to an MJCF file's actuators")
     try:
         if kind == "urdf":
             scene = Scene.from_urdf(path, floating=floating)
         else:
-            scene = Scene.from_mjcf(path, floating=floating, free_objects=free_objects or "keep")
+            scene = Scene.from_mjcf(
+                path,
+                floating=floating,
+                free_objects=free_objects or "keep",
+                actuator_springs=bool(actuator_springs),
+            )
     except SceneError:
         raise
     except ValueError as error:  # load_urdf's reasons name the file already
@@ -1426,6 +1467,13 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
         )
     if "free_objects" in m and "mjcf" not in m:
         raise SceneError("[model] free_objects is for an MJCF file's free objects ('mjcf')")
+    actuator_springs = m.get("actuator_springs", False)
+    if not isinstance(actuator_springs, bool):
+        raise SceneError(
+            f"[model] actuator_springs must be true or false, got {actuator_springs!r}"
+        )
+    if "actuator_springs" in m and "mjcf" not in m:
+        raise SceneError("[model] actuator_springs is for an MJCF file's actuators ('mjcf')")
     sources = [key for key in ("urdf", "robot", "mjcf") if key in m]
     if len(sources) != 1:
         raise SceneError(
@@ -1451,7 +1499,10 @@ def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
             raise SceneError(f"[model] mjcf must be a path (str), got {mjcf!r}")
         try:
             mjcf_scene = Scene.from_mjcf(
-                path.parent / mjcf, floating=floating, free_objects=free_objects
+                path.parent / mjcf,
+                floating=floating,
+                free_objects=free_objects,
+                actuator_springs=actuator_springs,
             )
         except (FileNotFoundError, SceneError) as error:
             raise SceneError(f"[model] mjcf: {error}") from None

@@ -816,7 +816,7 @@ def test_position_actuators_that_cannot_be_springs_are_refused(tmp_path):
     )
     assert "ignored: 2 actuators (pull, spot)" in " | ".join(load_mjcf(path).notes)
     line = one_line_error(run("solve", str(path), "--actuator-springs"))
-    assert '<position name="pull"> in <actuator>: a position actuator on a tendon' in line
+    assert '<position name="pull"> in <actuator> (a position actuator on a tendon' in line
     assert "a position actuator on a site" in line and "leave actuator_springs off" in line
 
 
@@ -833,3 +833,66 @@ def test_shadow_hand_position_actuators(tmp_path, mujoco):
     mj = mujoco.MjModel.from_xml_path(str(path))
     assert mj.nu == 20 and "robot0:A_WRJ1 on robot0:WRJ1 (5)" in " | ".join(out["notes"])
     assert_rest_is_mujocos(mujoco, path, out, np.zeros(mj.nu), actuator_springs=True)
+
+
+# --- refusals: short, with a way forward -------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "package, parts, fragments",
+    [
+        (
+            "gymnasium_robotics",
+            ("envs", "assets", "hand", "reach.xml"),
+            [
+                '<fixed name="robot0:T_WRJ1r">',
+                "and 41 more in <tendon> with a range",
+                '<flag limit="disable"/>',
+            ],
+        ),
+        (
+            "dm_control",
+            ("locomotion", "walkers", "assets", "dog_v2", "dog.xml"),
+            ["springdamper", "and 18 more", "give stiffness (and damping) instead"],
+        ),
+        (
+            "dm_control",
+            ("locomotion", "walkers", "assets", "build_fruitfly", "fruitfly.xml"),
+            ["85 asset files not found", "and 83 more (looked for in", "meshdir"],
+        ),
+        (
+            "dm_control",
+            ("suite", "cheetah.xml"),
+            ["<compiler settotalmass>", "mj_saveLastXML"],
+        ),
+    ],
+)
+def test_refusals_of_real_files_are_short_with_a_way_forward(package, parts, fragments):
+    # The Shadow hand's refusal was 3 kB on one line: now a few names, a count, what to do.
+    path = model_file(package, *parts)
+    line = one_line_error(run("solve", str(path)))
+    message = line.removeprefix("pinsettle: error: ").removeprefix(str(path))
+    assert len(message) < 400, message
+    for fragment in fragments:
+        assert fragment in message, message
+
+
+def test_refusals_group_by_kind(tmp_path):
+    joints = (
+        "".join(
+            f'<body name="b{k}"><joint name="j{k}" type="ball" range="0 30"/><geom size="0.1"/>'
+            for k in range(12)
+        )
+        + "</body>" * 12
+    )
+    path = tmp_path / "many.xml"
+    path.write_text(
+        f'<mujoco><option density="1.2"/><worldbody><body name="top" gravcomp="1">'
+        f'<joint name="top"/><geom size="0.1"/>{joints}</body></worldbody></mujoco>'
+    )
+    message = str(pytest.raises(MjcfError, load_mjcf, path).value)
+    assert (
+        '<joint name="j0">, <joint name="j1">, <joint name="j2"> and 9 more with a range' in message
+    )
+    assert "<option density> (buoyancy" in message and "gravcomp" in message
+    assert message.count("remove the range") == 1 and len(message) < 700

@@ -219,6 +219,12 @@ _TOP_LEVEL = {
     "keyframe",
     "deformable",
 }
+# A way forward for what MuJoCo's compiler expands (attached models, composites, replicas, mass
+# scaling): MuJoCo writes the model it compiled as plain MJCF, which pinsettle reads.
+_EXPAND = (
+    "expand it with MuJoCo: save the compiled model (mujoco.MjModel.from_xml_path, then "
+    "mujoco.mj_saveLastXML) and solve the saved file"
+)
 _ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
 _JOINT_KINDS = ("hinge", "slide", "ball", "free")
 _ACTUATOR_TAGS = (
@@ -544,7 +550,8 @@ class _Reader:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.refusals: list[str] = []
+        #: What cannot be honoured: (what it is, its kind, a way forward), grouped by kind.
+        self.refusals: list[tuple[str, str, str]] = []
         self.notes: list[str] = []
         self.root = self._expand(path)
         if self.root.tag != "mujoco":
@@ -553,7 +560,9 @@ class _Reader:
             )
         for child in self.root:
             if child.tag not in _TOP_LEVEL:
-                self.refuse(f"{_describe(child)} (a section pinsettle does not read)")
+                self.refuse(
+                    _describe(child), "(a section pinsettle does not read)", "remove it in a copy"
+                )
         self.compiler = self._compiler()
         self.classes, self.main_class = self._defaults()
         self.meshes: dict[str, _MeshAsset] = {}
@@ -567,8 +576,30 @@ class _Reader:
         for world in self.root.findall("worldbody"):
             self._contents(world, None, pinocchio.SE3.Identity(), None)
 
-    def refuse(self, what: str) -> None:
-        self.refusals.append(what)
+    def refuse(self, what: str, kind: str, way: str = "") -> None:
+        """``what`` (an element) cannot be honoured for ``kind`` (a reason, shared by the
+        elements it groups); ``way``: what the user can do instead."""
+        self.refusals.append((what, kind, way))
+
+    def check_refusals(self) -> None:
+        """One short line for all refusals: per kind the first elements, a count of the rest,
+        and the way forward."""
+        if not self.refusals:
+            return
+        kinds: dict[str, list[str]] = {}
+        ways: dict[str, str] = {}
+        for what, kind, way in self.refusals:
+            if what not in kinds.setdefault(kind, []):
+                kinds[kind].append(what)
+            ways.setdefault(kind, way)
+        parts = [
+            f"{_names(items, 3)} {kind}" + (f": {ways[kind]}" if ways[kind] else "")
+            for kind, items in kinds.items()
+        ]
+        shown = "; ".join(parts[:4]) + (
+            f"; and {len(parts) - 4} more kinds" if len(parts) > 4 else ""
+        )
+        raise MjcfError(f"{self.path}: cannot be honoured in statics: {shown}")
 
     # -- includes, compiler, defaults, assets --
 
@@ -611,7 +642,8 @@ class _Reader:
         if missing:
             raise MjcfError(
                 f"{path}: included file{'s' if len(missing) > 1 else ''} not found: "
-                + "; ".join(missing)
+                + _names(missing, 3, "; ")
+                + " (MuJoCo takes include paths from the main file's folder)"
             )
         return root
 
@@ -646,9 +678,17 @@ class _Reader:
                 "settotalmass" in a
                 and _floats(a["settotalmass"], f"{where} settotalmass", (1,))[0] > 0
             ):
-                self.refuse("<compiler settotalmass> (masses scaled to a total)")
+                self.refuse(
+                    "<compiler settotalmass>",
+                    "(masses scaled to a total)",
+                    _EXPAND,
+                )
             if a.get("coordinate", "local") != "local":
-                self.refuse(f'<compiler coordinate="{a["coordinate"]}"> (only local)')
+                self.refuse(
+                    f'<compiler coordinate="{a["coordinate"]}">',
+                    "(global coordinates; MuJoCo 2.3.4 and later refuse them too)",
+                    "load and save the file in MuJoCo 2.3.3 or older, as MuJoCo says",
+                )
             for key in ("meshdir", "texturedir", "assetdir"):
                 if key in a:
                     setattr(c, key, a[key])
@@ -717,12 +757,17 @@ class _Reader:
     def _check_assets(self) -> None:
         """Every file an asset names exists (MuJoCo refuses a model otherwise)."""
         c = self.compiler
-        missing = []
+        missing: list[str] = []
+        folders: dict[str, None] = {}  # in order, once each
         sections = [*self.root.findall("asset"), *self.root.findall("deformable")]
         for section in sections:
             for el in section:
                 if el.tag == "model":
-                    self.refuse(f"{_describe(el)} in <asset> (models attached with <attach>)")
+                    self.refuse(
+                        _describe(el),
+                        "in <asset> (models attached with <attach>)",
+                        _EXPAND,
+                    )
                 files: dict[str, Path] = {}
                 for key in _ASSET_FILES.get(el.tag, ()):
                     name = el.get(key)
@@ -737,13 +782,16 @@ class _Reader:
                         file = self.path.parent / (folder or "") / file
                     files[key] = file
                     if not file.is_file():
-                        missing.append(f"{el.tag} {_describe(el)} file '{name}' ({file})")
+                        missing.append(f"{el.tag} {_describe(el)} file '{name}'")
+                        folders.setdefault(str(file.parent), None)
                 if el.tag == "mesh" and section.tag == "asset":
                     self._mesh_asset(el, files.get("file"))
         if missing:
             raise MjcfError(
-                f"{self.path}: asset file{'s' if len(missing) > 1 else ''} not found: "
-                + "; ".join(missing)
+                f"{self.path}: {len(missing)} asset file{'s' if len(missing) > 1 else ''} not "
+                f"found: {_names(missing, 2, '; ')} (looked for in {_names(list(folders), 2)}); "
+                "paths are taken from the main file's folder and <compiler meshdir, texturedir, "
+                "assetdir>: check them, and that the files are there"
             )
 
     def _mesh_asset(self, el: ET.Element, file: Path | None) -> None:
@@ -843,7 +891,11 @@ class _Reader:
             elif tag in _SKIPPED_IN_BODY:
                 continue
             else:
-                self.refuse(f"{_describe(el)} in {owner}")
+                self.refuse(
+                    f"{_describe(el)} in {owner}",
+                    "(an element pinsettle does not read in a body)",
+                    _EXPAND,
+                )
 
     def _body(
         self, el: ET.Element, parent: _Body | None, frame: pinocchio.SE3, childclass: str | None
@@ -857,7 +909,12 @@ class _Reader:
             "gravcomp" in el.attrib
             and _floats(el.get("gravcomp", ""), f"{where} gravcomp", (1,))[0]
         ):
-            self.refuse(f'<body name="{name}" gravcomp> (gravity compensation)')
+            self.refuse(
+                f'<body name="{name}" gravcomp>',
+                "(gravity compensation)",
+                "remove gravcomp in a copy, and give the lift as a [[load]] of a scene file "
+                "(gravcomp m g up at the body's centre of mass)",
+            )
         body = _Body(name, frame * self._pose(el.attrib, where), el)
         self.body_names[name] = body
         (parent.children if parent is not None else self.bodies).append(body)
@@ -969,7 +1026,11 @@ def _option(reader: _Reader) -> tuple[np.ndarray, dict[str, bool]]:
             gravity = _floats(el.attrib["gravity"], f"{where} gravity", (3,))
         density = el.get("density")
         if density is not None and _floats(density, f"{where} density", (1,))[0] != 0:
-            reader.refuse("<option density> (buoyancy of a fluid medium)")
+            reader.refuse(
+                "<option density>",
+                "(buoyancy of a fluid medium)",
+                'set <option density="0"> in a copy for the rest in vacuum',
+            )
         viscosity = el.get("viscosity")
         wind = el.get("wind")
         if (
@@ -977,7 +1038,9 @@ def _option(reader: _Reader) -> tuple[np.ndarray, dict[str, bool]]:
             and np.any(_floats(wind, f"{where} wind", (3,)))
             and (viscosity is not None and _floats(viscosity, f"{where} viscosity", (1,))[0] != 0)
         ):
-            reader.refuse("<option wind> (drag of a moving medium)")
+            reader.refuse(
+                "<option wind>", "(drag of a moving medium)", 'set wind="0 0 0" in a copy'
+            )
         for flag in el.findall("flag"):
             for key in flags:
                 if key in flag.attrib:
@@ -989,8 +1052,9 @@ def _option(reader: _Reader) -> tuple[np.ndarray, dict[str, bool]]:
     return gravity, flags
 
 
-def _names(items: Sequence[str], limit: int = 4) -> str:
-    shown = ", ".join(items[:limit])
+def _names(items: Sequence[str], limit: int = 4, separator: str = ", ") -> str:
+    """The first few items and a count of the rest: a hand has dozens of joints."""
+    shown = separator.join(items[:limit])
     return shown + (f" and {len(items) - limit} more" if len(items) > limit else "")
 
 
@@ -1019,10 +1083,16 @@ def _joint_statics(reader: _Reader, flags: Mapping[str, bool]) -> _Statics:
                 on = limited == "true"
             if on:
                 if joint.kind == "free":
-                    reader.refuse(f'<joint name="{joint.name}"> range on a free joint')
+                    reader.refuse(
+                        f'<joint name="{joint.name}">',
+                        "with a range on a free joint",
+                        "remove the range",
+                    )
                 elif joint.kind == "ball":
                     reader.refuse(
-                        f'<joint name="{joint.name}"> range on a ball joint (a cone limit)'
+                        f'<joint name="{joint.name}">',
+                        "with a range on a ball joint (a cone limit)",
+                        'remove the range, or set limited="false" on it',
                     )
                 elif "range" not in a:
                     raise MjcfError(f'{where}: limited="true" without a range')
@@ -1041,14 +1111,17 @@ def _joint_statics(reader: _Reader, flags: Mapping[str, bool]) -> _Statics:
             stiffness = _floats(a.get("stiffness", "0"), f"{where} stiffness", (1, 2, 3))
             if np.any(stiffness[1:]):
                 reader.refuse(
-                    f'<joint name="{joint.name}" stiffness="{a["stiffness"]}"> (a polynomial '
-                    "spring)"
+                    f'<joint name="{joint.name}" stiffness="{a["stiffness"]}">',
+                    "(a polynomial spring)",
+                    "keep its first, linear stiffness only",
                 )
             if "springdamper" in a and np.all(
                 _floats(a["springdamper"], f"{where} springdamper", (2,)) > 0
             ):
                 reader.refuse(
-                    f'<joint name="{joint.name}" springdamper> (a stiffness from the mass matrix)'
+                    f'<joint name="{joint.name}" springdamper>',
+                    "(a stiffness from the mass matrix)",
+                    "give stiffness (and damping) instead of springdamper",
                 )
             k = float(stiffness[0])
             if k < 0:
@@ -1056,8 +1129,9 @@ def _joint_statics(reader: _Reader, flags: Mapping[str, bool]) -> _Statics:
             if k > 0:
                 if joint.kind not in ("hinge", "slide"):
                     reader.refuse(
-                        f'<joint name="{joint.name}" stiffness> on a {joint.kind} joint (joint '
-                        "springs on hinge and slide joints only)"
+                        f'<joint name="{joint.name}" stiffness>',
+                        f"on a {joint.kind} joint (joint springs on hinge and slide joints only)",
+                        'remove the stiffness, or <option><flag spring="disable"/>',
                     )
                 elif flags["spring"]:
                     rest = float(_floats(a.get("springref", "0"), f"{where} springref", (1,))[0])
@@ -1102,7 +1176,11 @@ def _other_sections(reader: _Reader, flags: Mapping[str, bool]) -> None:
             where = f"{reader.path}: {_describe(el)} in <tendon>"
             if np.any(_floats(attrs.get("stiffness", "0"), f"{where} stiffness", (1, 2, 3))):
                 if flags["spring"]:
-                    reader.refuse(f"{_describe(el)} in <tendon> with a stiffness (a tendon spring)")
+                    reader.refuse(
+                        _describe(el),
+                        "in <tendon> with a stiffness (a tendon spring)",
+                        'remove the stiffness, or <option><flag spring="disable"/> (all springs)',
+                    )
                 else:
                     springs_off.append(label)
             limited = _flag(attrs.get("limited", "auto"), f"{where} limited", _LIMITED)
@@ -1110,7 +1188,11 @@ def _other_sections(reader: _Reader, flags: Mapping[str, bool]) -> None:
                 limited == "auto" and reader.compiler.autolimits and "range" in attrs
             ):
                 if flags["limit"] and flags["constraint"]:
-                    reader.refuse(f"{_describe(el)} in <tendon> with a range (a tendon limit)")
+                    reader.refuse(
+                        _describe(el),
+                        "in <tendon> with a range (a tendon limit)",
+                        'remove the ranges, or <option><flag limit="disable"/> (all limits)',
+                    )
                 else:
                     ranges_off.append(label)
     if tendons:
@@ -1128,7 +1210,7 @@ def _other_sections(reader: _Reader, flags: Mapping[str, bool]) -> None:
     for section in reader.root.findall("deformable"):
         for el in section:
             if el.tag != "skin":  # a skin is drawn only
-                reader.refuse(f"{_describe(el)} in <deformable>")
+                reader.refuse(_describe(el), "in <deformable>", "remove it in a copy")
 
 
 # --- actuators ----------------------------------------------------------------------------------
@@ -1250,7 +1332,9 @@ def _actuators(reader: _Reader, flags: Mapping[str, bool], as_springs: bool) -> 
         label = el.get("name") or f"actuator {k}"
         where = f"{path}: {_describe(el)} in <actuator>"
         if el.tag not in _ACTUATOR_TAGS:
-            reader.refuse(f"{_describe(el)} in <actuator> (an actuator pinsettle does not know)")
+            reader.refuse(
+                _describe(el), "in <actuator> (an actuator pinsettle does not know)", "remove it"
+            )
             continue
         cls = el.get("class") or reader.main_class
         if cls not in reader.actuator_defaults:
@@ -1282,14 +1366,16 @@ def _actuators(reader: _Reader, flags: Mapping[str, bool], as_springs: bool) -> 
                 )
             )
             reader.refuse(
-                f"{_describe(el)} in <actuator>: a position actuator {on}; pinsettle holds "
-                "position actuators on hinge and slide joints only: leave actuator_springs off"
+                f"{_describe(el)} in <actuator>",
+                f"(a position actuator {on}; actuator springs are on hinge and slide joints only)",
+                "leave actuator_springs off",
             )
             continue
         if actuator.bias[1] > 0:
             reader.refuse(
-                f"{_describe(el)} in <actuator>: its force grows with the joint's position "
-                "(biasprm[1] > 0), no spring: leave actuator_springs off"
+                f"{_describe(el)} in <actuator>",
+                "(its force grows with the joint's position, biasprm[1] > 0: no spring)",
+                "leave actuator_springs off",
             )
             continue
         limited = actuator.forcelimited == "true" or (
@@ -1471,8 +1557,9 @@ class _Writer:
         if not use_geoms:
             if body.inertial is None:
                 reader.refuse(
-                    f'<body name="{body.name}"> without <inertial> while <compiler '
-                    'inertiafromgeom="false">'
+                    f'<body name="{body.name}">',
+                    'without <inertial> while <compiler inertiafromgeom="false">',
+                    "give it an <inertial>",
                 )
                 return
             a = body.inertial.attrib
@@ -1490,7 +1577,12 @@ class _Writer:
                 xx, yy, zz, xy, xz, yz = full
                 tensor = rotation @ np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
             else:
-                diagonal = _floats(a.get("diaginertia", ""), f"{where} diaginertia", (3,))
+                if "diaginertia" not in a and body.joints:
+                    raise MjcfError(
+                        f"{where}: neither diaginertia nor fullinertia, and the body moves "
+                        "(MuJoCo refuses a moving body without inertia too): give one"
+                    )
+                diagonal = _floats(a.get("diaginertia", "0 0 0"), f"{where} diaginertia", (3,))
                 inertial.set("diaginertia", _text(diagonal))
                 tensor = rotation @ np.diag(diagonal)
             self.inertias[body.name] = (
@@ -1564,15 +1656,18 @@ class _Writer:
             return self._mesh_geom_mass(body, geom, key, amount)
         if "mesh" in a:
             reader.refuse(
-                f"{what}: a {kind} sized to fit mesh '{a['mesh']}' (pinsettle does not size "
-                "geoms from meshes): give it a size and no mesh, or the body an <inertial>"
+                f"{what} (mesh '{a['mesh']}')",
+                "sized to fit a mesh (pinsettle does not size geoms from meshes)",
+                "give the geom a size and no mesh, or its body an <inertial>",
             )
             return None
         if kind in ("plane", "hfield", "sdf") or kind not in _MASS_SHAPES:
             if kind == "plane":
                 return None  # no volume: MuJoCo gives it no mass
             reader.refuse(
-                f"{what}: the mass of a {kind} geom is not computed: give the body an <inertial>"
+                what,
+                f"(the mass of a {kind} geom is not computed)",
+                "give its body an <inertial>",
             )
             return None
         rotation, center, size = self._shape(geom, kind, where)
@@ -1623,8 +1718,9 @@ class _Writer:
                 self.mesh_masses[name] = _mesh_mass(mesh, where)
             except MjcfError as error:
                 reader.refuse(
-                    f"{geom.label} of body '{body.name}', whose mass comes from its geoms: "
-                    f"{error}; or give the body an <inertial>"
+                    f"{geom.label} of body '{body.name}'",
+                    f"(its mass comes from {error})",
+                    "or give the body an <inertial>",
                 )
                 return None
             except OSError as error:
@@ -2004,9 +2100,10 @@ def _loops(
             where = f"{reader.path}: {_describe(el)} in <equality>"
             if el.tag not in ("connect", "weld"):
                 reader.refuse(
-                    f"{_describe(el)} in <equality> (a {el.tag} equality: only connect and "
-                    "weld equalities are honoured, as loops; without it its joints or bodies "
-                    "settle independently)"
+                    f"{_describe(el)} in <equality>",
+                    f"(a {el.tag} equality: connect and weld equalities are honoured, as loops)",
+                    "remove it in a copy (its joints or bodies then settle independently), "
+                    'or <option><flag equality="disable"/>',
                 )
                 continue
             if _flag(a.get("active", "true"), f"{where} active", ("true", "false")) == "false":
@@ -2106,8 +2203,7 @@ def load_mjcf(
     actuators = _actuators(reader, flags, actuator_springs)
     structure = _structure(reader, floating, free_objects)
     writer = _Writer(reader, structure)
-    if reader.refusals:
-        raise MjcfError(f"{path}: cannot be honoured in statics: " + "; ".join(reader.refusals))
+    reader.check_refusals()
     if not reader.bodies:
         raise MjcfError(f"{path}: no body in <worldbody>: nothing to settle")
     model = _build(writer.xml, path)
@@ -2137,8 +2233,7 @@ def load_mjcf(
         model.referenceConfigurations[name] = q
     model.referenceConfigurations["qpos0"] = q0
     loops = _loops(reader, model, q0, flags)
-    if reader.refusals:
-        raise MjcfError(f"{path}: cannot be honoured in statics: " + "; ".join(reader.refusals))
+    reader.check_refusals()
     return MjcfModel(
         model=model,
         name=str(writer.xml.get("model")),

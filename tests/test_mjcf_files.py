@@ -419,6 +419,21 @@ def test_mesh_and_shape_masses_are_mujocos(mesh_attrs, geom_attrs, extra, tmp_pa
     assert assert_inertias_are_mujocos(mujoco, path) == 2
 
 
+def test_mesh_masses_of_the_fused_fruit_fly(mujoco):
+    # dm_control's fused fruit fly: 61 bodies whose masses come from MSH meshes and
+    # primitives, several geoms a body.
+    path = model_file(
+        "dm_control",
+        "locomotion",
+        "walkers",
+        "assets",
+        "build_fruitfly",
+        "assets",
+        "drosophila_fused.xml",
+    )
+    assert assert_inertias_are_mujocos(mujoco, path) == 61
+
+
 def test_mesh_vertices_in_the_file(tmp_path, mujoco):
     # A mesh given by its vertices only (MuJoCo takes their convex hull) and one with faces.
     vertices, faces = u_prism()

@@ -46,7 +46,7 @@ def _run(case: gallery.Case) -> gallery.Run:
     """The case's command, run once per session (the judge's own tests reuse answers)."""
     root = gallery.package_dir(case.package)
     assert root is not None
-    return gallery.run_cli(root / case.path, case.floating)
+    return gallery.run_cli(root / case.path, case.floating, case.flags)
 
 
 @pytest.mark.parametrize("case", gallery.CASES, ids=[case.id for case in gallery.CASES])

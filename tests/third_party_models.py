@@ -19,8 +19,8 @@ An answer of ``pinsettle solve FILE --json`` is judged by the physics of another
 - Tolerance: ``REL_TOL`` times the model's force scale, the largest |f| MuJoCo or Pinocchio
   gives over random poses inside the joint ranges (and at the answer).
 - Joints are matched by name (the answer's quaternions w first, as MuJoCo's qpos); a free body
-  on the world that the answer leaves out or does not move is held where the file puts it
-  (its six coordinates take no part in the balance).
+  on the world that the answer leaves out (``--free-objects lock``) is held where the file
+  puts it (its six coordinates take no part in the balance).
 - A fall must end ``no_equilibrium``: where gravity pulls with a constant non-zero force on a
   coordinate nothing stops (the vertical of a free body on the world that the answer moves,
   or of the free-flyer ``--floating`` adds; an unlimited, springless slide of a body on the
@@ -98,10 +98,14 @@ class Case:
     floating: bool = False
     #: a refusal is a right answer (what the file needs cannot be honoured in statics)
     may_refuse: bool = False
+    #: further flags of the command (``--free-objects lock``)
+    flags: tuple[str, ...] = ()
 
     @property
     def id(self) -> str:
-        return f"{self.package}/{self.path}" + (" --floating" if self.floating else "")
+        return " ".join([f"{self.package}/{self.path}", *self.flags]) + (
+            " --floating" if self.floating else ""
+        )
 
 
 def package_dir(name: str) -> Path | None:
@@ -131,9 +135,11 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def run_cli(path: Path, floating: bool, timeout: float = COMMAND_TIMEOUT) -> Run:
+def run_cli(
+    path: Path, floating: bool, flags: tuple[str, ...] = (), timeout: float = COMMAND_TIMEOUT
+) -> Run:
     """The command exactly as a user types it, in a folder of its own."""
-    command = [sys.executable, "-m", "pinsettle", "solve", str(path), "--json"]
+    command = [sys.executable, "-m", "pinsettle", "solve", str(path), "--json", *flags]
     if floating:
         command.append("--floating")
     start = time.perf_counter()
@@ -319,22 +325,22 @@ def _mj_weight(m: Any, body: int) -> float:
     return float(m.body_subtreemass[body] * np.linalg.norm(m.opt.gravity))
 
 
-def _mj_falls(m: Any, d: Any, moved_roots: list[int], added_root: bool) -> bool:
+def _mj_falls(m: Any, d: Any, free_roots: list[int], added_root: bool) -> bool:
     """Whether no rest exists: gravity pulls, with a constant non-zero force, on a coordinate
-    nothing stops: the vertical of a free root body that moves in the answer (``moved_roots``:
-    joint ids) or of a free-flyer --floating added, or an unlimited slide of a body on the
-    world whose earlier joints are slides too (its axis fixed in the world), where no equality
-    or tendon holds that body."""
+    nothing stops: the vertical of a free body on the world that the answer lets move
+    (``free_roots``: joint ids) or of a free-flyer --floating added, or an unlimited slide of a
+    body on the world whose earlier joints are slides too (its axis fixed in the world), where
+    no equality or tendon holds that body."""
     if not np.any(m.opt.gravity) or m.opt.disableflags & _DSBL_GRAVITY:
         return False
     held = _mj_held_roots(m)
     tops = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0 and b not in held]
     if added_root:  # pinsettle refuses --floating on a file with more than one top-level body
         return any(_mj_weight(m, b) > 0.0 for b in tops)
-    dofs: list[int] = []
-    for j in moved_roots:
+    dofs: list[tuple[int, int]] = []  # (dof, its body)
+    for j in free_roots:
         if m.jnt_bodyid[j] in tops and not m.jnt_stiffness[j]:
-            dofs += [int(m.jnt_dofadr[j]) + k for k in range(3)]
+            dofs += [(int(m.jnt_dofadr[j]) + k, int(m.jnt_bodyid[j])) for k in range(3)]
     for j in range(m.njnt):
         body = m.jnt_bodyid[j]
         if body not in tops or int(m.jnt_type[j]) != _SLIDE:
@@ -343,11 +349,11 @@ def _mj_falls(m: Any, d: Any, moved_roots: list[int], added_root: bool) -> bool:
             continue
         if any(int(m.jnt_type[k]) != _SLIDE for k in range(m.body_jntadr[body], j)):
             continue
-        dofs.append(int(m.jnt_dofadr[j]))
+        dofs.append((int(m.jnt_dofadr[j]), int(body)))
     if not dofs:
         return False
     pull = _mj_static_force(m, d, m.qpos0)
-    return any(abs(pull[k]) > 1e-3 * _mj_weight(m, 0) for k in dofs)
+    return any(abs(pull[k]) > 1e-3 * _mj_weight(m, body) for k, body in dofs)
 
 
 def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Verdict:
@@ -375,7 +381,7 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
         unnamed_answers.pop(0)  # the free-flyer --floating put on the root body, first
     qpos = m.qpos0.copy()
     held: list[int] = []  # dofs held: a free body that stays where the file puts it
-    moved_roots: list[int] = []
+    free_roots: list[int] = []
     unnamed = 0
     for j in range(m.njnt):
         adr, dof, kind = m.jnt_qposadr[j], m.jnt_dofadr[j], int(m.jnt_type[j])
@@ -383,15 +389,11 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
         if not name:
             name = unnamed_answers[unnamed] if unnamed < len(unnamed_answers) else f"#{j}"
             unnamed += 1
-        if kind == _FREE and m.body_parentid[m.jnt_bodyid[j]] == 0:
-            value = joints.pop(name, None)
-            # Held (the root fixed, or the body locked) when not in the answer or not moved.
-            if value is None or np.allclose(value, m.qpos0[adr : adr + 7], rtol=0, atol=1e-12):
-                held += list(range(dof, dof + 6))
-            else:
-                moved_roots.append(j)
-                qpos[adr : adr + 7] = value  # x y z, then the quaternion w first as MuJoCo's
+        if kind == _FREE and m.body_parentid[m.jnt_bodyid[j]] == 0 and name not in joints:
+            held += list(range(dof, dof + 6))  # a free object locked where the file puts it
             continue
+        if kind == _FREE and m.body_parentid[m.jnt_bodyid[j]] == 0:
+            free_roots.append(j)
         if name not in joints:
             verdict.problems.append(f"joint '{name}' is missing from the answer")
             continue
@@ -408,7 +410,7 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
         joints.pop(next(iter(n for n in answer["joints"] if n not in known)), None)
     if joints:
         verdict.problems.append(f"joints MuJoCo does not have: {', '.join(joints)}")
-    verdict.falls = _mj_falls(m, d, moved_roots, added_root)
+    verdict.falls = _mj_falls(m, d, free_roots, added_root)
     if verdict.problems or verdict.falls or not answer.get("converged"):
         return verdict
     if added_root:
@@ -727,7 +729,8 @@ CASES: list[Case] = [
     # gymnasium-robotics: the Fetch arm held by a weld, objects beside a robot, the Shadow
     # and Adroit hands (coupled by tendon ranges), the Franka kitchen.
     _robotics("fetch/reach.xml"),
-    _robotics("fetch/pick_and_place.xml", may_refuse=True),
+    _robotics("fetch/pick_and_place.xml", may_refuse=True),  # the block falls
+    _robotics("fetch/pick_and_place.xml", flags=("--free-objects", "lock")),
     _robotics("hand/manipulate_block.xml", may_refuse=True),
     _robotics("adroit_hand/adroit_hammer.xml", may_refuse=True),
     _robotics("kitchen_franka/kitchen_assets/kitchen_env_model.xml", may_refuse=True),
@@ -735,6 +738,9 @@ CASES: list[Case] = [
     # pybullet's MJCF files MuJoCo 3 still reads.
     _bullet("mjcf/humanoid.xml"),
     _bullet("mjcf/capsule.xml"),  # a lone free body with an unnamed <freejoint>
+    _bullet("mjcf/thrower.xml"),  # an arm and a free ball beside it, which falls
+    _bullet("mjcf/thrower.xml", flags=("--free-objects", "lock")),
+    _bullet("mjcf/striker.xml"),  # a free target without weight beside an arm
     # pybullet's URDF robots: arms, grippers with <mimic>, legged robots hanging from their
     # base or floating, wheeled ones; files urdfdom cannot read are refused.
     _bullet("kuka_iiwa/model.urdf"),

@@ -28,6 +28,7 @@ import pinsettle
 import pytest
 from scene_reference import Reference
 from scipy.optimize import minimize
+from verdict_reference import describe, model_verdict
 
 ROBOTS = Path(__file__).parents[1] / "robots"
 PENDULUM = ROBOTS / "pendulum.urdf"
@@ -510,7 +511,8 @@ def gallery_times() -> dict[str, float]:
 def test_robot_gallery_settles_inside_its_limits(name, gallery_times):
     # Every robot of example-robot-data, root fixed, released at rest from neutral with the
     # default settings: converged, inside its limits, the conditions of a rest against stops
-    # recomputed with pinocchio, and not reported on an unstable rest.
+    # recomputed with pinocchio, and the verdict and smallest eigenvalue those of the stiffness
+    # differenced here on the joints not pressed on a stop (tests/verdict_reference.py).
     model = pinsettle.load_robot(name, floating=False)
     q0 = pinocchio.neutral(model)
     start = time.perf_counter()
@@ -520,6 +522,9 @@ def test_robot_gallery_settles_inside_its_limits(name, gallery_times):
     assert result.limits
     check_rest(Reference(model), result, tolerance(model, q0))
     assert result.stability != "unstable"
+    verdict = model_verdict(model, result.q)
+    assert verdict.decided, describe(verdict)
+    verdict.check(result.stability, result.min_stiffness_eigenvalue)
 
 
 # --- errors -----------------------------------------------------------------------------------

@@ -173,15 +173,15 @@ def classify(
 def solver_bands(
     model: pinocchio.Model, differenced: bool, extra_scale: float = 0.0
 ) -> tuple[tuple[float, float], tuple[float, float]]:
-    """(relative band, absolute floor band) of the solver's tolerance: relative 1e-9, or 1e-7
-    where it may difference its stiffness (joints whose axes turn, scene elements, loops and
-    couplings); floor from none up to 1e-13 of the gravity scale (1e-7 when differenced), as
-    round-off of the terms K is summed from. extra_scale: the elements' share of that scale
-    (J)."""
-    scale = gravity_scale(model) + extra_scale
+    """(relative band, absolute floor band) of the solver's tolerance: relative 1e-9, or up to
+    1e-7 where it may difference its stiffness (joints whose axes turn, scene elements, loops
+    and couplings); an absolute floor of 1e-13 of the gravity scale, round-off of the terms K
+    is summed from, up to 1e-7 of the scale with the elements' share (extra_scale, J) where it
+    may difference (a central difference of step 1e-6 divides the round-off by it)."""
+    low = 1e-13 * gravity_scale(model) + 1e-300
     if differenced or has_varying_joints(model):
-        return (1e-9, 1e-7), (0.0, 1e-7 * scale + 1e-300)
-    return (1e-9, 1e-9), (0.0, 1e-13 * scale + 1e-300)
+        return (1e-9, 1e-7), (low, 1e-7 * (gravity_scale(model) + extra_scale) + 1e-300)
+    return (1e-9, 1e-9), (low, 1e-13 * (gravity_scale(model) + extra_scale) + 1e-300)
 
 
 def tree_verdict(
@@ -204,10 +204,10 @@ def tree_verdict(
     symmetric = 0.5 * (k + k.T)
     eigenvalues = np.linalg.eigvalsh(symmetric)
     # The solver's own stiffness: gravity's analytic derivatives and the elements' closed form
-    # are exact to round-off; on joints whose axes turn it differences with a 1e-6 step, whose
-    # error (~2e-10 of the terms' size) counts too.
+    # are exact to round-off (2e-16 of the terms' size, 1e-14 here); on joints whose axes turn
+    # it differences with a 1e-6 step, whose error (~2e-10 of the terms' size) counts too.
     scale = gravity_scale(model) + extra_scale
-    noise += (3e-10 if has_varying_joints(model) else 1e-13) * scale
+    noise += (3e-10 if has_varying_joints(model) else 1e-14) * scale
     relative, floor = solver_bands(model, differenced, extra_scale)
     return classify(eigenvalues, noise, relative, floor, symmetric, force(q)[free])
 

@@ -4,8 +4,9 @@ A two-link arm whose second joint has a URDF ``<mimic>`` tag (as in most paralle
 loaded with ``pinocchio.buildModelFromUrdf(path, mimic=True)``, holds a ``JointModelMimic``:
 ``pinocchio::aba`` does not support it and only asserts so (a segmentation fault in a release
 build). ``solve``, ``assess_stability``, ``static_force`` and ``Scene`` answer for the coupled
-mechanism (tests/test_mimic.py checks the answers against an independent reference); every
-other entry point that takes a model must refuse it with a ValueError that names the joint.
+mechanism (tests/test_mimic.py checks the answers against an independent reference; here the
+residual and the verdict against Pinocchio's own gravity on the mimic model); every other entry
+point that takes a model must refuse it with a ValueError that names the joint.
 Each call runs in a subprocess of its own, so that a crash is a failing test here rather than
 the end of pytest.
 """
@@ -57,11 +58,23 @@ MIMIC_URDF = """<?xml version="1.0"?>
 # Each call on the mimic model; `model` and `q` are defined in the child before it runs. Those
 # that answer for the coupled arm, with what the child checks of their answer (Pinocchio's own
 # rnea on the mimic model: the chain rule), and those that refuse it.
+# The coupled arm's stiffness at a configuration x, by central differences of Pinocchio's own
+# gravity on the mimic model (the chain rule tau_leader + multiplier * tau_follower, 1-DoF): its
+# sign is the verdict (clear of the solver's band at the configurations used here), its value
+# (1 + multiplier^2) times the solver's eigenvalue along the unit coupled direction.
+STIFFNESS = (
+    "stiffness = lambda x, h=1e-4: ("
+    "pinocchio.computeGeneralizedGravity(model, model.createData(), x + h)[0] "
+    "- pinocchio.computeGeneralizedGravity(model, model.createData(), x - h)[0]) / (2 * h); "
+)
 ANSWERED = {
-    "solve": "r = pinsettle.solve(model, q); assert r.converged and r.q.shape == (1,); "
-    "assert abs(pinocchio.computeGeneralizedGravity(model, model.createData(), r.q)[0]) < 1e-8",
-    "assess_stability": "assert pinsettle.assess_stability(model, q).verdict in "
-    "('stable', 'neutral', 'unstable')",
+    "solve": STIFFNESS + "r = pinsettle.solve(model, q); assert r.converged and r.q.shape == (1,); "
+    "assert abs(pinocchio.computeGeneralizedGravity(model, model.createData(), r.q)[0]) < 1e-8; "
+    "k = stiffness(r.q); assert k > 1e-3 and r.stability == 'stable', (k, r.stability)",
+    "assess_stability": STIFFNESS + "k = stiffness(q); r = pinsettle.assess_stability(model, q); "
+    "assert abs(k) > 1e-3, k; "
+    "assert r.verdict == ('stable' if k > 0 else 'unstable'), (r.verdict, k); "
+    "assert abs(2.0 * r.min_eigenvalue - k) <= 1e-6 * abs(k), (r.min_eigenvalue, k)",
     "static_force": "assert np.allclose(pinsettle.static_force(model, q), "
     "pinocchio.computeGeneralizedGravity(model, model.createData(), q), atol=1e-12)",
     "scene_solve": "r = pinsettle.solve(pinsettle.Scene(model)); "

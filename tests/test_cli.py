@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import json
+import re
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -176,3 +179,81 @@ def test_cmake_dir():
     assert folder.is_dir()
     assert (folder / "pinsettleConfig.cmake").is_file()
     assert str(folder) == pinsettle.get_cmake_dir()
+
+
+# --- Ctrl-C on pinsettle solve ----------------------------------------------------------------
+
+
+def _restore_sigint() -> None:
+    # In the child before it runs: Python's own Ctrl-C handling, whoever started pytest (a
+    # shell's background job starts it with SIGINT ignored, and Python then leaves it so).
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@pytest.fixture(scope="module")
+def swinging_chain(tmp_path_factory, chain_urdf) -> tuple[Path, pinocchio.Model]:
+    """A 30-link chain released horizontal with a fixed step of 10 us and max_e = 0: still
+    swinging seconds later (a tenth of a second simulated per second), and only a signal ends
+    its run."""
+    folder = tmp_path_factory.mktemp("ctrl_c")
+    (folder / "chain30.urdf").write_text(chain_urdf(30), encoding="utf-8")
+    scene = folder / "chain30.toml"
+    scene.write_text(
+        '[model]\nurdf = "chain30.urdf"\n[start]\njoint1 = 1.5707963267948966\n'
+        "[solver]\ndt = 1e-5\nmax_e = 0\nmax_steps = 1000000000000\nnewton_takeover = false\n",
+        encoding="utf-8",
+    )
+    return scene, pinocchio.buildModelFromUrdf(str(folder / "chain30.urdf"))
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="sends SIGINT")
+@pytest.mark.parametrize("output", ["json", "text"])
+def test_ctrl_c_stops_a_solve_and_prints_where_it_stood(output, swinging_chain):
+    # Ctrl-C must end the run within a check interval, with the README's exit status for a run
+    # that did not converge (1), status 'aborted', no traceback, and the state the chain stood
+    # in (still moving), printed as a finished run's is.
+    scene, model = swinging_chain
+    flags = ["--json"] if output == "json" else []
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pinsettle", "solve", str(scene), *flags],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_restore_sigint,
+    )
+    try:
+        time.sleep(2.0)  # start-up (~1 s here), then solving
+        assert proc.poll() is None, proc.communicate()  # still solving
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, err = proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            pytest.fail("pinsettle solve still ran 10 s after Ctrl-C")
+        stopped = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert stopped < 5.0, stopped  # measured 0.1 s
+    assert proc.returncode == 1, (proc.returncode, out, err)
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    names = [model.names[j] for j in range(1, model.njoints)]
+    if output == "text":
+        assert "status           aborted" in out, out
+        for name in names:
+            assert re.search(rf"^\s+{name}\s+-?\d+\.\d+", out, re.MULTILINE), (name, out)
+        return
+    lines = out.strip().splitlines()
+    assert len(lines) == 1, out  # exactly one JSON object
+    state = json.loads(lines[0])
+    assert state["status"] == "aborted" and state["converged"] is False
+    assert state["steps"] > 0 and state["sim_time_s"] > 0 and state["wall_time_s"] >= 1.0
+    assert state["kinetic_energy"] > 0.0  # caught moving: no rest
+    q = np.array(state["q"])
+    assert q.shape == (model.nq,) and list(state["joints"]) == names
+    assert [state["joints"][name] for name in names] == state["q"]
+    # The residual printed is that of the state printed, by Pinocchio's gravity there (the
+    # chain's URDF has no stops), and far from a rest's.
+    g = np.max(np.abs(pinocchio.computeGeneralizedGravity(model, model.createData(), q)))
+    assert state["residual"] == pytest.approx(g, rel=1e-9) and g > 1e-3, (state["residual"], g)

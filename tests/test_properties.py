@@ -5,18 +5,29 @@ with random joint types (revolute about x, y or z, prismatic, spherical, free-fl
 continuous), placements and masses over 8 decades (1e-4 to 1e4 kg). Starts are random points of
 the configuration manifold (``integrate(neutral, v)``), velocities and settings are drawn within
 their documented ranges (README's settings table), and each solve is bounded (at most 2,000
-steps and 1 s). Properties:
+steps and 1 s). Scenes: random chains of 1-DoF joints with joint springs, point springs, joint
+and point loads, stops, couplings and a loop, each element given both to a ``pinsettle.Scene``
+and to tests/scene_reference.py. Properties:
 
 - no crash, no hang: a solve ends within its step and time budget with finite q and v;
-- a ``converged`` answer has the residual it claims, recomputed with
-  ``pinocchio.computeGeneralizedGravity`` (nothing of pinsettle's);
-- the stability verdict agrees with the eigenvalues of a finite-difference stiffness computed
-  here (central differences of computeGeneralizedGravity through ``pinocchio.integrate``);
+- a ``converged`` answer is a rest: its residual, recomputed with
+  ``pinocchio.computeGeneralizedGravity`` (or the scene reference: the conditions of a rest
+  against stops, the force along the motions loops and couplings allow), is at round-off of the
+  model's force scale when Newton's polish was kept, and otherwise within what the stopping
+  energy allows;
+- the runs that must converge do: every chain whose configurations are bounded (no slider, no
+  free body) released near a rest, and every random scene (each joint on a spring, so that the
+  potential has a minimum), up to a least share measured;
+- the stability verdict is the one the solver's own rule gives on the eigenvalues of a
+  finite-difference stiffness computed here (tests/verdict_reference.py: central differences of
+  the reference force, on the joints off their stops and the motions loops and couplings
+  allow), wherever the differences' error cannot tip it, and most cases are such;
 - settings out of their ranges raise ValueError, of the wrong type TypeError, naming the field.
 
 The runs are derandomized (``derandomize=True``): the same examples every time, so a failure
 replays; hypothesis prints the failing example (and ``print_blob`` a reproduction blob).
-Joint stops are off (``limits=False``) so that the residual is the plain static force.
+Joint stops are off (``limits=False``) on the random models so that the residual is the plain
+static force; the scenes set their own.
 """
 
 from __future__ import annotations
@@ -24,11 +35,21 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections import Counter
 
 import numpy as np
 import pinocchio
 import pinsettle
 import pytest
+from scene_reference import Reference
+from verdict_reference import (
+    Verdict,
+    describe,
+    gravity_force,
+    has_varying_joints,
+    scene_verdict,
+    tree_verdict,
+)
 
 hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, event, given, settings  # noqa: E402
@@ -170,50 +191,56 @@ def gravity(model: pinocchio.Model, q: np.ndarray) -> np.ndarray:
     return pinocchio.computeGeneralizedGravity(model, model.createData(), q).copy()
 
 
-def fd_stiffness_eigenvalues(model: pinocchio.Model, q: np.ndarray) -> np.ndarray:
-    """Eigenvalues of the symmetric part of d g / dq, g = computeGeneralizedGravity, by central
-    differences along each tangent direction (pinocchio.integrate), step 1e-6 rad or m."""
-    h = 1e-6
-    K = np.empty((model.nv, model.nv))
-    for i in range(model.nv):
-        e = np.zeros(model.nv)
-        e[i] = h
-        K[:, i] = (
-            gravity(model, pinocchio.integrate(model, q, e))
-            - gravity(model, pinocchio.integrate(model, q, -e))
-        ) / (2 * h)
-    return np.linalg.eigvalsh(0.5 * (K + K.T))
+def force_scale(model: pinocchio.Model) -> float:
+    """The model's force scale (N m or N): its largest gravity effort at neutral plus its whole
+    weight."""
+    return float(
+        np.max(np.abs(gravity(model, pinocchio.neutral(model))), initial=0.0)
+        + sum(inertia.mass for inertia in model.inertias) * 9.81
+    )
 
 
-def stiffness_floor(model: pinocchio.Model) -> float:
-    """An absolute floor for comparing stiffnesses (N m/rad): 1e-9 of m g L over the bodies,
-    L their reach (round-off where every eigenvalue vanishes, e.g. a slider on the level)."""
-    reach = 1.0 + sum(np.linalg.norm(p.translation) for p in model.jointPlacements)
-    weight = sum(inertia.mass for inertia in model.inertias) * 9.81
-    return 1e-9 * weight * (reach + max(np.linalg.norm(i.lever) for i in model.inertias))
+# A converged run whose Newton polish was kept ends at round-off along every direction of
+# clear stiffness (Newton's step does not move along the neutral ones): measured over this
+# module's examples and 5,000 more, at most 3e-16 of the force scale on the chains, 1.7e-14 on
+# the scenes, once 9.6e-14 (1e-12 leaves a margin of 10 over that). Where the solver
+# differences its stiffness (joints whose axes turn, loops), Newton's step is that far off and
+# stops earlier: at most 4e-8 measured (1e-6).
+POLISHED_RESIDUAL = 1e-12
+POLISHED_RESIDUAL_DIFFERENCED = 1e-6
+# Any converged run (polished or not) is a rest: the potential energy it has left to release
+# before the rest, 1/2 f^T K^-1 f (eigenvalues taken at least the solver's tolerance), is at
+# most 100 max_e (the stopping energy), or round-off of the force scale for max_e = 0. Twice
+# that here, for the stiffness's change on the way.
+REST_ENERGY_FACTOR = 200.0
+# The least share of the runs that must converge which must: the chains of bounded joints
+# released near a rest, the scenes. Measured over 2,500 examples: 95-100% of the chains (every
+# miss a round-off eigenvalue read as unstable, pushed and spinning for ever, issue 40), 99-100%
+# of the scenes (a miss: 20,000 steps not enough). Below it a solver stopped early or sent
+# astray by a wrong verdict fails.
+LEAST_CONVERGED_SHARE = 0.98
+# The share of verdicts the reference decides (no eigenvalue within the differences' error of
+# the solver's band), so that the verdict checks cannot pass by being undecided. Measured over
+# 600 to 2,000 examples each: 94% at random configurations, 75-81% at the chains' rests (their
+# neutral directions sit at the band's edge where masses span 8 decades), 99.7% on the scenes.
+LEAST_DECIDED_SHARE = {"configurations": 0.85, "rests": 0.65, "scenes": 0.95}
 
 
-def check_verdict(
-    verdict: str, min_eigenvalue: float, eigenvalues: np.ndarray, floor: float
+def check_converged_residual(
+    result: pinsettle.Result, scale: float, verdict: Verdict, differenced: bool, name: str
 ) -> None:
-    """The verdict against the finite-difference eigenvalues. Where they are clear (beyond
-    1e-5 of the largest, far above the differences' noise and the solver's own tolerance of
-    1e-9 of the largest) the verdict must follow them; in between either side is right."""
-    top = float(np.max(np.abs(eigenvalues)))
-    band = 1e-5 * top + floor
-    smallest = float(eigenvalues[0])
-    if smallest > band:
-        assert verdict == "stable", (verdict, eigenvalues)
-    elif smallest < -band:
-        assert verdict == "unstable", (verdict, eigenvalues)
-    if verdict == "stable":
-        assert smallest > -band, eigenvalues
-    elif verdict == "unstable":
-        assert smallest < band, eigenvalues
-    else:
-        assert verdict == "neutral" and abs(smallest) <= band, (verdict, eigenvalues)
-    # The smallest eigenvalue the solver reports is the same, up to the differences' error.
-    assert min_eigenvalue == pytest.approx(smallest, abs=band), (min_eigenvalue, eigenvalues)
+    """A converged run is a rest, by the reference's force along the free motions
+    (verdict.force) and stiffness: round-off when Newton's polish was kept, and in any case
+    little potential energy left to release."""
+    assert result.converged
+    residual = verdict.residual
+    if result.polished:
+        bound = (POLISHED_RESIDUAL_DIFFERENCED if differenced else POLISHED_RESIDUAL) * scale
+        stiff = verdict.stiff_residual()
+        assert stiff <= bound, (name, stiff, bound, describe(verdict), result.summary())
+    energy = verdict.rest_energy()
+    allowed = REST_ENERGY_FACTOR * result.settings.max_e + 1e-22 * scale
+    assert energy <= allowed, (name, energy, allowed, residual, describe(verdict))
 
 
 @settings(PROPERTIES, max_examples=1500)
@@ -239,47 +266,319 @@ def test_random_solves_end_well(data):
     assert np.all(np.isfinite(result.q)) and np.all(np.isfinite(result.v)), name
     assert result.status in {"converged", "max_steps", "time_limit", "no_equilibrium", "diverged"}
     if result.converged:
-        # The residual it claims is the one recomputed with Pinocchio alone.
+        # The residual it claims is the one recomputed with Pinocchio alone, and that is a rest.
         recomputed = float(np.max(np.abs(gravity(model, result.q))))
-        scale = float(
-            np.max(np.abs(gravity(model, pinocchio.neutral(model))), initial=0.0)
-            + sum(inertia.mass for inertia in model.inertias) * 9.81
-        )
+        scale = force_scale(model)
         assert result.residual == pytest.approx(recomputed, rel=1e-9, abs=1e-13 * scale), name
+        verdict = tree_verdict(model, gravity_force(model), result.q)
+        check_converged_residual(result, scale, verdict, has_varying_joints(model), name)
         assert result.stability in ("stable", "neutral"), name
+        verdict.check(result.stability)
 
 
-@settings(PROPERTIES, max_examples=600)
-@given(data=st.data())
-def test_verdict_agrees_with_finite_differences(data):
-    # At any configuration (an equilibrium or not), the verdict of assess_stability is the sign
-    # pattern of the eigenvalues of the finite-difference stiffness.
-    name, model = data.draw(models(), label="model")
-    q = configuration(data.draw, model)
-    report = pinsettle.assess_stability(model, q, limits=False)
-    event(f"{name.split()[0]}: {report.verdict}")
-    eigenvalues = fd_stiffness_eigenvalues(model, q)
-    floor = stiffness_floor(model)
-    check_verdict(report.verdict, report.min_eigenvalue, eigenvalues, floor)
-    band = 1e-5 * np.max(np.abs(eigenvalues)) + floor
-    assert np.allclose(report.eigenvalues, eigenvalues, rtol=0.0, atol=band), name
+def test_verdict_agrees_with_finite_differences():
+    # At any configuration (an equilibrium or not), the verdict of assess_stability is the one
+    # the solver's rule gives on the eigenvalues of the finite-difference stiffness, and so are
+    # its eigenvalues (within the differences' error).
+    decided = Counter()
+
+    @settings(PROPERTIES, max_examples=600)
+    @given(data=st.data())
+    def verdicts(data):
+        name, model = data.draw(models(), label="model")
+        q = configuration(data.draw, model)
+        report = pinsettle.assess_stability(model, q, limits=False)
+        event(f"{name.split()[0]}: {report.verdict}")
+        verdict = tree_verdict(model, gravity_force(model), q)
+        decided[verdict.decided] += 1
+        verdict.check(report.verdict, report.min_eigenvalue)
+        assert np.allclose(
+            report.eigenvalues,
+            verdict.eigenvalues,
+            rtol=0.0,
+            atol=verdict.noise + verdict.tolerances[1],
+        ), (name, report.eigenvalues, describe(verdict))
+
+    verdicts()
+    share = decided[True] / sum(decided.values())
+    assert share >= LEAST_DECIDED_SHARE["configurations"], decided
 
 
-@settings(PROPERTIES, max_examples=500)
-@given(data=st.data())
-def test_verdict_of_a_converged_rest_agrees_with_finite_differences(data):
-    # From a start near a rest (a chain hanging, the manipulator, small random moves), the
-    # solve converges; its verdict and smallest eigenvalue are those of the differences.
-    model, kinds = data.draw(chains(), label="model")
-    q0 = configuration(data.draw, model, scale=0.5)
-    result = pinsettle.solve(model, q0, limits=False, max_steps=20000, max_time=MAX_TIME)
-    event(f"{result.status}, {result.stability}")
-    if not result.converged:
-        return  # a free body or slider falls for ever: nothing to compare
-    eigenvalues = fd_stiffness_eigenvalues(model, result.q)
-    check_verdict(
-        result.stability, result.min_stiffness_eigenvalue, eigenvalues, stiffness_floor(model)
-    )
+# Joints whose configurations form a bounded set: a chain of them has a lowest pose, so
+# released near a rest it must come to one.
+BOUNDED = {"RX", "RY", "RZ", "spherical", "continuous", "universal", "spherical-zyx", "ellipsoid"}
+
+
+def test_verdict_of_a_converged_rest_agrees_with_finite_differences():
+    # From a start near a rest (small random moves from neutral), a chain of bounded joints must
+    # converge (a least share of them, none falling); a chain with sliders or free bodies may
+    # fall. Every converged rest is one (its residual recomputed) and its verdict and smallest
+    # eigenvalue are those of the differences.
+    outcomes = Counter()
+
+    @settings(PROPERTIES, max_examples=500)
+    @given(data=st.data())
+    def rests(data):
+        model, kinds = data.draw(chains(), label="model")
+        q0 = configuration(data.draw, model, scale=0.5)
+        result = pinsettle.solve(model, q0, limits=False, max_steps=20000, max_time=MAX_TIME)
+        bounded = set(kinds) <= BOUNDED
+        event(f"{'bounded' if bounded else 'unbounded'}: {result.status}, {result.stability}")
+        outcomes[bounded, result.converged] += 1
+        if not result.converged:
+            assert result.status in ("max_steps", "no_equilibrium", "time_limit"), result.status
+            return  # counted: the bounded ones must converge, below
+        name = ",".join(kinds)
+        verdict = tree_verdict(model, gravity_force(model), result.q)
+        outcomes["decided", verdict.decided] += 1
+        check_converged_residual(
+            result, force_scale(model), verdict, has_varying_joints(model), name
+        )
+        verdict.check(result.stability, result.min_stiffness_eigenvalue)
+
+    rests()
+    bounded_runs = outcomes[True, True] + outcomes[True, False]
+    assert bounded_runs >= 150, outcomes  # most chains drawn are bounded
+    assert outcomes[True, True] >= LEAST_CONVERGED_SHARE * bounded_runs, outcomes
+    decided = outcomes["decided", True] / (outcomes["decided", True] + outcomes["decided", False])
+    assert decided >= LEAST_DECIDED_SHARE["rests"], outcomes
+
+
+# --- random scenes: springs, loads, stops, couplings and loops ---------------------------------
+
+# 1-DoF joints of one coordinate, and the continuous ones (cos, sin).
+SCENE_JOINTS = {
+    "RX": pinocchio.JointModelRX,
+    "RY": pinocchio.JointModelRY,
+    "RZ": pinocchio.JointModelRZ,
+    "PX": pinocchio.JointModelPX,
+    "PY": pinocchio.JointModelPY,
+    "PZ": pinocchio.JointModelPZ,
+    "HX": lambda: pinocchio.JointModelHX(0.1),
+    "HZ": lambda: pinocchio.JointModelHZ(-0.2),
+    "continuous": pinocchio.JointModelRUBY,
+}
+
+
+def small_vector(draw, bound: float) -> list[float]:
+    """A vector of 3 multiples of 0.05 in [-bound, bound]: scenes on a coarse grid, where a
+    point is on an axis exactly or clearly off it (a loop 1e-20 m off its hinge's axis holds
+    the hinge for the solver, for the reference's rank cut it holds nothing; neither is wrong)."""
+    n = round(bound / 0.05)
+    return [i * 0.05 for i in draw(st.lists(st.integers(-n, n), min_size=3, max_size=3))]
+
+
+@st.composite
+def coarse_placements(draw) -> pinocchio.SE3:
+    rpy = np.array(draw(st.lists(st.integers(-12, 12), min_size=3, max_size=3))) * math.pi / 12
+    return pinocchio.SE3(pinocchio.rpy.rpyToMatrix(rpy), np.array(small_vector(draw, 1.0)))
+
+
+@st.composite
+def scenes(draw) -> tuple[str, Reference, list[tuple[str, str, float, float]]]:
+    """A random chain of 2 to 5 one-DoF joints (revolute, prismatic, helical, continuous), each
+    carrying a body of 0.1 to 10 kg and a body frame, and its elements as a Reference: a joint
+    spring on every joint but the continuous ones (so that the potential grows without bound and
+    has a minimum), point springs, joint loads, point forces (torques only without a continuous
+    joint, which one would turn for ever), stops around the start, a coupling and a point loop
+    to the world, assembled at the start. Returns (description, reference, couplings as
+    (follower, leader, multiplier, offset)); scene_of builds the pinsettle.Scene."""
+    model = pinocchio.Model()
+    kinds = draw(st.lists(st.sampled_from(sorted(SCENE_JOINTS)), min_size=2, max_size=5))
+    names = []
+    for k, kind in enumerate(kinds):
+        parent = draw(st.sampled_from(_ancestors_or_self(model, k)))
+        name = f"j{k}_{kind}"
+        joint = model.addJoint(parent, SCENE_JOINTS[kind](), draw(coarse_placements()), name)
+        mass = 10.0 ** draw(st.floats(-1.0, 1.0, **finite))
+        lever = np.array(small_vector(draw, 0.5))
+        model.appendBodyToJoint(
+            joint, pinocchio.Inertia(mass, lever, mass * 0.01 * np.eye(3)), pinocchio.SE3.Identity()
+        )
+        model.addFrame(
+            pinocchio.Frame(f"b{k}", joint, 0, pinocchio.SE3.Identity(), pinocchio.FrameType.BODY)
+        )
+        names.append(name)
+    ref = Reference(model)
+    linear = [n for n, kind in zip(names, kinds, strict=True) if kind != "continuous"]
+    has_continuous = len(linear) < len(names)
+    parts = []
+    # Start: each joint within 1 rad or m of zero; a follower where its coupling puts it.
+    ref.start = {n: draw(st.floats(-1.0, 1.0, **finite)) for n in names}
+    couplings = []
+    if len(linear) >= 2 and draw(st.booleans()):
+        follower, leader = draw(st.permutations(linear))[:2]
+        multiplier = draw(st.sampled_from([-1.5, -0.5, 0.5, 2.0]))
+        offset = draw(st.floats(-0.3, 0.3, **finite))
+        couplings.append((follower, leader, multiplier, offset))
+        ref.start[follower] = multiplier * ref.start[leader] + offset
+        parts.append("coupling")
+    for name in linear:
+        stiffness = 10.0 ** draw(st.floats(0.0, 3.0, **finite))
+        ref.joint_springs.append((name, stiffness, draw(st.floats(-1.0, 1.0, **finite))))
+    frames = [f"b{k}" for k in range(len(names))]
+    for _ in range(draw(st.integers(0, 2))):
+        a = draw(st.sampled_from(frames))
+        b = draw(st.sampled_from(["universe", *(f for f in frames if f != a)]))  # two bodies
+        ref.springs.append(
+            (
+                a,
+                np.array(small_vector(draw, 0.5)),
+                b,
+                np.array(small_vector(draw, 1.0)),
+                10.0 ** draw(st.floats(0.0, 3.0, **finite)),
+                draw(st.floats(0.0, 1.0, **finite)),
+            )
+        )
+        parts.append("spring")
+    for _ in range(draw(st.integers(0, 2)) if linear else 0):
+        effort = np.array([draw(st.floats(-5.0, 5.0, **finite))])
+        ref.joint_loads.append((draw(st.sampled_from(linear)), effort))
+        parts.append("joint load")
+    for _ in range(draw(st.integers(0, 2))):
+        frame = draw(st.sampled_from(frames))
+        point = np.array(small_vector(draw, 0.5))
+        force = np.array(small_vector(draw, 20.0))
+        torque = np.zeros(3) if has_continuous else np.array(small_vector(draw, 2.0))
+        ref.point_loads.append((frame, point, force, torque))
+        parts.append("point load")
+    followers = {c[0] for c in couplings}
+    for name in linear:
+        if name in followers or not draw(st.booleans()):
+            continue
+        lower = ref.start[name] - draw(st.floats(0.05, 1.0, **finite))
+        upper = ref.start[name] + draw(st.floats(0.05, 1.0, **finite))
+        side = draw(st.sampled_from(["both", "lower", "upper"]))
+        lower, upper = (None if side == "upper" else lower), (None if side == "lower" else upper)
+        ref.limit_entries.append((name, lower, upper))
+        parts.append("stop")
+    if draw(st.booleans()):
+        # A point of a body held where it is at the start: a loop to the world, kept only where
+        # it leaves the mechanism some motion.
+        frame = draw(st.sampled_from(frames))
+        point = np.array(small_vector(draw, 0.5))
+        q0 = ref.q_start()
+        data = model.createData()
+        pinocchio.framesForwardKinematics(model, data, q0)
+        ref.loops.append(
+            (frame, point, "universe", data.oMf[model.getFrameId(frame)].act(point), "point")
+        )
+        rows = ref.loop_jacobian(model, q0)[1]
+        jacobian = np.vstack([rows, *_coupling_rows(model, couplings)])
+        sigma = np.linalg.svd(jacobian, compute_uv=False)
+        clear = sigma > 1e-2 * sigma[0]
+        # Kept where it leaves some motion, its equations are clearly independent or clearly
+        # redundant (a singular start would make the rank a matter of round-off), and it holds
+        # something: a point on a hinge's axis has a Jacobian of round-off, which the solver
+        # counts as an equation (its rank cut is relative: reported, not tested here).
+        if (
+            model.nv - clear.sum() >= 1
+            and np.all(clear | (sigma < 1e-12 * sigma[0]))
+            and np.linalg.norm(rows, 2) > 1e-2
+        ):
+            parts.append("loop")
+        else:
+            ref.loops.pop()
+    return ",".join(kinds) + ": " + (", ".join(parts) or "springs only"), ref, couplings
+
+
+def scene_of(ref: Reference, couplings) -> pinsettle.Scene:
+    """The reference's mechanism as a pinsettle.Scene, through its API."""
+    scene = pinsettle.Scene(ref.full)
+    for follower, leader, multiplier, offset in couplings:
+        scene.add_coupling(follower, leader, multiplier, offset)
+    scene.set_start(ref.start)
+    for name, stiffness, rest in ref.joint_springs:
+        scene.add_joint_spring(name, stiffness, rest)
+    for frame_a, point_a, frame_b, point_b, stiffness, rest_length in ref.springs:
+        scene.add_spring(
+            {"frame": frame_a, "point": point_a},
+            {"frame": frame_b, "point": point_b},
+            stiffness,
+            rest_length,
+        )
+    for name, effort in ref.joint_loads:
+        scene.add_load(name, float(effort[0]))
+    for frame, point, force, torque in ref.point_loads:
+        scene.add_load(frame=frame, point=point, force=force, torque=torque)
+    for name, lower, upper in ref.limit_entries:
+        scene.set_limit(name, lower=lower, upper=upper)
+    for frame_a, point_a, frame_b, point_b, kind in ref.loops:
+        scene.add_loop(
+            {"frame": frame_a, "point": point_a}, {"frame": frame_b, "point": point_b}, kind
+        )
+    return scene
+
+
+def _coupling_rows(model: pinocchio.Model, couplings) -> list[np.ndarray]:
+    rows = []
+    for follower, leader, multiplier, _ in couplings:
+        row = np.zeros(model.nv)
+        row[model.idx_vs[model.getJointId(follower)]] = 1.0
+        row[model.idx_vs[model.getJointId(leader)]] = -multiplier
+        rows.append(row)
+    return rows
+
+
+def check_scene_rest(ref: Reference, couplings, result: pinsettle.Result, scale: float) -> Verdict:
+    """The conditions of a rest at result.q, by the reference: the loops closed and the
+    couplings held, every stop pushing (never pulling) and no force along the motions left
+    free; returns the reference verdict there."""
+    q = result.q
+    model = ref.reduced(q)
+    for follower, leader, multiplier, offset in couplings:
+        x = q[model.idx_qs[model.getJointId(follower)]]
+        y = q[model.idx_qs[model.getJointId(leader)]]
+        assert abs(x - multiplier * y - offset) <= 1e-10, (follower, x, multiplier * y + offset)
+    if ref.loops:
+        assert np.max(np.abs(ref.loop_jacobian(model, q)[0])) <= 1e-10
+    for name, (low, high) in ref.stops(model).items():
+        x = q[model.idx_qs[model.getJointId(name)]]
+        assert low <= x <= high, (name, x, low, high)
+    verdict = scene_verdict(ref, q, couplings)
+    assert verdict.pull <= POLISHED_RESIDUAL_DIFFERENCED * scale, verdict.pull  # stops push
+    if not (ref.loops or couplings):
+        # A tree: the conditions of a rest against stops, joint by joint (KKT).
+        violation = ref.rest_conditions(model, q, ref.force_reduced(model, q))[0]
+        tolerance = max(POLISHED_RESIDUAL_DIFFERENCED * scale, 2.0 * result.residual)
+        assert float(np.max(violation, initial=0.0)) <= tolerance, violation
+    return verdict
+
+
+def test_random_scenes_settle_at_rests_the_reference_confirms():
+    # Every random scene has a rest (each joint on a spring); released from its start with the
+    # default settings it must converge (a least share), at a rest the reference confirms, with
+    # the reference's verdict.
+    outcomes = Counter()
+
+    @settings(PROPERTIES, max_examples=300)
+    @given(data=st.data())
+    def rests(data):
+        description, ref, couplings = data.draw(scenes(), label="scene")
+        for part in description.split(": ")[1].split(", "):
+            event(part)
+        scene = scene_of(ref, couplings)
+        result = pinsettle.solve(scene, max_steps=20000, max_time=MAX_TIME)
+        outcomes[result.status] += 1
+        if not result.converged:
+            assert result.status in ("max_steps", "time_limit"), (description, result.reason)
+            return  # counted: the least share below
+        rng = np.random.default_rng(0)
+        scale = max(
+            ref.residual(ref.q_start()),
+            *(ref.residual(ref.random_configuration(rng)) for _ in range(3)),
+        )
+        verdict = check_scene_rest(ref, couplings, result, scale)
+        outcomes["decided", verdict.decided] += 1
+        differenced = bool(ref.loops or couplings or has_varying_joints(scene.model))
+        check_converged_residual(result, scale, verdict, differenced, description)
+        verdict.check(result.stability, result.min_stiffness_eigenvalue)
+
+    rests()
+    runs = sum(n for key, n in outcomes.items() if isinstance(key, str))
+    assert outcomes["converged"] >= LEAST_CONVERGED_SHARE * runs, outcomes
+    decided = outcomes["decided", True] / max(1, outcomes["converged"])
+    assert decided >= LEAST_DECIDED_SHARE["scenes"], outcomes
 
 
 @settings(PROPERTIES, max_examples=100)

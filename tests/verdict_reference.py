@@ -92,6 +92,8 @@ class Verdict:
     possible: set[str]
     stiffness: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: The largest pull a stop would have to exert (N m or N; 0 when every stop pushes).
+    pull: float = 0.0
 
     @property
     def decided(self) -> bool:
@@ -99,8 +101,9 @@ class Verdict:
 
     @property
     def residual(self) -> float:
-        """The largest static force along the free motions (N m or N)."""
-        return float(np.max(np.abs(self.force), initial=0.0))
+        """The residual of a rest: the largest static force along the free motions and the
+        largest pull asked of a stop (N m or N)."""
+        return max(float(np.max(np.abs(self.force), initial=0.0)), self.pull)
 
     def stiff_residual(self) -> float:
         """The largest component of the static force along the eigenvectors whose stiffness is
@@ -359,6 +362,7 @@ def scene_verdict(
     multipliers = np.linalg.lstsq(stacked.T, tau, rcond=None)[0]
     mu = multipliers[jacobian.shape[0] :]
     held = [iv for k, (_, iv, side) in enumerate(on_stops) if side * mu[k] > tolerance]
+    pull = max((-side * mu[k] for k, (_, _, side) in enumerate(on_stops)), default=0.0)
 
     def constraints(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         errors, rows = closure(x)
@@ -371,7 +375,9 @@ def scene_verdict(
             rows = np.vstack([rows, row])
         return errors, rows
 
-    return manifold_verdict(model, force, constraints, q, extra)
+    verdict = manifold_verdict(model, force, constraints, q, extra)
+    verdict.pull = max(pull, 0.0)
+    return verdict
 
 
 def gravity_force(model: pinocchio.Model) -> Force:

@@ -429,7 +429,7 @@ def test_urdf_faults_in_one_short_line_with_a_way_forward(tmp_path):
     line = one_line_error(run("solve", str(path)))
     assert len(line.replace(str(path), "")) < 300, line
     assert "Joint [chest] has no known type [spherical]" in line
-    assert "URDF joint types: revolute, continuous" in line
+    assert "change the joint's type to one of URDF's (revolute, continuous" in line
     assert "and 5 more" in line  # the collision faults merged into one
 
 

@@ -911,3 +911,26 @@ def test_refusals_group_by_kind(tmp_path):
     )
     assert "<option density> (buoyancy" in message and "gravcomp" in message
     assert message.count("remove the range") == 1 and len(message) < 700
+
+
+@pytest.mark.parametrize(
+    "task", ["manipulate_block.xml", "manipulate_egg.xml", "manipulate_pen.xml"]
+)
+def test_hand_manipulate_tasks_with_their_free_objects(task, tmp_path, mujoco):
+    # gymnasium_robotics' hand manipulate tasks: the Shadow hand beside a free object and a
+    # free target. Their tendon ranges are refused with the way forward; with limits disabled,
+    # kept objects fall (no_equilibrium naming one), locked ones leave the hand a rest MuJoCo's
+    # forces confirm.
+    assets = require("gymnasium_robotics") / "envs" / "assets"
+    original = model_file("gymnasium_robotics", "envs", "assets", "hand", task)
+    line = one_line_error(run("solve", str(original)))
+    assert "tendon limit" in line and '<flag limit="disable"/>' in line
+    folder = copy_of_assets(tmp_path, assets, "hand")
+    path = folder / f"without_limits_{task}"
+    flag = '<option><flag limit="disable"/></option>'
+    path.write_text(original.read_text().replace("</compiler>", f"</compiler>{flag}", 1))
+    kept = solve_json(str(path))
+    assert kept["status"] == "no_equilibrium"
+    assert "'object:joint'" in kept["reason"] or "'target:joint'" in kept["reason"]
+    locked = solve_json(str(path), "--free-objects", "lock")
+    assert_rest_is_mujocos(mujoco, path, locked, free_objects="lock")

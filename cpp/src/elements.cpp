@@ -228,6 +228,19 @@ namespace pinsettle
     spring_damping_ = spring_damping_ || damping > 0.;
   }
 
+  bool ForceElements::tiesToWorld(const pinocchio::Model & model, pinocchio::JointIndex root) const
+  {
+    for (const JointSpring & spring : joint_springs_)
+      if (spring.joint == root)
+        return true;
+    if (has_joint_loads_ && !joint_loads_.segment(model.idx_vs[root], model.nvs[root]).isZero(0.))
+      return true;
+    for (const PointSpring & spring : point_springs_)
+      if (isInSubtree(model, spring.a.joint, root) != isInSubtree(model, spring.b.joint, root))
+        return true;
+    return false;
+  }
+
   void ForceElements::addJointLoad(pinocchio::JointIndex joint, const Eigen::VectorXd & effort)
   {
     const char * what = "joint load";

@@ -27,4 +27,10 @@ namespace pinsettle
     tau += tau_;
   }
 
+  bool ConstantGeneralizedForce::tiesToWorld(
+    const pinocchio::Model & model, pinocchio::JointIndex root) const
+  {
+    return tau_.size() != model.nv || !tau_.segment(model.idx_vs[root], model.nvs[root]).isZero(0.);
+  }
+
 } // namespace pinsettle

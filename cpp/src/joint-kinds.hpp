@@ -71,6 +71,16 @@ namespace pinsettle
     return false;
   }
 
+  /// \brief Whether joint is root or lies below it (the world, joint 0, lies below none).
+  inline bool isInSubtree(
+    const pinocchio::Model & model, pinocchio::JointIndex joint, pinocchio::JointIndex root)
+  {
+    for (; joint != 0; joint = model.parents[joint])
+      if (joint == root)
+        return true;
+    return false;
+  }
+
 } // namespace pinsettle
 
 #endif // ifndef __pinsettle_joint_kinds_hpp__

@@ -483,7 +483,7 @@ namespace pinsettle
                  / (2. * h);
     }
     const Eigen::MatrixXd reduced = N.transpose() * (K * N - C);
-    StabilityReport report = assessStiffness(reduced, 1e-7);
+    StabilityReport report = assessStiffness(reduced, 1e-7, computeStiffnessFloor(model, true));
     report.softest_direction = N * report.softest_direction;
     report.basis = N;
     return report;

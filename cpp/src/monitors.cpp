@@ -137,11 +137,14 @@ namespace pinsettle
     return growing_ >= kRunawayDoublings && drift >= kMinTravel;
   }
 
-  void RestCheck::start(std::int64_t window, double push_energy, EnergyMeasure measure)
+  void RestCheck::start(
+    std::int64_t window, double push_energy, EnergyMeasure measure, double rest_energy_limit)
   {
     window_ = window;
     push_energy_ = push_energy;
     measure_ = measure;
+    rest_energy_limit_ = rest_energy_limit;
+    rest_energy_ = 0.;
     last_assessed_ = 0;
     creeping_ = stalled_ = false;
     report_ = StabilityReport();
@@ -154,9 +157,11 @@ namespace pinsettle
     return (quiet && not_rising) || exact_rest || creeping_;
   }
 
-  void RestCheck::record(StabilityReport report, const Eigen::VectorXd & q, std::int64_t step)
+  void RestCheck::record(
+    StabilityReport report, const Eigen::VectorXd & q, std::int64_t step, double rest_energy)
   {
     stalled_ = creeping_ && report_q_.size() == q.size() && report_q_ == q;
+    rest_energy_ = rest_energy;
     report_ = std::move(report);
     report_q_ = q;
     last_assessed_ = step;

@@ -6,6 +6,7 @@
 #include "pinsettle/energy.hpp"
 #include "pinsettle/model-checks.hpp"
 #include "pinsettle/stability.hpp"
+#include "joint-kinds.hpp"
 #include "loop-stepper.hpp"
 #include "unit-norm.hpp"
 
@@ -142,6 +143,105 @@ namespace pinsettle
     return pinocchio::computeGeneralizedGravity(model, data, q) - tau;
   }
 
+  namespace
+  {
+    // Tangent coordinates (first index, count) along which a root joint moves its whole subtree
+    // in a straight line, or count 0: a helical or revolute root turns it.
+    std::pair<int, int> rootTranslation(const pinocchio::Model & model, pinocchio::JointIndex j)
+    {
+      const std::string kind = model.joints[j].shortname();
+      int count = 0;
+      if (kind == "JointModelFreeFlyer" || kind == "JointModelTranslation")
+        count = 3;
+      else if (kind == "JointModelPlanar")
+        count = 2;
+      else if (
+        kind == "JointModelPX" || kind == "JointModelPY" || kind == "JointModelPZ"
+        || kind == "JointModelPrismaticUnaligned")
+        count = 1;
+      return {model.idx_vs[j], count};
+    }
+
+    // Whether a loop or coupling ties root's subtree to the world or to another branch.
+    bool loopsTie(
+      const pinocchio::Model & model, const LoopConstraints & loops, pinocchio::JointIndex root)
+    {
+      for (const Loop & loop : loops.loops())
+        if (isInSubtree(model, loop.joint_a, root) != isInSubtree(model, loop.joint_b, root))
+          return true;
+      for (const JointCoupling & coupling : loops.couplings())
+        if (
+          coupling.follower == root || coupling.leader == root
+          || isInSubtree(model, coupling.follower, root)
+               != isInSubtree(model, coupling.leader, root))
+          return true;
+      return false;
+    }
+  } // namespace
+
+  std::string explainFreeFall(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces,
+    const LoopConstraints * loops,
+    const JointStops * stops)
+  {
+    Eigen::VectorXd tau;
+    for (pinocchio::JointIndex root = 1; root < static_cast<pinocchio::JointIndex>(model.njoints);
+         ++root)
+    {
+      const std::pair<int, int> along = rootTranslation(model, root);
+      if (model.parents[root] != 0 || along.second == 0)
+        continue;
+      if (forces != nullptr && !forces->empty() && forces->tiesToWorld(model, root))
+        continue;
+      if (loops != nullptr && loopsTie(model, *loops, root))
+        continue;
+      bool stopped = false;
+      if (stops != nullptr)
+        for (const JointStops::Stop & stop : stops->stops())
+          stopped = stopped || stop.joint == root;
+      if (stopped)
+        continue;
+      // Nothing ties the subtree to the world: the net force on it (its weight and the loads)
+      // is the same in every pose, and its component along the root's translation is the
+      // static force there.
+      if (tau.size() == 0)
+        tau = computeStaticForce(model, data, q, forces);
+      const double pull = tau.segment(along.first, along.second).norm();
+      double mass = 0.;
+      int bodies = 0;
+      for (pinocchio::JointIndex j = root; j < static_cast<pinocchio::JointIndex>(model.njoints);
+           ++j)
+        if (isInSubtree(model, j, root))
+        {
+          mass += model.inertias[j].mass();
+          ++bodies;
+        }
+      if (!(pull > 1e-9 * mass * model.gravity.linear().norm()) || pull == 0.)
+        continue;
+      std::ostringstream msg;
+      msg.precision(4);
+      msg << "the potential energy falls without bound: nothing holds joint '" << model.names[root]
+          << "' (" << model.joints[root].shortname().substr(10) << " at the root, " << bodies
+          << (bodies == 1 ? " body, " : " bodies, ") << mass
+          << " kg): the net force along its free translation, " << pull
+          << " N (weight and loads), is the same in every pose, so it falls whatever its joints "
+             "do; fix its root or add what holds it (a spring, a loop, a stop)";
+      return msg.str();
+    }
+    return "";
+  }
+
+  double restEnergyLimit(const pinocchio::Model & model, const Settings & settings)
+  {
+    // The energy the stopping rule accepts still moving, kRestEnergyFactor times over; a floor of
+    // round-off for max_e = 0 (a rest at round-off leaves about (1e-15 of the force scale)^2).
+    return std::max(
+      kRestEnergyFactor * settings.max_e, 1e-24 * computeGravityScale(model) + 1e-300);
+  }
+
   double computeStaticResidual(
     const pinocchio::Model & model,
     pinocchio::Data & data,
@@ -227,6 +327,13 @@ namespace pinsettle
     RunClock clock; // the wall time includes the checks and the set-up
     Result result;
     start(q0, v0, settings, forces, result);
+    result.reason = explainFreeFall(model_, data, q_, forces_, loops_, stops_);
+    if (!result.reason.empty())
+    {
+      finish(Status::NoEquilibrium, result);
+      result.wall_time = clock.elapsed();
+      return result;
+    }
     clock.configure(settings, abort);
     RunProgress progress;
     progress.compute_residual = [this]() { return progressResidual(); };
@@ -384,7 +491,7 @@ namespace pinsettle
     window_ = StoppingWindow(settings.ds, settings.max_e);
     rest_.start(
       std::max<std::int64_t>(settings.ds, model_.nv), std::max(10. * settings.max_e, 1e-30),
-      settings.energy);
+      settings.energy, restEnergyLimit(model_, settings));
     trace_.start(settings);
     runaway_.start(model_.nv, RunawayMonitor::kFirstSample, std::max(10. * settings.max_e, 1e-30));
     step_control_.start(settings, forces);
@@ -556,7 +663,11 @@ namespace pinsettle
     // an unstable rest goes that way, as the mechanism would fall, not along whichever sign
     // the eigen-solver gave the softest direction.
     drift_ = v_.isZero(0.) ? data.ddq : v_;
-    rest_.record(assess(q_, forces_), q_, step_);
+    StabilityReport report = assess(q_, forces_);
+    const double energy = report.verdict == Stability::Unstable
+                            ? std::numeric_limits<double>::infinity()
+                            : computeRestEnergy(report, staticForce(q_, forces_));
+    rest_.record(std::move(report), q_, step_, energy);
     return true;
   }
 
@@ -855,12 +966,17 @@ namespace pinsettle
     StabilityReport after = run.iterations == 0 ? report : assess(run.q, forces_);
     if (after.verdict != report.verdict)
       return false;
+    // Newton leaves neutral directions alone: a force still pulling along one (a slider on a
+    // tilted arm, 3.6 N along it) is no rest, whatever the round-off of the rest.
+    const double energy = computeRestEnergy(after, run.tau);
+    if (!(energy <= restEnergyLimit(model_, *settings_)))
+      return false;
     result.residual_before_polish = residual;
     result.polish_iterations = run.iterations;
     result.polished = run.iterations > 0;
     q_ = std::move(run.q);
     v_.setZero();
-    rest_.record(std::move(after), q_, step_);
+    rest_.record(std::move(after), q_, step_, energy);
     settled_by_newton_ = true;
     return true;
   }

@@ -140,7 +140,8 @@ namespace pinsettle
     return K;
   }
 
-  StabilityReport assessStiffness(const Eigen::MatrixXd & K, double relative_tolerance)
+  StabilityReport assessStiffness(
+    const Eigen::MatrixXd & K, double relative_tolerance, double absolute_tolerance)
   {
     StabilityReport report;
     report.stiffness = K;
@@ -158,7 +159,7 @@ namespace pinsettle
       decomposeStiffness<Eigen::Dynamic>(K, report);
     report.min_eigenvalue = report.eigenvalues[0];
     report.max_abs_eigenvalue = report.eigenvalues.cwiseAbs().maxCoeff();
-    report.tolerance = relative_tolerance * report.max_abs_eigenvalue;
+    report.tolerance = std::max(relative_tolerance * report.max_abs_eigenvalue, absolute_tolerance);
     for (Eigen::Index k = 0; k < report.eigenvalues.size(); ++k)
       if (std::abs(report.eigenvalues[k]) <= report.tolerance)
         ++report.neutral_directions;
@@ -177,9 +178,49 @@ namespace pinsettle
     const Eigen::VectorXd & q,
     const ForceModel * forces)
   {
+    const bool differenced = stiffnessByFiniteDifferences(model, forces);
     return assessStiffness(
-      computeStiffnessMatrix(model, data, q, forces),
-      stiffnessByFiniteDifferences(model, forces) ? 1e-7 : 1e-9);
+      computeStiffnessMatrix(model, data, q, forces), differenced ? 1e-7 : 1e-9,
+      computeStiffnessFloor(model, differenced));
+  }
+
+  double computeGravityScale(const pinocchio::Model & model)
+  {
+    double mass = 0., reach = 0., lever = 0.;
+    for (std::size_t j = 1; j < model.joints.size(); ++j)
+    {
+      mass += model.inertias[j].mass();
+      reach += model.jointPlacements[j].translation().norm();
+      lever = std::max(lever, model.inertias[j].lever().norm());
+    }
+    return mass * model.gravity.linear().norm() * (reach + lever);
+  }
+
+  double computeStiffnessFloor(const pinocchio::Model & model, bool differenced)
+  {
+    // A central difference of step 1e-6 divides the static force's round-off by it.
+    return (differenced ? 1e6 : 1.) * kStiffnessRoundOff * computeGravityScale(model);
+  }
+
+  double computeRestEnergy(const StabilityReport & report, const Eigen::VectorXd & tau)
+  {
+    const Eigen::VectorXd f = report.basis.transpose() * tau;
+    if (f.size() == 0)
+      return 0.;
+    const Eigen::MatrixXd Ks = 0.5 * (report.stiffness + report.stiffness.transpose());
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Ks);
+    const Eigen::VectorXd along = eig.eigenvectors().transpose() * f;
+    double energy = 0.;
+    for (Eigen::Index k = 0; k < along.size(); ++k)
+    {
+      const double stiffness = std::max(eig.eigenvalues()[k], report.tolerance);
+      if (along[k] == 0.)
+        continue;
+      if (!(stiffness > 0.))
+        return std::numeric_limits<double>::infinity();
+      energy += 0.5 * along[k] * along[k] / stiffness;
+    }
+    return energy;
   }
 
   namespace

@@ -245,8 +245,9 @@ namespace pinsettle
     const Eigen::MatrixXd B = computeFreeDirections(stops, q, tau, tolerance);
     const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
     const bool finite_differences = forces != nullptr && !forces->empty();
-    StabilityReport report =
-      assessStiffness(B.transpose() * K * B, finite_differences ? 1e-7 : 1e-9);
+    StabilityReport report = assessStiffness(
+      B.transpose() * K * B, finite_differences ? 1e-7 : 1e-9,
+      computeStiffnessFloor(model, finite_differences));
     if (B.cols() == 0) // every joint pressed onto a stop: nothing can move
     {
       report.verdict = Stability::Stable;

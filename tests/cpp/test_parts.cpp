@@ -492,7 +492,7 @@ BOOST_AUTO_TEST_CASE(runaway_monitor_sees_a_fall_without_bound_and_not_a_ringing
 BOOST_AUTO_TEST_CASE(rest_check_assesses_when_the_signals_say_so)
 {
   pinsettle::RestCheck rest;
-  rest.start(100, 1e-11, pinsettle::EnergyMeasure::Exact);
+  rest.start(100, 1e-11, pinsettle::EnergyMeasure::Exact, 1e-4);
   BOOST_CHECK(!rest.isDue(false, true, false, 500));
   BOOST_CHECK(!rest.isDue(true, false, false, 50)); // quiet but rising: not a window yet
   BOOST_CHECK(rest.isDue(true, true, false, 50));   // the stopping rule
@@ -501,37 +501,87 @@ BOOST_AUTO_TEST_CASE(rest_check_assesses_when_the_signals_say_so)
   pinsettle::StabilityReport stable;
   stable.verdict = pinsettle::Stability::Stable;
   const Eigen::VectorXd q = Eigen::VectorXd::Zero(1);
-  rest.record(stable, q, 100);
+  rest.record(stable, q, 100, 0.);
   BOOST_CHECK(!rest.accepts()); // a creeping stable rest is not accepted yet
   pinsettle::StabilityReport neutral;
   neutral.verdict = pinsettle::Stability::Neutral;
-  rest.record(neutral, q, 100);
+  rest.record(neutral, q, 100, 0.);
   BOOST_CHECK(rest.accepts()); // a creeping neutral one is: its energy may never peak
   pinsettle::StabilityReport unstable;
   unstable.verdict = pinsettle::Stability::Unstable;
-  rest.record(unstable, q, 100);
+  rest.record(unstable, q, 100, 0.);
   BOOST_CHECK(!rest.accepts());
   BOOST_CHECK(rest.isUnstable());
-  rest.record(stable, q, 100);
+  rest.record(stable, q, 100, 0.);
   BOOST_CHECK(!rest.isDue(true, false, false, 150));
   BOOST_CHECK(rest.isDue(true, true, false, 150));
-  rest.record(stable, q, 150);
+  rest.record(stable, q, 150, 0.);
   BOOST_CHECK(rest.accepts());
   BOOST_CHECK(rest.isAssessed(q));
   BOOST_CHECK(!rest.isAssessed(Eigen::VectorXd::Ones(1)));
   // Creeping at a stable rest a window later with q unchanged, to the bit: a stall below the
   // resolution of q, accepted; had q moved, the swing back is still to come.
   pinsettle::RestCheck stall;
-  stall.start(100, 1e-11, pinsettle::EnergyMeasure::Exact);
+  stall.start(100, 1e-11, pinsettle::EnergyMeasure::Exact, 1e-4);
   BOOST_CHECK(stall.isDue(true, false, false, 100));
-  stall.record(stable, q, 100);
+  stall.record(stable, q, 100, 0.);
   BOOST_CHECK(!stall.accepts());
   BOOST_CHECK(stall.isDue(true, false, false, 200));
-  stall.record(stable, Eigen::VectorXd::Constant(1, 1e-300), 200);
+  stall.record(stable, Eigen::VectorXd::Constant(1, 1e-300), 200, 0.);
   BOOST_CHECK(!stall.accepts());
   BOOST_CHECK(stall.isDue(true, false, false, 300));
-  stall.record(stable, Eigen::VectorXd::Constant(1, 1e-300), 300);
+  stall.record(stable, Eigen::VectorXd::Constant(1, 1e-300), 300, 0.);
   BOOST_CHECK(stall.accepts());
+  // The same stall with more potential energy left than the limit (1e-4 J): quiet because it
+  // hardly moves, not a rest.
+  stall.record(stable, Eigen::VectorXd::Constant(1, 1e-300), 400, 2e-4);
+  BOOST_CHECK(!stall.accepts());
+  rest.record(neutral, q, 400, 2e-4);
+  BOOST_CHECK(!rest.accepts());
+  rest.record(neutral, q, 400, 1e-4);
+  BOOST_CHECK(rest.accepts());
+}
+
+BOOST_AUTO_TEST_CASE(rest_energy_is_the_potential_left_above_the_rest)
+{
+  // A pendulum of m = 2 kg, l = 0.5 m held at q: tau = m g l sin q, K = m g l cos q. The energy
+  // left to its rest at 0 is m g l (1 - cos q), to second order 1/2 tau^2 / K.
+  const double m = 2., l = 0.5, g = 9.81;
+  const pinocchio::Model model = pendulum(m, l);
+  pinocchio::Data data(model);
+  const Eigen::VectorXd q = Eigen::VectorXd::Constant(1, 1e-3);
+  const pinsettle::StabilityReport report = pinsettle::assessStability(model, data, q);
+  const Eigen::VectorXd tau = pinsettle::computeStaticForce(model, data, q);
+  BOOST_CHECK_CLOSE(
+    pinsettle::computeRestEnergy(report, tau), m * g * l * (1. - std::cos(1e-3)), 1e-4);
+  BOOST_CHECK_EQUAL(pinsettle::computeRestEnergy(report, Eigen::VectorXd::Zero(1)), 0.);
+  // A force along a neutral direction (a vertical hinge turned by 1 N m) counts in full: its
+  // stiffness is taken at the tolerance, so the energy is huge, not zero.
+  pinsettle::StabilityReport flat =
+    pinsettle::assessStiffness(Eigen::MatrixXd::Zero(1, 1), 1e-9, 1e-12);
+  BOOST_CHECK(flat.verdict == pinsettle::Stability::Neutral);
+  BOOST_CHECK_CLOSE(pinsettle::computeRestEnergy(flat, Eigen::VectorXd::Ones(1)), 0.5e12, 1e-9);
+}
+
+BOOST_AUTO_TEST_CASE(a_stiffness_of_round_off_is_neutral_under_the_model_floor)
+{
+  // Without a floor, eigenvalues of 8.9e-16 of either sign are read relative to the largest,
+  // 8.9e-16 too: the negative one is 'unstable'. The model's own floor is far above them.
+  const pinocchio::Model model = pendulum(2., 0.5);
+  const double scale = pinsettle::computeGravityScale(model);
+  BOOST_CHECK_CLOSE(scale, 2. * 9.81 * 0.5, 1e-12);
+  Eigen::MatrixXd K(2, 2);
+  K << -8.9e-16, 0., 0., 8.9e-16;
+  BOOST_CHECK(pinsettle::assessStiffness(K, 1e-9).verdict == pinsettle::Stability::Unstable);
+  const double floor = pinsettle::computeStiffnessFloor(model, false);
+  BOOST_CHECK_CLOSE(floor, pinsettle::kStiffnessRoundOff * scale, 1e-12);
+  const pinsettle::StabilityReport report = pinsettle::assessStiffness(K, 1e-9, floor);
+  BOOST_CHECK(report.verdict == pinsettle::Stability::Neutral);
+  BOOST_CHECK_EQUAL(report.neutral_directions, 2);
+  // A real stiffness, however small against the weight (a link of 1e-4 kg and 1 mm under a
+  // pendulum of 2 kg and 0.5 m: 1e-6 N m/rad), stays above the floor.
+  K << 1e-6, 0., 0., 9.81;
+  BOOST_CHECK(pinsettle::assessStiffness(K, 1e-9, floor).verdict == pinsettle::Stability::Stable);
 }
 
 BOOST_AUTO_TEST_CASE(rest_check_pushes_an_upright_pendulum_with_the_push_energy)
@@ -543,9 +593,11 @@ BOOST_AUTO_TEST_CASE(rest_check_pushes_an_upright_pendulum_with_the_push_energy)
        {pinsettle::EnergyMeasure::Exact, pinsettle::EnergyMeasure::Simplified})
   {
     pinsettle::RestCheck rest;
-    rest.start(100, 1e-11, measure);
+    rest.start(100, 1e-11, measure, 1e-4);
     BOOST_REQUIRE(rest.isDue(false, false, true, 100));
-    rest.record(pinsettle::assessStability(model, data, upright), upright, 100);
+    rest.record(
+      pinsettle::assessStability(model, data, upright), upright, 100,
+      std::numeric_limits<double>::infinity());
     BOOST_REQUIRE(rest.isUnstable());
     BOOST_CHECK(!rest.accepts());
     Eigen::VectorXd v(1);
@@ -624,4 +676,68 @@ BOOST_AUTO_TEST_CASE(run_clock_stops_on_the_budget_and_on_the_callback)
   BOOST_CHECK(timed.mustStop(progress, status));
   BOOST_CHECK(status == pinsettle::Status::TimeLimit);
   BOOST_CHECK_GE(timed.elapsed(), 5e-3);
+}
+
+BOOST_AUTO_TEST_CASE(free_fall_is_explained_only_where_nothing_holds_the_root)
+{
+  // A 3 kg box on a free flyer carrying a 1 kg pendulum: its weight, 39.24 N, is the net force
+  // along the free flyer's translation in every pose.
+  pinocchio::Model model;
+  const pinocchio::JointIndex root =
+    model.addJoint(0, pinocchio::JointModelFreeFlyer(), pinocchio::SE3::Identity(), "root");
+  model.appendBodyToJoint(root, pinocchio::Inertia::FromBox(3., 0.2, 0.1, 0.1));
+  const pinocchio::JointIndex arm =
+    model.addJoint(root, pinocchio::JointModelRY(), pinocchio::SE3::Identity(), "arm");
+  model.appendBodyToJoint(
+    arm, pinocchio::Inertia(1., Eigen::Vector3d(0., 0., -0.5), Eigen::Matrix3d::Identity() * 1e-3));
+  model.addFrame(
+    pinocchio::Frame("box", root, 0, pinocchio::SE3::Identity(), pinocchio::FrameType::OP_FRAME));
+  pinocchio::Data data(model);
+  const Eigen::VectorXd q = pinocchio::randomConfiguration(
+    model, -Eigen::VectorXd::Ones(model.nq), Eigen::VectorXd::Ones(model.nq));
+  const std::string why = pinsettle::explainFreeFall(model, data, q, nullptr, nullptr, nullptr);
+  BOOST_TEST_MESSAGE(why);
+  BOOST_CHECK(why.find("'root'") != std::string::npos);
+  BOOST_CHECK(why.find("39.24 N") != std::string::npos);
+  // A joint spring on the pendulum is inside the subtree: still a fall.
+  pinsettle::ForceElements inside(model);
+  inside.addJointSpring(arm, 10., 0.);
+  BOOST_CHECK(!pinsettle::explainFreeFall(model, data, q, &inside, nullptr, nullptr).empty());
+  // A spring from the box to the world holds it: no certificate.
+  pinsettle::ForceElements hung(model);
+  hung.addPointSpring(
+    0, Eigen::Vector3d::Zero(), model.getFrameId("box"), Eigen::Vector3d::Zero(), 100., 0.);
+  BOOST_CHECK(pinsettle::explainFreeFall(model, data, q, &hung, nullptr, nullptr).empty());
+  // A constant effort on the root's own coordinates may balance it: no certificate either.
+  Eigen::VectorXd lift = Eigen::VectorXd::Zero(model.nv);
+  lift[2] = 1.;
+  const pinsettle::ConstantGeneralizedForce pushed(lift);
+  BOOST_CHECK(pinsettle::explainFreeFall(model, data, q, &pushed, nullptr, nullptr).empty());
+  // Without gravity nothing pulls: no fall.
+  pinocchio::Model weightless = model;
+  weightless.gravity.setZero();
+  pinocchio::Data weightless_data(weightless);
+  BOOST_CHECK(
+    pinsettle::explainFreeFall(weightless, weightless_data, q, nullptr, nullptr, nullptr).empty());
+}
+
+BOOST_AUTO_TEST_CASE(a_prismatic_root_falls_unless_a_stop_holds_it)
+{
+  pinocchio::Model model;
+  const pinocchio::JointIndex slide =
+    model.addJoint(0, pinocchio::JointModelPZ(), pinocchio::SE3::Identity(), "slide");
+  model.appendBodyToJoint(slide, pinocchio::Inertia::FromBox(2., 0.1, 0.1, 0.1));
+  pinocchio::Data data(model);
+  const Eigen::VectorXd q = Eigen::VectorXd::Zero(1);
+  BOOST_CHECK(!pinsettle::explainFreeFall(model, data, q, nullptr, nullptr, nullptr).empty());
+  pinsettle::JointStops stops(model, false);
+  stops.setLimit(slide, -0.5, 0.5);
+  BOOST_CHECK(pinsettle::explainFreeFall(model, data, q, nullptr, nullptr, &stops).empty());
+  // A horizontal slider feels no net force along its axis: no fall (it is neutral).
+  pinocchio::Model flat;
+  const pinocchio::JointIndex x =
+    flat.addJoint(0, pinocchio::JointModelPX(), pinocchio::SE3::Identity(), "x");
+  flat.appendBodyToJoint(x, pinocchio::Inertia::FromBox(2., 0.1, 0.1, 0.1));
+  pinocchio::Data flat_data(flat);
+  BOOST_CHECK(pinsettle::explainFreeFall(flat, flat_data, q, nullptr, nullptr, nullptr).empty());
 }

@@ -150,6 +150,10 @@ namespace pinsettle
       Eigen::VectorXd & tau,
       ForceVector & fext) const override;
 
+    /// A joint spring or load on root, or a point spring with one end in root's subtree and the
+    /// other outside it; point loads are constant world forces.
+    bool tiesToWorld(const pinocchio::Model & model, pinocchio::JointIndex root) const override;
+
     const std::vector<JointSpring> & jointSprings() const
     {
       return joint_springs_;

@@ -44,6 +44,19 @@ namespace pinsettle
       return false;
     }
 
+    ///
+    /// \brief Whether the efforts may tie the subtree of joint root to the world: act on root's
+    /// own coordinates, or change their net force on the subtree when it moves as a whole (a
+    /// spring from it to the world or to another branch). Where they cannot, a root that
+    /// translates freely under a net force falls for ever (explainFreeFall). True unless the
+    /// model knows better.
+    ///
+    virtual bool tiesToWorld(
+      const pinocchio::Model & /*model*/, pinocchio::JointIndex /*root*/) const
+    {
+      return true;
+    }
+
     /// \brief Whether addStiffness gives the efforts' share of the stiffness in closed form;
     /// otherwise the stiffness takes it by central differences of computeForces.
     virtual bool hasClosedFormStiffness() const
@@ -117,6 +130,9 @@ namespace pinsettle
     {
       return tau_;
     }
+
+    /// Only an effort on root's own coordinates: any other is a pair inside the subtree.
+    bool tiesToWorld(const pinocchio::Model & model, pinocchio::JointIndex root) const override;
 
   private:
     Eigen::VectorXd tau_;

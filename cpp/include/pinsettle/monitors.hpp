@@ -270,20 +270,37 @@ namespace pinsettle
     ///            least model.nv: an assessment costs O(nv^3), a step O(nv)).
     /// \param[in] push_energy Energy of a push (unit of the energy signal).
     /// \param[in] measure The energy signal.
+    /// \param[in] rest_energy_limit Most potential energy (J) a rest may have left to release
+    ///            (computeRestEnergy) to end the run.
     ///
-    void start(std::int64_t window, double push_energy, EnergyMeasure measure);
+    void start(
+      std::int64_t window, double push_energy, EnergyMeasure measure, double rest_energy_limit);
 
     /// \brief Whether the signals call for an assessment at step.
     bool isDue(bool quiet, bool not_rising, bool exact_rest, std::int64_t step);
 
+    ///
     /// \brief Keep the assessment of q, made at step (moved in: its matrices are not copied).
-    void record(StabilityReport report, const Eigen::VectorXd & q, std::int64_t step);
+    /// \param[in] rest_energy computeRestEnergy of the assessment (J); infinity for an unstable
+    ///            one.
+    ///
+    void record(
+      StabilityReport report, const Eigen::VectorXd & q, std::int64_t step, double rest_energy);
 
-    /// \brief Whether the rest just assessed ends the run.
+    /// \brief Whether the rest just assessed ends the run: stable or neutral, not merely
+    /// creeping, and close enough to its rest (rest_energy_limit). A quiet run far from a rest
+    /// (the step halved until nothing moves) goes on.
     bool accepts() const
     {
-      return report_.verdict == Stability::Neutral
-             || (report_.verdict == Stability::Stable && (!creeping_ || stalled_));
+      const bool kind = report_.verdict == Stability::Neutral
+                        || (report_.verdict == Stability::Stable && (!creeping_ || stalled_));
+      return kind && rest_energy_ <= rest_energy_limit_;
+    }
+
+    /// \brief computeRestEnergy of the last assessment (J).
+    double restEnergy() const
+    {
+      return rest_energy_;
     }
 
     /// \brief Whether the rest just assessed must be pushed off.
@@ -322,7 +339,7 @@ namespace pinsettle
 
   private:
     std::int64_t window_ = 1, last_assessed_ = 0;
-    double push_energy_ = 0.;
+    double push_energy_ = 0., rest_energy_ = 0., rest_energy_limit_ = 0.;
     EnergyMeasure measure_ = EnergyMeasure::Exact;
     bool creeping_ = false, stalled_ = false;
     StabilityReport report_;

@@ -17,6 +17,7 @@
 
 #include <limits>
 #include <memory>
+#include <string>
 
 namespace pinsettle
 {
@@ -69,6 +70,38 @@ namespace pinsettle
     pinocchio::Data & data,
     const Eigen::VectorXd & q,
     const ForceModel * forces = nullptr);
+
+  ///
+  /// \brief Why the mechanism can have no rest because a root joint translates freely: a free
+  /// flyer, planar, translation or prismatic joint at the root that nothing ties to the world
+  /// (no stop on it, no loop, coupling or element from its subtree to the world or another
+  /// branch: ForceModel::tiesToWorld), under a net force along its translation. That force is
+  /// the subtree's weight and loads, the same in every pose, so no motion of its joints can
+  /// balance it: a falling humanoid, whatever its limbs do. Certain, unlike the runaway test,
+  /// which must watch the motion.
+  ///
+  /// \param[in] q A configuration (dim model.nq).
+  /// \return The reason, naming the joint and the force; empty where no root falls so.
+  ///
+  std::string explainFreeFall(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces,
+    const LoopConstraints * loops,
+    const JointStops * stops);
+
+  /// \brief A rest ends a run only with at most this many times Settings::max_e of potential
+  /// energy left to release (computeRestEnergy): a quiet run that is not at a rest goes on.
+  /// Measured with polish and the takeover off (docs/method.md, When is it a rest).
+  constexpr double kRestEnergyFactor = 100.;
+
+  ///
+  /// \brief The most potential energy (J) a rest may have left to end a run:
+  /// kRestEnergyFactor * settings.max_e, or for max_e = 0 round-off of the model's gravity
+  /// scale (computeGravityScale). With the simplified measure max_e is read as J here too.
+  ///
+  double restEnergyLimit(const pinocchio::Model & model, const Settings & settings);
 
   ///
   /// \brief Static residual: max |rnea(q, 0, 0) - applied generalized forces at (q, 0)|.

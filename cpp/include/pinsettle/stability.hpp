@@ -53,11 +53,50 @@ namespace pinsettle
 
   ///
   /// \brief The verdict from a stiffness matrix: eigenvalues of its symmetric part, zero within
-  /// relative_tolerance times the largest absolute one.
+  /// the larger of relative_tolerance times the largest absolute one and absolute_tolerance.
   ///
   /// \param[in] K Stiffness matrix (dim n x n); basis is set to the identity.
+  /// \param[in] absolute_tolerance Eigenvalues this small count as zero whatever the largest
+  ///            (N m/rad or N/m): where K vanishes altogether (wheels turning freely), its
+  ///            eigenvalues are round-off of either sign (computeStiffnessFloor).
   ///
-  StabilityReport assessStiffness(const Eigen::MatrixXd & K, double relative_tolerance);
+  StabilityReport assessStiffness(
+    const Eigen::MatrixXd & K, double relative_tolerance, double absolute_tolerance = 0.);
+
+  ///
+  /// \brief The model's own scale of gravity's work, sum_i m_i |g| times the longest lever the
+  /// model can have (the sum of its joints' offsets and the largest centre-of-mass offset), in
+  /// J (or N m per rad): the size of the terms gravity's stiffness is summed from, hence of its
+  /// round-off. 0 without gravity or mass.
+  ///
+  double computeGravityScale(const pinocchio::Model & model);
+
+  /// \brief Round-off of a stiffness relative to computeGravityScale: double precision's 2.2e-16
+  /// times a margin for the sums over the bodies (measured: a wheeled robot whose stiffness is
+  /// zero gave eigenvalues of 8.9e-16 N m/rad of either sign at a scale of 150 J).
+  constexpr double kStiffnessRoundOff = 1e-13;
+
+  ///
+  /// \brief The absolute tolerance of a verdict on this model: kStiffnessRoundOff times
+  /// computeGravityScale (N m/rad or N/m), 1e6 times that when the stiffness is differenced
+  /// (stiffnessByFiniteDifferences: a central difference of step 1e-6 divides the force's
+  /// round-off by it).
+  ///
+  double computeStiffnessFloor(const pinocchio::Model & model, bool differenced);
+
+  ///
+  /// \brief Potential energy left to release before the rest the report describes:
+  /// 1/2 f^T K^+ f with f = basis^T tau along the eigenvectors of K's symmetric part, each
+  /// eigenvalue taken at least report.tolerance (a force along a neutral direction releases
+  /// energy without bound, so it counts in full), in J. Zero at an exact rest; where the
+  /// kinetic energy was quiet only because the mechanism hardly moved (a step halved many
+  /// times), it stays large.
+  ///
+  /// \param[in] report A stable or neutral assessment (assessStability).
+  /// \param[in] tau The static force at the assessed configuration (dim model.nv, N m or N).
+  /// \return The energy (J); infinity where tau pulls along a direction of zero tolerance.
+  ///
+  double computeRestEnergy(const StabilityReport & report, const Eigen::VectorXd & tau);
 
   ///
   /// \brief Stiffness matrix K = d tau_static / dq, the Jacobian of the net static generalized

@@ -46,7 +46,10 @@ def _run(case: gallery.Case) -> gallery.Run:
     """The case's command, run once per session (the judge's own tests reuse answers)."""
     root = gallery.package_dir(case.package)
     assert root is not None
-    return gallery.run_cli(root / case.path, case.floating, case.flags)
+    flags = case.flags
+    if case.open_defect:
+        flags = (*flags, "--max-steps", str(gallery.DEFECT_MAX_STEPS))
+    return gallery.run_cli(root / case.path, case.floating, flags)
 
 
 @pytest.mark.parametrize("case", gallery.CASES, ids=[case.id for case in gallery.CASES])
@@ -95,6 +98,9 @@ def test_third_party_file(case: gallery.Case) -> None:
         assert not verdict.problems, f"{command}: " + "; ".join(verdict.problems)
         return
 
+    if case.open_defect and status != "converged":
+        # Not called a rest, and none is found yet: the defect stays open, reported as such.
+        pytest.xfail(f"{case.open_defect}; ended {status}, residual {answer['residual']:.3g}")
     assert status == "converged", (
         f"{command} ended {status} ({answer.get('reason') or 'no reason given'}; residual "
         f"{answer['residual']:.3g}) where a rest exists"

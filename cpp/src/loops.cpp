@@ -208,6 +208,27 @@ namespace pinsettle
 
     // Gauss-Newton onto the loops; on return error and J are those of the final q and svd is
     // J's decomposition. Returns the largest error left.
+    // A pinned joint's column is zero, but the least-norm step from an SVD puts round-off
+    // (1e-17) on it all the same: enough to lift a joint off its stop, or give it a velocity
+    // into it, so that it is no longer held and chatters there (Fetch's torso on its upper
+    // stop, its step halved 22 times). Pinned entries are copied back exactly.
+    void keepPinned(
+      const pinocchio::Model & model,
+      const Eigen::VectorXd & q,
+      const std::vector<Eigen::Index> * pinned,
+      Eigen::VectorXd & q_next)
+    {
+      if (pinned == nullptr)
+        return;
+      for (const Eigen::Index i : *pinned)
+        for (std::size_t j = 1; j < model.joints.size(); ++j)
+          if (model.idx_vs[j] == i)
+          {
+            q_next[model.idx_qs[j]] = q[model.idx_qs[j]];
+            break;
+          }
+    }
+
     double gaussNewton(
       const pinocchio::Model & model,
       pinocchio::Data & data,
@@ -244,6 +265,7 @@ namespace pinsettle
         for (double step = 1.; step > 1e-3; step *= 0.5)
         {
           pinocchio::integrate(model, q, (-step * dq).eval(), q_next);
+          keepPinned(model, q, pinned, q_next);
           evaluateLoops(model, data, loops, q_next, error_next, nullptr, work_a, work_b);
           const double next = error_next.lpNorm<Eigen::Infinity>();
           if (next < size)
@@ -835,6 +857,9 @@ namespace pinsettle
     const Eigen::Index rank = svdRank(d.svd);
     d.error_next.noalias() = d.J * v;
     solveLeastNorm(d.svd, rank, d.error_next, d.dq);
+    if (pinned != nullptr) // exactly unchanged (keepPinned)
+      for (const Eigen::Index i : *pinned)
+        d.dq[i] = 0.;
     v -= d.dq;
     return left;
   }

@@ -386,7 +386,7 @@ def test_urdf_with_something_before_the_xml_declaration(tmp_path, prologue):
 
 
 def test_pybullet_diff_ring_is_read():
-    data = required("pybullet_data", "PINSETTLE_REQUIRE_PYBULLET")
+    data = required("pybullet_data", "PINSETTLE_REQUIRE_MODELS")
     path = Path(data.getDataPath()) / "differential" / "diff_ring.urdf"
     assert path.read_bytes().startswith(b"\n<?xml")  # what the test is about
     scene = pinsettle.load_scene(path)

@@ -19,8 +19,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -28,23 +26,9 @@ import pinocchio
 import pinsettle
 import pytest
 from pinsettle import __main__ as cli
+from test_model_files import one_line_error, run  # the CLI's runner and its error line
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
-
-
-def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "pinsettle", *args], capture_output=True, text=True, timeout=120
-    )
-
-
-def one_line_error(proc: subprocess.CompletedProcess) -> str:
-    """The single line of error of a run that ended with exit 2."""
-    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
-    assert "Traceback" not in proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("pinsettle: error: "), proc.stderr
-    return lines[0]
 
 
 def required(module: str, switch: str):

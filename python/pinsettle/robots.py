@@ -173,11 +173,7 @@ def _urdf_fault(path: Path, reasons: list[str], error: BaseException | None) -> 
     )
     joined = " ".join(reasons)
     if "no known type" in joined:
-        hint = (
-            f"change the joint's type to one of URDF's ({URDF_JOINT_TYPES}); a 'spherical' "
-            "joint (PyBullet's) can be written as three revolute joints, or as a ball joint of "
-            "an MJCF file"
-        )
+        hint = f"change the joint's type to one of URDF's ({URDF_JOINT_TYPES})"
     elif "$(" in joined or "${" in joined:
         hint = "the file holds xacro substitutions: expand it with xacro first"
     elif "visual element" in joined or "collision element" in joined:

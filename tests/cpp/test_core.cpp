@@ -384,6 +384,48 @@ BOOST_AUTO_TEST_CASE(step_loop_does_not_allocate)
   BOOST_CHECK_EQUAL(frees[0], frees[1]);
 }
 
+BOOST_AUTO_TEST_CASE(default_settings_allocate_at_events_not_in_the_steps_between)
+{
+  // The default settings allocate where a run changes course (a step estimate, a Newton try
+  // at a damping event, an assessment at a rest), not in the steps between. On the UR5 with
+  // its stops, a joint spring and a point spring, released from its zero pose with kt = 0.9 (a
+  // long run with many events), the allocations are counted step by step through the abort
+  // callback (polled every step; it allocates nothing): the steps that allocate are at most
+  // the events, and most steps allocate nothing.
+  if (!PINSETTLE_COUNT_MALLOC)
+    return; // under AddressSanitizer
+  const pinocchio::Model model =
+    pinsettle::buildModelFromUrdf(robots_dir + "/ur_description/urdf/ur5_robot.urdf");
+  const pinsettle::JointStops stops(model);
+  pinsettle::ForceElements springs(model);
+  springs.addJointSpring(model.getJointId("elbow_joint"), 20., 0.5);
+  springs.addPointSpring(
+    0, Eigen::Vector3d(0.3, 0.3, 1.), model.getFrameId("tool0"), Eigen::Vector3d::Zero(), 50., 0.2);
+  pinsettle::Settings settings; // automatic step, takeover and polish: the defaults
+  settings.kt = 0.9;
+  settings.check_every = 1;
+  pinsettle::Solver solver(model, nullptr, &stops);
+  long last = 0, allocating_steps = 0, polls = 0;
+  const pinsettle::AbortCallback count = [&](const pinsettle::RunProgress &) {
+    const long now = g_allocations.load();
+    if (polls++ > 0 && now != last)
+      ++allocating_steps;
+    last = now;
+    return false;
+  };
+  const pinsettle::Result result =
+    solver.solve(pinocchio::neutral(model), settings, &springs, count);
+  const long events = result.peaks + result.dt_estimates + result.pushes;
+  BOOST_TEST_MESSAGE(
+    "default settings: " << allocating_steps << " of " << polls << " steps allocate; "
+                         << result.peaks << " damping events, " << result.dt_estimates
+                         << " estimates, " << result.pushes << " pushes");
+  BOOST_CHECK(result.status == pinsettle::Status::Converged);
+  BOOST_CHECK_GT(polls, 100);
+  BOOST_CHECK_LE(allocating_steps, events);
+  BOOST_CHECK_LT(2 * allocating_steps, polls);
+}
+
 namespace
 {
   // Returns NaN after a number of calls: the solver must stop and keep a finite state.

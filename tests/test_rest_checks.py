@@ -74,6 +74,14 @@ def test_a_free_body_is_called_a_fall_at_once_with_its_weight():
     assert f"{weight:.4g} N" in result.reason
 
 
+def test_a_fall_named_at_once_keeps_its_one_state_in_the_trace():
+    # Playback needs a configuration to show: the trace holds the start, the run's only state.
+    result = pinsettle.solve(floating_body(), trace_every=1, trace_configurations=True)
+    assert result.status == "no_equilibrium" and result.steps == 0
+    assert list(result.trace.step) == [0]
+    assert np.array_equal(result.trace.q[0], result.q)
+
+
 def test_a_humanoid_falls_whatever_its_limbs_do():
     # Pinocchio's sample humanoid on a free flyer, limbs bent at random and pushed: once the
     # runaway test had to see the released energy grow while the limbs' swings set off damping

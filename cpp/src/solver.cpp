@@ -330,6 +330,9 @@ namespace pinsettle
     result.reason = explainFreeFall(model_, data, q_, forces_, loops_, stops_);
     if (!result.reason.empty())
     {
+      // The trace holds the one state of the run, so that playback shows where it would fall.
+      const std::pair<double, double> e = computeKineticEnergies(model_, data, q_, v_);
+      trace_.sample(step_, time_, e.first, e.second, q_);
       finish(Status::NoEquilibrium, result);
       result.wall_time = clock.elapsed();
       return result;

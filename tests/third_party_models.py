@@ -481,13 +481,25 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
             + (" and the equality constraints" if eq_rows.size else "")
         )
     if not eq_rows.size:  # on a tree the stops' reactions are determined: compare them
-        reported = answer.get("limit_reactions", {})
-        for name, r in zip(stopped, reactions, strict=True):
-            if name in reported and abs(reported[name] - r) > REL_TOL * scale + 1e-9 * abs(r):
-                verdict.problems.append(
-                    f"'{name}': stop reaction {reported[name]:.9g} reported, MuJoCo's {r:.9g}"
-                )
+        _compare_reactions(verdict, answer, stopped, reactions, scale, "MuJoCo's")
     return verdict
+
+
+def _compare_reactions(
+    verdict: Verdict,
+    answer: dict[str, Any],
+    stopped: list[str],
+    reactions: Any,
+    scale: float,
+    judge: str,
+) -> None:
+    """A problem for each stop reaction the answer reports unlike the judge's own."""
+    reported = answer.get("limit_reactions", {})
+    for name, r in zip(stopped, reactions, strict=True):
+        if name in reported and abs(reported[name] - r) > REL_TOL * scale + 1e-9 * abs(r):
+            verdict.problems.append(
+                f"'{name}': stop reaction {reported[name]:.9g} reported, {judge} {r:.9g}"
+            )
 
 
 # --- URDF, by Pinocchio -----------------------------------------------------------------------
@@ -654,12 +666,7 @@ def judge_urdf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
             f"Pinocchio's net static force at the answer is {worst:.3g} (force scale {scale:.3g})"
             ": not a rest" + (" against the listed stops" if stops else "")
         )
-    reported = answer.get("limit_reactions", {})
-    for name, r in zip(stopped, reactions, strict=True):
-        if name in reported and abs(reported[name] - r) > REL_TOL * scale + 1e-9 * abs(r):
-            verdict.problems.append(
-                f"'{name}': stop reaction {reported[name]:.9g} reported, Pinocchio's {r:.9g}"
-            )
+    _compare_reactions(verdict, answer, stopped, reactions, scale, "Pinocchio's")
     return verdict
 
 

@@ -315,14 +315,10 @@ def srdf_poses(name: str) -> dict[str, dict[str, list[float]]]:
 
 
 POSES = [(robot, pose) for robot in sorted(ROBOT_SRDF) for pose in sorted(srdf_poses(robot))]
-# Measured: every pose but the Panda's converges in 6 to 173 steps. The Panda with its fingers
-# coupled (the default for a robot's scene) does not from its 'default' pose: max_steps after
-# 1e6 steps, the step halved 7 times, residual 1.5 N m, its arm drifting on two stops; with
-# mimic = false or the fingers locked it converges in ~90 steps. A defect, reported with
-# issue 40's test gaps; strict, so that the fix shows.
-NOT_CONVERGING = {
-    ("panda", "default"): "coupled fingers and arm stops: the run never settles (max_steps)"
-}
+# Measured: every pose converges in 6 to 173 steps. The Panda with its fingers coupled (the
+# default for a robot's scene) once did not from its 'default' pose (max_steps after 1e6 steps,
+# its arm drifting on two stops); it has converged (1297 steps) since an impact on a stop in a
+# mechanism with couplings or loops takes the metric of the mass matrix.
 
 
 def test_every_robot_of_the_table_has_its_srdf_and_most_have_poses():
@@ -346,12 +342,7 @@ def test_a_robot_whose_srdf_has_no_pose_says_which_there_are(tmp_path):
 
 @pytest.mark.parametrize(
     "robot, pose",
-    [
-        pytest.param(r, p, marks=pytest.mark.xfail(strict=True, reason=NOT_CONVERGING[r, p]))
-        if (r, p) in NOT_CONVERGING
-        else (r, p)
-        for r, p in POSES
-    ],
+    POSES,
     ids=[f"{r}-{p}" for r, p in POSES],
 )
 def test_each_srdf_pose_starts_the_robot_and_it_settles_from_there(robot, pose, tmp_path):

@@ -100,10 +100,6 @@ class Case:
     may_refuse: bool = False
     #: further flags of the command (``--free-objects lock``)
     flags: tuple[str, ...] = ()
-    #: a known defect: the rest is not found yet. The command then runs with a step budget
-    #: (``--max-steps``), must not call anything but a right rest converged, and the test is
-    #: reported xfail with this reason until the defect is fixed.
-    open_defect: str = ""
 
     @property
     def id(self) -> str:
@@ -689,13 +685,6 @@ def _gym(path: str, **kw: Any) -> Case:
     return Case("gymnasium", "envs/mujoco/assets/" + path, **kw)
 
 
-#: Issue 40, item 1: the weld-hung Fetch arm with its torso pressed on a stop (800 N) rings at
-#: its stops and no longer reaches a rest (it was called converged at 2.1 N m; now max_steps).
-FETCH_DEFECT = "issue 40: the Fetch arm hung from its weld does not reach its rest (max_steps)"
-#: The step budget of an open defect's command: the run must stop well inside the timeout.
-DEFECT_MAX_STEPS = 20000
-
-
 def _robotics(path: str, **kw: Any) -> Case:
     return Case("gymnasium_robotics", "envs/assets/" + path, **kw)
 
@@ -746,11 +735,13 @@ CASES: list[Case] = [
     _gym("swimmer.xml", may_refuse=True),  # buoyancy
     # gymnasium-robotics: the Fetch arm held by a weld, objects beside a robot, the Shadow
     # and Adroit hands (coupled by tendon ranges), the Franka kitchen.
-    _robotics("fetch/reach.xml", open_defect=FETCH_DEFECT),
+    # Fetch hangs from its weld with its torso pressed on a stop (once called converged at
+    # 2.1 N m, then ringing at its stops for ever).
+    _robotics("fetch/reach.xml"),
     _robotics("fetch/pick_and_place.xml", may_refuse=True),  # the block falls
-    _robotics(
-        "fetch/pick_and_place.xml", flags=("--free-objects", "lock"), open_defect=FETCH_DEFECT
-    ),
+    _robotics("fetch/pick_and_place.xml", flags=("--free-objects", "lock")),
+    _robotics("fetch/push.xml", flags=("--free-objects", "lock")),
+    _robotics("fetch/slide.xml", flags=("--free-objects", "lock")),
     _robotics("hand/manipulate_block.xml", may_refuse=True),
     _robotics("adroit_hand/adroit_hammer.xml", may_refuse=True),
     _robotics("kitchen_franka/kitchen_assets/kitchen_env_model.xml", may_refuse=True),

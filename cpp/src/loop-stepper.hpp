@@ -51,7 +51,9 @@ namespace pinsettle
     /// allow at the projected q (orthogonal projection in joint coordinates).
     ///
     /// \param[in] pinned Indices in v of 1-DoF joints held where they are (joints on a stop:
-    ///            their q and v do not change), or nullptr.
+    ///            their q and v do not change), or nullptr. If they hold the loops open, and
+    ///            stops were given (useStops), those the loops pull into their range leave
+    ///            their stop.
     /// \return The largest constraint error left (m or rad).
     ///
     double project(
@@ -60,7 +62,42 @@ namespace pinsettle
       Eigen::VectorXd & v,
       const std::vector<Eigen::Index> * pinned = nullptr);
 
+    /// \brief The stops of the run (or nullptr): see project().
+    void useStops(const JointStops * stops);
+
+    ///
+    /// \brief Keep the velocity with which a step arrives, before the stops act on it: the
+    /// velocity impact() starts from.
+    ///
+    /// \param[in] v Joint velocity (dim model.nv).
+    ///
+    void arrive(const Eigen::VectorXd & v);
+
+    ///
+    /// \brief An inelastic impact of joints on their stops in the closed mechanism: q onto the
+    /// loops with the pinned joints held (as project()), and v the velocity nearest to the one
+    /// given to arrive() in the metric of the mass matrix among those the loops allow with the
+    /// pinned joints still. That is the velocity after an impulse through the stops and the
+    /// loops, and it never has more kinetic energy than the arriving one (a projection in joint
+    /// coordinates may: a light joint's speed handed to a heavy base).
+    ///
+    /// \param[in] pinned Indices in v of the joints on a stop (1-DoF joints).
+    /// \return The largest constraint error left (m or rad).
+    ///
+    double impact(
+      pinocchio::Data & data,
+      Eigen::VectorXd & q,
+      Eigen::VectorXd & v,
+      const std::vector<Eigen::Index> & pinned);
+
+    /// Constraint error (m or rad) above which the loops are open: the rest is no rest.
+    static constexpr double kLoopTolerance = 1e-10;
+
   private:
+    // q onto the loops with the pinned joints held (or released, see project()).
+    double closeLoops(
+      pinocchio::Data & data, Eigen::VectorXd & q, const std::vector<Eigen::Index> * pinned);
+
     // With couplings and loops: the loops' constraint on the reduced acceleration.
     void loopAcceleration(
       pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v);

@@ -229,6 +229,55 @@ namespace pinsettle
           }
     }
 
+    // Stops given: the held joints exactly where they were (as keepPinned), and every joint
+    // within its stops.
+    void keepOnStops(
+      const JointStops * stops,
+      const std::vector<Eigen::Index> * held,
+      const Eigen::VectorXd & q,
+      Eigen::VectorXd & q_next)
+    {
+      if (stops == nullptr)
+        return;
+      for (const JointStops::Stop & s : stops->stops())
+      {
+        if (std::find(held->begin(), held->end(), s.iv) != held->end())
+          q_next[s.iq] = q[s.iq];
+        q_next[s.iq] = std::min(std::max(q_next[s.iq], s.lower), s.upper);
+      }
+    }
+
+    // With stops: the joints on a stop that the step q <- q - dq would push past it, held (added
+    // to held, their columns zeroed). Returns whether any was added.
+    bool holdPushed(
+      const JointStops & stops,
+      const Eigen::VectorXd & q,
+      const Eigen::VectorXd & dq,
+      std::vector<Eigen::Index> & held,
+      Eigen::MatrixXd & J)
+    {
+      bool added = false;
+      for (const JointStops::Stop & s : stops.stops())
+      {
+        const bool pushed =
+          (q[s.iq] <= s.lower && dq[s.iv] > 0.) || (q[s.iq] >= s.upper && dq[s.iv] < 0.);
+        if (pushed && std::find(held.begin(), held.end(), s.iv) == held.end())
+        {
+          held.push_back(s.iv);
+          J.col(s.iv).setZero();
+          added = true;
+        }
+      }
+      return added;
+    }
+
+    // Gauss-Newton onto the loops; on return error and J are those of the final q and svd is
+    // J's decomposition (pinned columns, or with stops the columns of the joints on a stop,
+    // zeroed). Returns the largest error left.
+    // pinned: joints that do not move. stops (instead): a joint on a stop stays there unless
+    // the step pulls it into its range, each step solved with the columns of the joints it would
+    // push past their stop zeroed (an active set grown until it pushes none), and cut back onto
+    // the stops.
     double gaussNewton(
       const pinocchio::Model & model,
       pinocchio::Data & data,
@@ -244,21 +293,38 @@ namespace pinsettle
       Eigen::VectorXd & error_next,
       pinocchio::Data::Matrix6x & work_a,
       pinocchio::Data::Matrix6x & work_b,
-      const std::vector<Eigen::Index> * pinned = nullptr)
+      const std::vector<Eigen::Index> * pinned = nullptr,
+      const JointStops * stops = nullptr,
+      std::vector<Eigen::Index> * held = nullptr)
     {
       // A pinned joint's column is left out: the least-norm steps never move it.
-      const auto evaluate = [&]() {
+      const auto evaluate = [&](bool all_on_stops) {
         evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
         if (pinned != nullptr)
           for (const Eigen::Index i : *pinned)
             J.col(i).setZero();
+        if (all_on_stops)
+        {
+          findJointsOnStops(*stops, q, *held);
+          for (const Eigen::Index i : *held)
+            J.col(i).setZero();
+        }
         svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
       };
-      evaluate();
+      evaluate(false);
       double size = error.lpNorm<Eigen::Infinity>();
       for (int it = 0; it < max_iterations && size > tolerance; ++it)
       {
         solveLeastNorm(svd, svdRank(svd), error, dq);
+        if (stops != nullptr)
+        {
+          held->clear();
+          while (holdPushed(*stops, q, dq, *held, J))
+          {
+            svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+            solveLeastNorm(svd, svdRank(svd), error, dq);
+          }
+        }
         // A full step, halved while it does not lower the error (far from the manifold the
         // linearisation overshoots).
         bool improved = false;
@@ -266,6 +332,7 @@ namespace pinsettle
         {
           pinocchio::integrate(model, q, (-step * dq).eval(), q_next);
           keepPinned(model, q, pinned, q_next);
+          keepOnStops(stops, held, q, q_next);
           evaluateLoops(model, data, loops, q_next, error_next, nullptr, work_a, work_b);
           const double next = error_next.lpNorm<Eigen::Infinity>();
           if (next < size)
@@ -276,10 +343,12 @@ namespace pinsettle
             break;
           }
         }
-        evaluate();
+        evaluate(false);
         if (!improved)
           break;
       }
+      if (stops != nullptr)
+        evaluate(true);
       return size;
     }
   } // namespace
@@ -737,6 +806,14 @@ namespace pinsettle
     Eigen::MatrixXd N, MN, reduced_mass;
     Eigen::VectorXd reduced_force, gamma;
     Eigen::LLT<Eigen::MatrixXd> mass_llt;
+    // Impacts: the arriving velocity, the rows held (loops and pinned joints), M^-1 A^T.
+    Eigen::VectorXd arriving, impulse;
+    Eigen::MatrixXd mass, A, MinvAt, delassus;
+    Eigen::LLT<Eigen::MatrixXd> full_mass_llt;
+    // The stops, if any; the joints the last projection kept still (pinned, or held).
+    const JointStops * stops = nullptr;
+    const std::vector<Eigen::Index> * pinned = nullptr;
+    std::vector<Eigen::Index> held;
   };
 
   LoopStepper::LoopStepper(const pinocchio::Model & model, const LoopConstraints & loops)
@@ -850,17 +927,80 @@ namespace pinsettle
     const std::vector<Eigen::Index> * pinned)
   {
     Impl & d = *impl_;
-    const double left = gaussNewton(
-      d.model, data, d.loops, q, 1e-13, 10, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
-      d.work_a, d.work_b, pinned);
+    const double left = closeLoops(data, q, pinned);
     // v <- v - J^+ J v: the nearest velocity the loops allow.
     const Eigen::Index rank = svdRank(d.svd);
     d.error_next.noalias() = d.J * v;
     solveLeastNorm(d.svd, rank, d.error_next, d.dq);
-    if (pinned != nullptr) // exactly unchanged (keepPinned)
-      for (const Eigen::Index i : *pinned)
+    if (d.pinned != nullptr) // exactly unchanged (keepPinned)
+      for (const Eigen::Index i : *d.pinned)
         d.dq[i] = 0.;
     v -= d.dq;
+    return left;
+  }
+
+  void LoopStepper::useStops(const JointStops * stops)
+  {
+    impl_->stops = stops;
+  }
+
+  double LoopStepper::closeLoops(
+    pinocchio::Data & data, Eigen::VectorXd & q, const std::vector<Eigen::Index> * pinned)
+  {
+    Impl & d = *impl_;
+    d.pinned = pinned;
+    double left = gaussNewton(
+      d.model, data, d.loops, q, 1e-13, 10, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
+      d.work_a, d.work_b, pinned);
+    // The joints on a stop hold the loops open: those the loops pull off their stop leave it.
+    if (left > kLoopTolerance && pinned != nullptr && d.stops != nullptr)
+    {
+      left = gaussNewton(
+        d.model, data, d.loops, q, 1e-13, 50, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
+        d.work_a, d.work_b, nullptr, d.stops, &d.held);
+      d.pinned = &d.held;
+    }
+    return left;
+  }
+
+  void LoopStepper::arrive(const Eigen::VectorXd & v)
+  {
+    impl_->arriving = v;
+  }
+
+  double LoopStepper::impact(
+    pinocchio::Data & data,
+    Eigen::VectorXd & q,
+    Eigen::VectorXd & v,
+    const std::vector<Eigen::Index> & pinned)
+  {
+    Impl & d = *impl_;
+    const pinocchio::Model & model = d.model;
+    const double left = closeLoops(data, q, &pinned);
+    const std::vector<Eigen::Index> & still = *d.pinned;
+    // The rows held: the loops' (pinned columns zeroed, which the pinned rows make equivalent)
+    // and one per pinned joint. v = v_a - M^-1 A^T mu with (A M^-1 A^T) mu = A v_a, least norm
+    // (the rows are often redundant: a weld over a chain with a joint on its stop).
+    const Eigen::Index m = d.J.rows(), p = static_cast<Eigen::Index>(still.size());
+    d.A.setZero(m + p, model.nv);
+    d.A.topRows(m) = d.J;
+    for (Eigen::Index k = 0; k < p; ++k)
+      d.A(m + k, still[static_cast<std::size_t>(k)]) = 1.;
+    pinocchio::crba(model, data, q);
+    d.mass = data.M.selfadjointView<Eigen::Upper>();
+    d.full_mass_llt.compute(d.mass);
+    d.MinvAt = d.full_mass_llt.solve(d.A.transpose());
+    d.delassus.noalias() = d.A * d.MinvAt;
+    Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(
+      d.delassus.rows(), d.delassus.cols());
+    // Relative to the largest pivot: round-off pivots of redundant rows are rank, not force.
+    cod.setThreshold(1e-10);
+    cod.compute(d.delassus);
+    d.impulse = cod.solve((d.A * d.arriving).eval());
+    v = d.arriving;
+    v.noalias() -= d.MinvAt * d.impulse;
+    for (const Eigen::Index i : still)
+      v[i] = 0.;
     return left;
   }
 

@@ -36,6 +36,18 @@ namespace pinsettle
           return "joint '" + model.names[j] + "'";
       return "coordinate " + std::to_string(iv);
     }
+
+    // Whether q closes the loops (if any) to LoopStepper::kLoopTolerance: open, it is no rest.
+    bool areLoopsClosed(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const LoopConstraints * loops,
+      const Eigen::VectorXd & q)
+    {
+      return loops == nullptr
+             || computeLoopError(model, data, *loops, q).lpNorm<Eigen::Infinity>()
+                  <= LoopStepper::kLoopTolerance;
+    }
   } // namespace
 
   void checkConfiguration(
@@ -279,6 +291,8 @@ namespace pinsettle
       if (&stops_->model() != &model)
         throw std::invalid_argument("stops: they were made for another model than the solver's");
       hold_.reset(new StopHold(*stops_, loops_));
+      if (stepper_)
+        stepper_->useStops(stops_);
     }
   }
 
@@ -667,9 +681,11 @@ namespace pinsettle
     // the eigen-solver gave the softest direction.
     drift_ = v_.isZero(0.) ? data.ddq : v_;
     StabilityReport report = assess(q_, forces_);
-    const double energy = report.verdict == Stability::Unstable
-                            ? std::numeric_limits<double>::infinity()
-                            : computeRestEnergy(report, staticForce(q_, forces_));
+    // Unstable, or loops left open, is no rest.
+    const double energy =
+      report.verdict == Stability::Unstable || !areLoopsClosed(model_, data, loops_, q_)
+        ? std::numeric_limits<double>::infinity()
+        : computeRestEnergy(report, staticForce(q_, forces_));
     rest_.record(std::move(report), q_, step_, energy);
     return true;
   }
@@ -753,8 +769,10 @@ namespace pinsettle
       // range, and the impacts keep the energy at zero): roll back with the step halved, as
       // for a blow-up.
       hits_.clear(); // traced as impacts
-      impacts_ =
-        enforceStops(*stops_, q_, v_, trace_.isTracing() ? &hits_ : nullptr) ? impacts_ + 1 : 0;
+      if (loops_ != nullptr)
+        stepper_->arrive(v_);
+      const bool hit = enforceStops(*stops_, q_, v_, trace_.isTracing() ? &hits_ : nullptr);
+      impacts_ = hit ? impacts_ + 1 : 0;
       for (const pinocchio::JointIndex joint : hits_)
         trace_.event(step_, time_ + h, EventKind::Impact, joint);
       if (impacts_ >= DivergenceGuard::kBlowUpSteps)
@@ -765,7 +783,12 @@ namespace pinsettle
       if (loops_ != nullptr) // back onto the loops with the joints on a stop kept there
       {
         findJointsOnStops(*stops_, q_, on_stops_);
-        stepper_->project(data, q_, v_, &on_stops_);
+        // Zeroing a joint's speed and projecting in joint coordinates handed the impact's
+        // energy to the rest of the loop: Fetch's weld-hung arm rang at its stops for ever.
+        if (hit)
+          stepper_->impact(data, q_, v_, on_stops_);
+        else
+          stepper_->project(data, q_, v_, &on_stops_);
       }
     }
     runaway_.addMotion(dq_);
@@ -894,6 +917,9 @@ namespace pinsettle
         findJointsOnStops(*stops_, q_next, on_stops_);
         projectOntoLoops(model, data, *loops_, q_next, 1e-13, 50, &on_stops_);
       }
+      // A step the loops cannot follow (held open by the stops) is no step to a rest.
+      if (loops_ != nullptr && !areLoopsClosed(model_, data, loops_, q_next))
+        break;
       const Eigen::VectorXd tau_next = staticForce(q_next, forces);
       const double residual_next = residualOf(q_next, tau_next);
       if (!(residual_next < run.residual))

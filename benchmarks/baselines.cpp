@@ -50,7 +50,7 @@
 
 #include "spec.hpp"
 
-#include <pinocchio/algorithm/crba.hpp>
+#include <pinsettle/prebuilt.hpp>
 #include <pinocchio/algorithm/energy.hpp>
 #include <pinocchio/serialization.hpp>
 
@@ -121,7 +121,7 @@ namespace
     Workspace & w,
     Outcome & out)
   {
-    pinocchio::crba(model, w.data, w.q);
+    pinsettle::prebuilt::crba(model, w.data, w.q);
     Eigen::MatrixXd M = w.data.M;
     M.triangularView<Eigen::StrictlyLower>() = M.transpose();
     const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model, w.data, w.q, elements);

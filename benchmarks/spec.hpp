@@ -35,7 +35,6 @@
 
 #include <pinsettle/pinsettle.hpp>
 
-#include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
@@ -230,9 +229,9 @@ namespace bench
   {
     const pinocchio::Convention world = pinocchio::Convention::WORLD;
     if (elements != nullptr && elements->hasExternalForces())
-      pinocchio::aba(model, w.data, q, v, w.tau, w.fext, world);
+      pinsettle::prebuilt::aba(model, w.data, q, v, w.tau, w.fext, world);
     else
-      pinocchio::aba(model, w.data, q, v, w.tau, world);
+      pinsettle::prebuilt::aba(model, w.data, q, v, w.tau, world);
   }
 
   // q moved by h v on the configuration manifold; false when a value turned non-finite.

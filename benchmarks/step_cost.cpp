@@ -57,7 +57,7 @@ namespace
       Eigen::VectorXd q = start(model), v = Eigen::VectorXd::Zero(model.nv);
       for (long k = 0; k < steps && q.allFinite() && v.allFinite(); ++k)
       {
-        v += dt * pinocchio::aba(model, data, q, v, tau);
+        v += dt * pinsettle::prebuilt::aba(model, data, q, v, tau);
         q = pinocchio::integrate(model, q, dt * v);
       }
       if (q.allFinite() && v.allFinite())

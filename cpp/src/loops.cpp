@@ -12,7 +12,7 @@
 
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/constrained-dynamics.hpp>
-#include <pinocchio/algorithm/crba.hpp>
+#include "pinsettle/prebuilt.hpp"
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
@@ -728,7 +728,7 @@ namespace pinsettle
     Eigen::MatrixXd D;
     if (damped)
       D = N.transpose() * computeDampingMatrix(model, data, q, forces) * N;
-    pinocchio::crba(model, data, q);
+    prebuilt::crba(model, data, q);
     const Eigen::MatrixXd M =
       N.transpose() * Eigen::MatrixXd(data.M.selfadjointView<Eigen::Upper>()) * N;
     return computeTimeScale(
@@ -853,7 +853,7 @@ namespace pinsettle
     {
       // Couplings only (a constant Jacobian, no drift): M a = tau - b + J^T lambda with J a = 0
       // is a = N (N^T M N)^-1 N^T (tau - b). rnea leaves the body velocities in data.v.
-      pinocchio::crba(model, data, q);
+      prebuilt::crba(model, data, q);
       if (fext != nullptr)
         d.tau -= pinocchio::rnea(model, data, q, v, d.zero, *fext);
       else
@@ -986,7 +986,7 @@ namespace pinsettle
     d.A.topRows(m) = d.J;
     for (Eigen::Index k = 0; k < p; ++k)
       d.A(m + k, still[static_cast<std::size_t>(k)]) = 1.;
-    pinocchio::crba(model, data, q);
+    prebuilt::crba(model, data, q);
     d.mass = data.M.selfadjointView<Eigen::Upper>();
     d.full_mass_llt.compute(d.mass);
     d.MinvAt = d.full_mass_llt.solve(d.A.transpose());

@@ -10,8 +10,7 @@
 #include "loop-stepper.hpp"
 #include "unit-norm.hpp"
 
-#include <pinocchio/algorithm/aba.hpp>
-#include <pinocchio/algorithm/crba.hpp>
+#include "pinsettle/prebuilt.hpp"
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 
@@ -115,10 +114,10 @@ namespace pinsettle
     const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q)
   {
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
-    pinocchio::aba(model, data, q, zero, zero);
+    prebuilt::aba(model, data, q, zero, zero);
     if (data.ddq.allFinite())
       return;
-    pinocchio::crba(model, data, q);
+    prebuilt::crba(model, data, q);
     const Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(M);
     std::ostringstream msg;
@@ -579,9 +578,9 @@ namespace pinsettle
     if (loops_ != nullptr)
       stepper_->dynamics(data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
     else if (use_fext_)
-      pinocchio::aba(model, data, q_, v_, tau_, fext_, dynamicsConvention());
+      prebuilt::aba(model, data, q_, v_, tau_, fext_, dynamicsConvention());
     else
-      pinocchio::aba(model, data, q_, v_, tau_, dynamicsConvention());
+      prebuilt::aba(model, data, q_, v_, tau_, dynamicsConvention());
   }
 
   pinocchio::Convention Solver::dynamicsConvention() const

@@ -6,7 +6,7 @@
 #include "pinsettle/solver.hpp"
 #include "joint-kinds.hpp"
 
-#include <pinocchio/algorithm/crba.hpp>
+#include "pinsettle/prebuilt.hpp"
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/rnea-derivatives.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
@@ -276,7 +276,7 @@ namespace pinsettle
     const bool damped = forces != nullptr && forces->hasDamping();
     const Eigen::MatrixXd D =
       damped ? computeDampingMatrix(model, data, q, forces) : Eigen::MatrixXd();
-    pinocchio::crba(model, data, q);
+    prebuilt::crba(model, data, q);
     const Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
     return computeTimeScale(K, M, tau, damped ? &D : nullptr, scale_stiff_modes);
   }

@@ -6,7 +6,7 @@
 #include "pinsettle/solver.hpp" // computeStaticForce
 
 #include <pinocchio/algorithm/aba.hpp>
-#include <pinocchio/algorithm/crba.hpp>
+#include "pinsettle/prebuilt.hpp"
 #include <pinocchio/algorithm/joint-configuration.hpp>
 
 #include <algorithm>
@@ -113,7 +113,7 @@ namespace pinsettle
     // time scale of the mechanism that carries it.
     const Eigen::MatrixXd K = computeStiffnessMatrix(model_, data, q, forces_);
     const Eigen::VectorXd tau = computeStaticForce(model_, data, q, forces_);
-    pinocchio::crba(model_, data, q);
+    prebuilt::crba(model_, data, q);
     joint_inertia_ = computeJointInertia(K, data.M.diagonal(), tau);
     const int scaled = static_cast<int>((joint_inertia_.array() > 0.).count());
     scaled_joints_ = std::max(scaled_joints_, scaled);

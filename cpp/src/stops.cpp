@@ -6,7 +6,7 @@
 #include "pinsettle/solver.hpp"
 #include "unit-norm.hpp"
 
-#include <pinocchio/algorithm/crba.hpp>
+#include "pinsettle/prebuilt.hpp"
 
 #include <Eigen/QR>
 
@@ -330,7 +330,7 @@ namespace pinsettle
     free_acceleration_ = data.ddq;
     if (loops_ != nullptr)
       motions_ = computeLoopMotion(model, data, *loops_, q).basis;
-    pinocchio::crba(model, data, q);
+    prebuilt::crba(model, data, q);
     mass_ = data.M.selfadjointView<Eigen::Upper>();
     if (added != nullptr && added->stiff_masses.size() > 0)
       mass_.noalias() +=

@@ -187,10 +187,10 @@ BOOST_AUTO_TEST_CASE(exact_energy_is_half_vT_M_v)
     {
       const Eigen::VectorXd q = pinocchio::randomConfiguration(model, lower, upper);
       const Eigen::VectorXd v = Eigen::VectorXd::Random(model.nv) * 3.;
-      pinocchio::aba(model, data, q, v, Eigen::VectorXd::Zero(model.nv));
+      pinsettle::prebuilt::aba(model, data, q, v, Eigen::VectorXd::Zero(model.nv));
       const double ours = pinsettle::computeBodyKineticEnergy(model, data);
       const double theirs = pinocchio::computeKineticEnergy(model, ref, q, v);
-      pinocchio::crba(model, ref, q);
+      pinsettle::prebuilt::crba(model, ref, q);
       ref.M.triangularView<Eigen::StrictlyLower>() =
         ref.M.transpose().triangularView<Eigen::StrictlyLower>();
       const double quadratic = 0.5 * v.dot(ref.M * v);
@@ -202,7 +202,7 @@ BOOST_AUTO_TEST_CASE(exact_energy_is_half_vT_M_v)
       // The world convention's ABA (the solver's step) gives both measures alike: from data.ov,
       // data.oh and data.oinertias, not data.v.
       pinocchio::Data world(model);
-      pinocchio::aba(
+      pinsettle::prebuilt::aba(
         model, world, q, v, Eigen::VectorXd::Zero(model.nv), pinocchio::Convention::WORLD);
       const pinocchio::Convention convention = pinocchio::Convention::WORLD;
       BOOST_CHECK_CLOSE(
@@ -761,7 +761,7 @@ BOOST_AUTO_TEST_CASE(stiff_mode_scaling_slows_the_stiff_mode_and_keeps_the_soft_
   pinocchio::Data data(model);
   const Eigen::Vector2d q = Eigen::Vector2d::Zero();
   const Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model, data, q, &springs);
-  pinocchio::crba(model, data, q);
+  pinsettle::prebuilt::crba(model, data, q);
   Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
   const Eigen::VectorXd before =
     Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd>(K, M, Eigen::EigenvaluesOnly)
@@ -896,7 +896,7 @@ BOOST_AUTO_TEST_CASE(joint_inertia_brings_each_joint_down_to_the_slowest_and_not
   const Eigen::VectorXd q = Eigen::VectorXd::Zero(model.nq);
   Eigen::MatrixXd K = Eigen::MatrixXd::Zero(model.nv, model.nv);
   pinocchio::computeGeneralizedGravityDerivatives(model, data, q, K);
-  pinocchio::crba(model, data, q);
+  pinsettle::prebuilt::crba(model, data, q);
   const Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
   const Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
   const Eigen::VectorXd added = pinsettle::computeJointInertia(K, M.diagonal(), tau);
@@ -958,7 +958,7 @@ BOOST_AUTO_TEST_CASE(an_estimate_takes_no_energy_where_it_adds_inertia_and_count
   control.start(settings, nullptr);
   pinocchio::Data data(model), scratch(model);
   const auto energy = [&](const Eigen::VectorXd & q, const Eigen::VectorXd & v) {
-    pinocchio::crba(model, scratch, q);
+    pinsettle::prebuilt::crba(model, scratch, q);
     const Eigen::MatrixXd M = scratch.M.selfadjointView<Eigen::Upper>();
     return 0.5 * v.dot(M * v) + control.addedEnergy(v);
   };

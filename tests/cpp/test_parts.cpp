@@ -367,7 +367,7 @@ BOOST_AUTO_TEST_CASE(step_controller_scales_a_stiff_mode_consistently)
   BOOST_CHECK_EQUAL(control.scaledModes(), 1);
   // The same scaling, recomputed: M + W^T diag(d) W.
   const pinsettle::TimeScale scale = pinsettle::computeTimeScale(model, data, q, &springs, true);
-  pinocchio::crba(model, data, q);
+  pinsettle::prebuilt::crba(model, data, q);
   Eigen::MatrixXd M = data.M.selfadjointView<Eigen::Upper>();
   const Eigen::MatrixXd scaled =
     M + scale.stiff_momenta.transpose() * scale.stiff_masses.asDiagonal() * scale.stiff_momenta;

@@ -222,12 +222,12 @@ BOOST_AUTO_TEST_CASE(held_acceleration_is_that_of_the_joint_locked)
   Eigen::VectorXd q(3), v(3);
   q << 0.4, -0.3, 0.2;
   v << 0., 0.5, -0.2;
-  pinocchio::aba(model, data, q, v, Eigen::VectorXd::Zero(3));
+  pinsettle::prebuilt::aba(model, data, q, v, Eigen::VectorXd::Zero(3));
   BOOST_REQUIRE_LT(data.ddq[0], 0.); // falls into the stop
   const Eigen::VectorXd free_motion = data.ddq;
   pinsettle::StopHold hold(stops);
   BOOST_CHECK(hold.hold(data, q, v, nullptr));
-  pinocchio::crba(model, ref, q);
+  pinsettle::prebuilt::crba(model, ref, q);
   const Eigen::MatrixXd M = ref.M.selfadjointView<Eigen::Upper>();
   const Eigen::VectorXd f = M * free_motion;
   const Eigen::Vector2d expected = M.bottomRightCorner(2, 2).llt().solve(f.tail(2));
@@ -238,11 +238,11 @@ BOOST_AUTO_TEST_CASE(held_acceleration_is_that_of_the_joint_locked)
 
   // Moving off the stop, or accelerating away from it, the joint is not held.
   v[0] = 0.1;
-  pinocchio::aba(model, data, q, v, Eigen::VectorXd::Zero(3));
+  pinsettle::prebuilt::aba(model, data, q, v, Eigen::VectorXd::Zero(3));
   BOOST_CHECK(!hold.hold(data, q, v, nullptr));
   q[0] = 0.4 + 1e-9;
   v[0] = 0.;
-  pinocchio::aba(model, data, q, v, Eigen::VectorXd::Zero(3));
+  pinsettle::prebuilt::aba(model, data, q, v, Eigen::VectorXd::Zero(3));
   BOOST_CHECK(!hold.hold(data, q, v, nullptr));
 }
 

@@ -12,6 +12,7 @@
 #include "pinsettle/loops.hpp"
 #include "pinsettle/model-checks.hpp"
 #include "pinsettle/monitors.hpp"
+#include "pinsettle/prebuilt.hpp"
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
 #include "pinsettle/solver.hpp"

@@ -94,8 +94,14 @@ namespace pinsettle
     static constexpr double kLoopTolerance = 1e-10;
 
   private:
-    // q onto the loops with the pinned joints held (or released, see project()).
-    double closeLoops(
+    // q onto the loops with the pinned joints held (or released, see project()): the error
+    // left, and the joints kept still (pinned, the held ones if released, or nullptr).
+    struct ClosedLoops
+    {
+      double left;
+      const std::vector<Eigen::Index> * still;
+    };
+    ClosedLoops closeLoops(
       pinocchio::Data & data, Eigen::VectorXd & q, const std::vector<Eigen::Index> * pinned);
 
     // With couplings and loops: the loops' constraint on the reduced acceleration.

@@ -229,24 +229,6 @@ namespace pinsettle
           }
     }
 
-    // Stops given: the held joints exactly where they were (as keepPinned), and every joint
-    // within its stops.
-    void keepOnStops(
-      const JointStops * stops,
-      const std::vector<Eigen::Index> * held,
-      const Eigen::VectorXd & q,
-      Eigen::VectorXd & q_next)
-    {
-      if (stops == nullptr)
-        return;
-      for (const JointStops::Stop & s : stops->stops())
-      {
-        if (std::find(held->begin(), held->end(), s.iv) != held->end())
-          q_next[s.iq] = q[s.iq];
-        q_next[s.iq] = std::min(std::max(q_next[s.iq], s.lower), s.upper);
-      }
-    }
-
     // With stops: the joints on a stop that the step q <- q - dq would push past it, held (added
     // to held, their columns zeroed). Returns whether any was added.
     bool holdPushed(
@@ -332,7 +314,11 @@ namespace pinsettle
         {
           pinocchio::integrate(model, q, (-step * dq).eval(), q_next);
           keepPinned(model, q, pinned, q_next);
-          keepOnStops(stops, held, q, q_next);
+          if (stops != nullptr) // the held joints where they were, every joint within its stops
+          {
+            keepPinned(model, q, held, q_next);
+            clampToStops(*stops, q_next);
+          }
           evaluateLoops(model, data, loops, q_next, error_next, nullptr, work_a, work_b);
           const double next = error_next.lpNorm<Eigen::Infinity>();
           if (next < size)
@@ -432,7 +418,7 @@ namespace pinsettle
     const Eigen::VectorXd start = q;
     const Eigen::VectorXd error_start = computeLoopError(model, data, loops, q);
     const double left = projectOntoLoops(model, data, loops, q, 1e-13, 100);
-    if (!(left <= 1e-10))
+    if (!(left <= LoopStepper::kLoopTolerance))
     {
       // Name the loop that stays open.
       const Eigen::VectorXd error = computeLoopError(model, data, loops, q);
@@ -810,9 +796,8 @@ namespace pinsettle
     Eigen::VectorXd arriving, impulse;
     Eigen::MatrixXd mass, A, MinvAt, delassus;
     Eigen::LLT<Eigen::MatrixXd> full_mass_llt;
-    // The stops, if any; the joints the last projection kept still (pinned, or held).
+    // The stops, if any; the joints a projection with stops held on theirs.
     const JointStops * stops = nullptr;
-    const std::vector<Eigen::Index> * pinned = nullptr;
     std::vector<Eigen::Index> held;
   };
 
@@ -927,16 +912,16 @@ namespace pinsettle
     const std::vector<Eigen::Index> * pinned)
   {
     Impl & d = *impl_;
-    const double left = closeLoops(data, q, pinned);
+    const ClosedLoops closed = closeLoops(data, q, pinned);
     // v <- v - J^+ J v: the nearest velocity the loops allow.
     const Eigen::Index rank = svdRank(d.svd);
     d.error_next.noalias() = d.J * v;
     solveLeastNorm(d.svd, rank, d.error_next, d.dq);
-    if (d.pinned != nullptr) // exactly unchanged (keepPinned)
-      for (const Eigen::Index i : *d.pinned)
+    if (closed.still != nullptr) // exactly unchanged (keepPinned)
+      for (const Eigen::Index i : *closed.still)
         d.dq[i] = 0.;
     v -= d.dq;
-    return left;
+    return closed.left;
   }
 
   void LoopStepper::useStops(const JointStops * stops)
@@ -944,23 +929,24 @@ namespace pinsettle
     impl_->stops = stops;
   }
 
-  double LoopStepper::closeLoops(
+  LoopStepper::ClosedLoops LoopStepper::closeLoops(
     pinocchio::Data & data, Eigen::VectorXd & q, const std::vector<Eigen::Index> * pinned)
   {
     Impl & d = *impl_;
-    d.pinned = pinned;
-    double left = gaussNewton(
-      d.model, data, d.loops, q, 1e-13, 10, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
-      d.work_a, d.work_b, pinned);
+    ClosedLoops closed{
+      gaussNewton(
+        d.model, data, d.loops, q, 1e-13, 10, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
+        d.work_a, d.work_b, pinned),
+      pinned};
     // The joints on a stop hold the loops open: those the loops pull off their stop leave it.
-    if (left > kLoopTolerance && pinned != nullptr && d.stops != nullptr)
+    if (closed.left > kLoopTolerance && pinned != nullptr && d.stops != nullptr)
     {
-      left = gaussNewton(
+      closed.left = gaussNewton(
         d.model, data, d.loops, q, 1e-13, 50, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
         d.work_a, d.work_b, nullptr, d.stops, &d.held);
-      d.pinned = &d.held;
+      closed.still = &d.held;
     }
-    return left;
+    return closed;
   }
 
   void LoopStepper::arrive(const Eigen::VectorXd & v)
@@ -976,8 +962,8 @@ namespace pinsettle
   {
     Impl & d = *impl_;
     const pinocchio::Model & model = d.model;
-    const double left = closeLoops(data, q, &pinned);
-    const std::vector<Eigen::Index> & still = *d.pinned;
+    const ClosedLoops closed = closeLoops(data, q, &pinned);
+    const std::vector<Eigen::Index> & still = *closed.still;
     // The rows held: the loops' (pinned columns zeroed, which the pinned rows make equivalent)
     // and one per pinned joint. v = v_a - M^-1 A^T mu with (A M^-1 A^T) mu = A v_a, least norm
     // (the rows are often redundant: a weld over a chain with a joint on its stop).
@@ -1001,7 +987,7 @@ namespace pinsettle
     v.noalias() -= d.MinvAt * d.impulse;
     for (const Eigen::Index i : still)
       v[i] = 0.;
-    return left;
+    return closed.left;
   }
 
 } // namespace pinsettle

@@ -430,7 +430,7 @@ namespace pinsettle
   {
     findJointsOnStops(*stops_, q_, on_stops_);
     const double left = projectOntoLoops(model_, data, *loops_, q_, 1e-13, 100, &on_stops_);
-    if (!(left <= 1e-10))
+    if (!(left <= LoopStepper::kLoopTolerance))
     {
       std::ostringstream msg;
       msg << "cannot close the loops with the joints moved onto their stops held there (";
@@ -907,17 +907,18 @@ namespace pinsettle
               -here.basis * solveWithRankCut(here.stiffness, here.basis.transpose() * run.tau, cut))
           : Eigen::VectorXd(-solveWithRankCut(here.stiffness, run.tau, cut));
       pinocchio::integrate(model, q, dq, q_next);
+      double open = 0.; // the loops' error left at q_next
       if (loops_ != nullptr)
-        projectOntoLoops(model, data, *loops_, q_next);
+        open = projectOntoLoops(model, data, *loops_, q_next);
       if (stops_ != nullptr)
         clampToStops(*stops_, q_next);
       if (loops_ != nullptr && stops_ != nullptr)
       {
         findJointsOnStops(*stops_, q_next, on_stops_);
-        projectOntoLoops(model, data, *loops_, q_next, 1e-13, 50, &on_stops_);
+        open = projectOntoLoops(model, data, *loops_, q_next, 1e-13, 50, &on_stops_);
       }
       // A step the loops cannot follow (held open by the stops) is no step to a rest.
-      if (loops_ != nullptr && !areLoopsClosed(model_, data, loops_, q_next))
+      if (!(open <= LoopStepper::kLoopTolerance))
         break;
       const Eigen::VectorXd tau_next = staticForce(q_next, forces);
       const double residual_next = residualOf(q_next, tau_next);

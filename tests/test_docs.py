@@ -1,0 +1,82 @@
+"""The README and docs/: a short README that keeps the markers CI and the benchmark report read,
+Python examples that run, and relative links that all land on a file and heading of the
+repository."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+PAGES = [README, *sorted((ROOT / "docs").glob("*.md"))]
+FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+
+
+def _between(text: str, begin: str, end: str) -> str:
+    assert text.count(begin) == 1 and text.count(end) == 1, (begin, end)
+    start, stop = text.index(begin), text.index(end)
+    assert start < stop, (begin, end)
+    return text[start + len(begin) : stop]
+
+
+def test_readme_is_at_most_250_lines():
+    # Issue 41: the README says what pinsettle is and how to start; the rest lives in docs/.
+    assert len(README.read_text().splitlines()) <= 250
+
+
+def test_readme_keeps_the_test_command_and_the_speed_summary():
+    text = README.read_text()
+    # .ci/run reads the test command between these markers; benchmarks/report.py rewrites the
+    # block between the others.
+    command = _between(text, "<!-- ci:test-command -->", "<!-- /ci:test-command -->")
+    assert re.search(r"^```bash\npip install .*&& pytest\n```$", command, re.M), command
+    summary = _between(
+        text, "<!-- bench:summary (written by benchmarks/report.py) -->", "<!-- /bench:summary -->"
+    )
+    assert "docs/benchmarks.md" in summary
+
+
+def test_readme_python_examples_run():
+    blocks = re.findall(r"^```python\n(.*?)^```", README.read_text(), re.S | re.M)
+    assert len(blocks) >= 2
+    namespace: dict[str, object] = {}
+    for block in blocks:  # in order: a later example may use an earlier one's imports
+        exec(compile(block, str(README), "exec"), namespace)
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
+    text = heading.strip().lower().replace("`", "")
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def _anchors(path: Path) -> set[str]:
+    anchors: set[str] = set()
+    counts: dict[str, int] = {}
+    for heading in re.findall(r"^#{1,6}\s+(.*)$", FENCE.sub("", path.read_text()), re.M):
+        slug = _slug(heading)
+        count = counts.get(slug, 0)
+        counts[slug] = count + 1
+        anchors.add(slug if count == 0 else f"{slug}-{count}")  # GitHub numbers repeats
+    return anchors
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_relative_links_land_on_a_file_and_heading_of_the_repository(page):
+    text = FENCE.sub("", page.read_text())
+    bad = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if re.match(r"[a-z][a-z0-9+.-]*:", target):  # https:, mailto:
+            continue
+        path, _, anchor = target.partition("#")
+        dest = (page.parent / path).resolve() if path else page
+        if not dest.is_relative_to(ROOT):
+            bad.append(f"{target}: outside the repository")
+        elif not dest.exists():
+            bad.append(f"{target}: no such file")
+        elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
+            bad.append(f"{target}: no heading #{anchor} in {dest.name}")
+    assert not bad, bad

@@ -6,8 +6,10 @@
 #include "pinsettle/settings.hpp"
 
 #include <cmath>
+#include <cstdint>
 #include <sstream>
 #include <stdexcept>
+#include <variant>
 
 namespace pinsettle
 {
@@ -64,44 +66,79 @@ namespace pinsettle
 
   namespace
   {
-    template<typename T>
-    [[noreturn]] void fail(const char * name, const char * expected, T value)
+    // One field's rule: its name, what it must be (the message's words), whether it is, and the
+    // value given (printed as given: an integer field without a decimal point).
+    struct FieldRule
+    {
+      const char * name;
+      const char * expected;
+      bool valid;
+      std::variant<double, std::int64_t> given;
+    };
+
+    bool finiteAtLeast(double value, double low)
+    {
+      return std::isfinite(value) && value >= low;
+    }
+
+    // NaN fails every comparison, so it is outside every range.
+    bool inClosedRange(double value, double low, double high)
+    {
+      return value >= low && value <= high;
+    }
+
+    bool inHalfOpenRange(double value, double low, double high)
+    {
+      return value >= low && value < high;
+    }
+
+    // 0 asks for the measured default.
+    bool zeroOrFiniteAtLeast(double value, double low)
+    {
+      return value == 0. || finiteAtLeast(value, low);
+    }
+
+    bool isKnownEnergyMeasure(EnergyMeasure energy)
+    {
+      return energy == EnergyMeasure::Exact || energy == EnergyMeasure::Simplified;
+    }
+
+    [[noreturn]] void fail(const FieldRule & rule)
     {
       std::ostringstream msg;
       msg.precision(17);
-      msg << name << " must be " << expected << ", got " << value;
+      msg << rule.name << " must be " << rule.expected << ", got ";
+      std::visit([&msg](auto value) { msg << value; }, rule.given);
       throw std::invalid_argument(msg.str());
     }
   } // namespace
 
   void checkSettings(const Settings & s)
   {
-    if (!(std::isfinite(s.dt) && s.dt >= 0.))
-      fail("dt", "a finite number > 0 (seconds), or 0 for the automatic step", s.dt);
-    if (!(s.dt_safety >= 0. && s.dt_safety <= 1.))
-      fail("dt_safety", "in (0, 1], or 0 for the measured default", s.dt_safety);
-    if (!(s.dt_growth == 0. || (std::isfinite(s.dt_growth) && s.dt_growth >= 1.)))
-      fail("dt_growth", "a finite number >= 1, or 0 for the measured default", s.dt_growth);
-    if (!(s.kt >= 0. && s.kt < 1.))
-      fail("kt", "in [0, 1)", s.kt);
-    if (!(std::isfinite(s.err) && s.err >= 0.))
-      fail("err", "a finite number >= 0", s.err);
-    if (s.ds < 1)
-      fail("ds", "an integer >= 1 (steps)", s.ds);
-    if (!(std::isfinite(s.max_e) && s.max_e >= 0.))
-      fail("max_e", "a finite number >= 0", s.max_e);
-    if (s.max_steps < 1)
-      fail("max_steps", "an integer >= 1", s.max_steps);
-    if (!(s.max_time > 0.)) // NaN fails too; +inf means no limit
-      fail("max_time", "a number > 0 (seconds; inf for no limit)", s.max_time);
-    if (s.trace_every < 0)
-      fail("trace_every", "an integer >= 0 (0 disables the trace)", s.trace_every);
-    if (s.trace_capacity < 2)
-      fail("trace_capacity", "an integer >= 2", s.trace_capacity);
-    if (s.check_every < 1)
-      fail("check_every", "an integer >= 1 (steps)", s.check_every);
-    if (s.energy != EnergyMeasure::Exact && s.energy != EnergyMeasure::Simplified)
-      fail("energy", "\"exact\" or \"simplified\"", static_cast<int>(s.energy));
+    // In this order: the first field that breaks its rule is the one reported.
+    const FieldRule rules[] = {
+      {"dt", "a finite number > 0 (seconds), or 0 for the automatic step", finiteAtLeast(s.dt, 0.),
+       s.dt},
+      {"dt_safety", "in (0, 1], or 0 for the measured default", inClosedRange(s.dt_safety, 0., 1.),
+       s.dt_safety},
+      {"dt_growth", "a finite number >= 1, or 0 for the measured default",
+       zeroOrFiniteAtLeast(s.dt_growth, 1.), s.dt_growth},
+      {"kt", "in [0, 1)", inHalfOpenRange(s.kt, 0., 1.), s.kt},
+      {"err", "a finite number >= 0", finiteAtLeast(s.err, 0.), s.err},
+      {"ds", "an integer >= 1 (steps)", s.ds >= 1, s.ds},
+      {"max_e", "a finite number >= 0", finiteAtLeast(s.max_e, 0.), s.max_e},
+      {"max_steps", "an integer >= 1", s.max_steps >= 1, s.max_steps},
+      // NaN fails too; +inf means no limit
+      {"max_time", "a number > 0 (seconds; inf for no limit)", s.max_time > 0., s.max_time},
+      {"trace_every", "an integer >= 0 (0 disables the trace)", s.trace_every >= 0, s.trace_every},
+      {"trace_capacity", "an integer >= 2", s.trace_capacity >= 2, s.trace_capacity},
+      {"check_every", "an integer >= 1 (steps)", s.check_every >= 1, s.check_every},
+      {"energy", "\"exact\" or \"simplified\"", isKnownEnergyMeasure(s.energy),
+       std::int64_t{static_cast<int>(s.energy)}},
+    };
+    for (const FieldRule & rule : rules)
+      if (!rule.valid)
+        fail(rule);
   }
 
 } // namespace pinsettle

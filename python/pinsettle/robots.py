@@ -152,18 +152,42 @@ def _merge(reasons: list[str]) -> list[str]:
     return merged
 
 
+def _xml_reasons(path: Path, reasons: list[str]) -> list[str]:
+    """TinyXML's codes name no cause: ElementTree's reason does, when it has one."""
+    if not any("XML_ERROR" in reason for reason in reasons):
+        return reasons
+    try:
+        parse_xml(path)
+    except ET.ParseError as xml_error:
+        return [f"not well-formed XML ({xml_error})"]
+    except OSError:
+        pass
+    return reasons
+
+
+# What to do, by a phrase of urdfdom's reasons (the first that matches wins).
+_URDF_HINTS: tuple[tuple[tuple[str, ...], str], ...] = (
+    (("no known type",), f"change the joint's type to one of URDF's ({URDF_JOINT_TYPES})"),
+    (("$(", "${"), "the file holds xacro substitutions: expand it with xacro first"),
+    (
+        ("visual element", "collision element"),
+        "urdfdom checks <visual> and <collision> (pinsettle never uses them): fix or drop them",
+    ),
+)
+
+
+def _urdf_hint(joined: str) -> str:
+    for phrases, hint in _URDF_HINTS:
+        if any(phrase in joined for phrase in phrases):
+            return hint
+    return "correct the file there"
+
+
 def _urdf_fault(path: Path, reasons: list[str], error: BaseException | None) -> str:
     """One short line for a URDF urdfdom refuses: its first reasons (repeats merged, the
     consequences of a joint's fault left out) and what to do."""
     reasons = [" ".join(r.split()).removeprefix("Error:").strip() for r in reasons]
-    if any("XML_ERROR" in reason for reason in reasons):
-        # TinyXML's codes name no cause: ElementTree's reason does, when it has one.
-        try:
-            parse_xml(path)
-        except ET.ParseError as xml_error:
-            reasons = [f"not well-formed XML ({xml_error})"]
-        except OSError:
-            pass
+    reasons = _xml_reasons(path, reasons)
     reasons = [r for r in reasons if r != "joint xml is not initialized correctly"]
     merged = _merge(reasons) or [str(error) if error is not None else "no reason given"]
     text = "; ".join(merged[:2]) + (
@@ -171,36 +195,28 @@ def _urdf_fault(path: Path, reasons: list[str], error: BaseException | None) -> 
         if len(merged) > 2
         else ""
     )
-    joined = " ".join(reasons)
-    if "no known type" in joined:
-        hint = f"change the joint's type to one of URDF's ({URDF_JOINT_TYPES})"
-    elif "$(" in joined or "${" in joined:
-        hint = "the file holds xacro substitutions: expand it with xacro first"
-    elif "visual element" in joined or "collision element" in joined:
-        hint = (
-            "urdfdom checks <visual> and <collision> (pinsettle never uses them): fix or drop them"
-        )
-    else:
-        hint = "correct the file there"
-    return f"{path}: the URDF does not parse: {text}; {hint}"
+    return f"{path}: the URDF does not parse: {text}; {_urdf_hint(' '.join(reasons))}"
 
 
-def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Model:
-    """:func:`load_urdf` without the warning (for callers that apply the tags)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"URDF file not found: {path}")
-    # urdfdom refuses a comment before the XML declaration: such a file is given as text with
-    # its declaration first (Pinocchio's XML-string builder).
+def _urdf_text(path: Path) -> str | None:
+    """The file as text with its XML declaration first, where a comment comes before it
+    (urdfdom refuses that; Pinocchio's XML-string builder takes the text); else None."""
     try:
         data = xml_bytes(path)
-        text = data.decode("utf-8") if data != path.read_bytes() else None
+        return data.decode("utf-8") if data != path.read_bytes() else None
     except UnicodeDecodeError:
-        text = None
+        return None
     except OSError as os_error:
         raise ValueError(f"{path}: cannot read the file: {os_error}") from None
-    # The URDF parser (urdfdom, C++) prints its reasons on the process's stderr: capture them,
-    # to put them in the message on failure, and pass them on (warnings) on success.
+
+
+def _build_capturing_stderr(
+    path: Path, text: str | None, floating: bool
+) -> tuple[pinocchio.Model | None, BaseException | None, str]:
+    """The model (or the error), and what the URDF parser (urdfdom, C++) printed on the
+    process's stderr meanwhile: its reasons, for the message on failure or passed on."""
+    model = None
+    error: BaseException | None = None
     with tempfile.TemporaryFile(mode="w+b") as captured:
         sys.stderr.flush()
         saved = os.dup(2)
@@ -211,7 +227,6 @@ def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Mode
                 model = pinocchio.buildModelFromXML(text, *root)
             else:
                 model = pinocchio.buildModelFromUrdf(str(path), *root)
-            error = None
         except (RuntimeError, ValueError) as e:
             error = e
         finally:
@@ -219,6 +234,15 @@ def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Mode
             os.close(saved)
         captured.seek(0)
         parser_says = captured.read().decode(errors="replace").strip()
+    return model, error, parser_says
+
+
+def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Model:
+    """:func:`load_urdf` without the warning (for callers that apply the tags)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"URDF file not found: {path}")
+    model, error, parser_says = _build_capturing_stderr(path, _urdf_text(path), floating)
     reasons = [
         line.strip()
         for line in parser_says.splitlines()
@@ -229,7 +253,7 @@ def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Mode
     # anyway: without that link's inertia, say. Such a file is refused as one that does not
     # parse, not solved as a different mechanism.
     dropped = any(reason.startswith("Error:") for reason in reasons)
-    if error is not None or dropped:
+    if model is None or error is not None or dropped:
         raise ValueError(_urdf_fault(path, reasons, error))
     if parser_says:
         print(parser_says, file=sys.stderr)

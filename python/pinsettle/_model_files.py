@@ -129,6 +129,55 @@ def _group_states(path: Path) -> list[tuple[str, list[tuple[str, str | None]]]]:
     return states
 
 
+def _srdf_values(where: str, value: str | None) -> list[float]:
+    """The numbers of a pose's joint value."""
+    if value is None:
+        raise ValueError(f"{where}: missing 'value'")
+    try:
+        values = [float(x) for x in value.split()]
+    except ValueError:
+        raise ValueError(f"{where}: value must be numbers, got '{value}'") from None
+    if not all(math.isfinite(x) for x in values):
+        raise ValueError(f"{where}: value must be finite, got '{value}'")
+    return values
+
+
+def _check_srdf_pose(
+    model: pinocchio.Model, path: Path, pose: str, joints: list[tuple[str, str | None]]
+) -> list[str]:
+    """Checks a pose's values against the model's joints; returns the free-flyer joints it
+    gives that the model does not have (left out)."""
+    names = list(model.names)
+    unknown: list[str] = []
+    left_out: list[str] = []
+    for joint, value in joints:
+        where = f"{path}: pose '{pose}', joint '{joint}'"
+        values = _srdf_values(where, value)
+        if joint not in names:
+            # A free-flyer's pose (x y z qx qy qz qw) for a root the model has fixed (or
+            # frees under another name): nothing of the model to put it on.
+            (left_out if len(values) == 7 else unknown).append(joint)
+            continue
+        j = model.getJointId(joint)
+        expected = 1 if model.nqs[j] == 2 and model.nvs[j] == 1 else model.nqs[j]
+        if len(values) != expected:
+            raise ValueError(
+                f"{where}: {len(values)} value{'s' if len(values) != 1 else ''} for a joint "
+                f"({model.joints[j].shortname()}) that takes {expected}"
+            )
+    if unknown:
+        raise ValueError(
+            f"{path}: pose '{pose}' names joint{'s' if len(unknown) > 1 else ''} the model "
+            f"does not have: {', '.join(unknown[:6])}"
+            + (f" and {len(unknown) - 6} more" if len(unknown) > 6 else "")
+            + f" (the model has {model.njoints - 1} joints: "
+            + ", ".join(names[1:7])
+            + (", ..." if model.njoints > 7 else "")
+            + "): this SRDF does not match the model"
+        )
+    return left_out
+
+
 def load_srdf_poses(model: pinocchio.Model, path: str | Path) -> dict[str, str]:
     """Add the SRDF's named poses to ``model.referenceConfigurations`` (Pinocchio's
     ``loadReferenceConfigurations``; ``disable_collisions`` and the rest of the SRDF play no
@@ -144,42 +193,8 @@ def load_srdf_poses(model: pinocchio.Model, path: str | Path) -> dict[str, str]:
     if not path.is_file():
         raise FileNotFoundError(f"SRDF file not found: {path}")
     notes: dict[str, str] = {}
-    names = list(model.names)
     for pose, joints in _group_states(path):
-        unknown: list[str] = []
-        left_out: list[str] = []
-        for joint, value in joints:
-            where = f"{path}: pose '{pose}', joint '{joint}'"
-            if value is None:
-                raise ValueError(f"{where}: missing 'value'")
-            try:
-                values = [float(x) for x in value.split()]
-            except ValueError:
-                raise ValueError(f"{where}: value must be numbers, got '{value}'") from None
-            if not all(math.isfinite(x) for x in values):
-                raise ValueError(f"{where}: value must be finite, got '{value}'")
-            if joint not in names:
-                # A free-flyer's pose (x y z qx qy qz qw) for a root the model has fixed (or
-                # frees under another name): nothing of the model to put it on.
-                (left_out if len(values) == 7 else unknown).append(joint)
-                continue
-            j = model.getJointId(joint)
-            expected = 1 if model.nqs[j] == 2 and model.nvs[j] == 1 else model.nqs[j]
-            if len(values) != expected:
-                raise ValueError(
-                    f"{where}: {len(values)} value{'s' if len(values) != 1 else ''} for a joint "
-                    f"({model.joints[j].shortname()}) that takes {expected}"
-                )
-        if unknown:
-            raise ValueError(
-                f"{path}: pose '{pose}' names joint{'s' if len(unknown) > 1 else ''} the model "
-                f"does not have: {', '.join(unknown[:6])}"
-                + (f" and {len(unknown) - 6} more" if len(unknown) > 6 else "")
-                + f" (the model has {model.njoints - 1} joints: "
-                + ", ".join(names[1:7])
-                + (", ..." if model.njoints > 7 else "")
-                + "): this SRDF does not match the model"
-            )
+        left_out = _check_srdf_pose(model, path, pose, joints)
         if left_out:
             notes[pose] = (
                 f"pose '{pose}': the free-flyer pose of {', '.join(left_out)} left out (the "

@@ -18,10 +18,15 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinsettle
 from scipy.optimize import brentq
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.axes import Axes
 
 ROOT = Path(__file__).resolve().parents[1]
 M, G, L, H, K, TAU = 1.0, 9.81, 1.0, 2.0, 40.0, 0.5
@@ -64,26 +69,20 @@ def scene() -> pinsettle.Scene:
     return out
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "sweep_bistable_fold.png")
-    args = parser.parse_args()
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def continuation() -> tuple[pd.DataFrame, pd.DataFrame, int]:
+    """The two sweeps (down from HIGH started on the negative side, up from LOW) and the case
+    where the sweep down jumps (checked: the only jump of either)."""
     lengths = np.linspace(HIGH, LOW, N)
     down = pinsettle.sweep(scene(), {"spring[0].rest_length": lengths}, [[-1.0]], progress=False)
     up = pinsettle.sweep(scene(), {"spring[0].rest_length": lengths[::-1]}, [[0.0]], progress=False)
-    where = fold()
     jumps = down[down["jump"].fillna(False)]
     assert len(jumps) == 1 and not up["jump"].fillna(False).any()
-    jump = jumps.index[0]
+    return down, up, jumps.index[0]
 
-    fig, ax = plt.subplots(figsize=(8, 5), dpi=120)
+
+def draw_closed_form(ax: Axes) -> None:
+    """The hanging-side equilibria (the one near pi is the top, a maximum, left out)."""
     dense = np.linspace(LOW, HIGH, 400)
-    # The hanging-side equilibria (the one near pi is the top, a maximum, left out).
     points = [(x, t, s) for x in dense for t, s in equilibria(x) if abs(t) < 2.5]
     for stable, style, label in (
         (True, "o", "stable equilibria (closed form)"),
@@ -92,20 +91,24 @@ def main() -> None:
         xs = [x for x, _, s in points if s == stable]
         ts = [t for _, t, s in points if s == stable]
         ax.plot(xs, ts, style, ms=1.5, color="0.5" if stable else "0.65", label=label)
+
+
+def draw_down(ax: Axes, down: pd.DataFrame, jump: int) -> tuple[float, float, float, float]:
+    """The sweep down, in two pieces joined by an arrow at its jump; the jump's two ends
+    (rest lengths x0, x1 and angles t0, t1)."""
+    x, t = down["spring[0].rest_length"], down["hinge"]
     ax.plot(
-        down["spring[0].rest_length"][:jump],
-        down["hinge"][:jump],
+        x[:jump],
+        t[:jump],
         "v-",
         color="C3",
         ms=5,
         lw=1,
         label="sweep down from L0 = 2.2 m, started at -1 rad",
     )
-    ax.plot(
-        down["spring[0].rest_length"][jump:], down["hinge"][jump:], "v-", color="C3", ms=5, lw=1
-    )
-    x0, x1 = down["spring[0].rest_length"][jump - 1], down["spring[0].rest_length"][jump]
-    t0, t1 = down["hinge"][jump - 1], down["hinge"][jump]
+    ax.plot(x[jump:], t[jump:], "v-", color="C3", ms=5, lw=1)
+    x0, x1 = x[jump - 1], x[jump]
+    t0, t1 = t[jump - 1], t[jump]
     ax.annotate(
         "",
         xy=(x1, t1),
@@ -113,6 +116,10 @@ def main() -> None:
         arrowprops={"arrowstyle": "->", "color": "C3", "lw": 1.5, "ls": "--"},
     )
     ax.text(x1 + 0.02, 0.5 * (t0 + t1), f"jump (case {jump})", color="C3", va="center")
+    return x0, x1, t0, t1
+
+
+def draw_up_and_fold(ax: Axes, up: pd.DataFrame, where: float) -> None:
     ax.plot(
         up["spring[0].rest_length"],
         up["hinge"],
@@ -130,6 +137,23 @@ def main() -> None:
     ax.set_title("Bistable pendulum, 0.5 N m on its hinge: continuation over the rest length")
     ax.legend(loc="upper left", bbox_to_anchor=(0.0, 0.93), fontsize=8)
     ax.grid(alpha=0.3)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "sweep_bistable_fold.png")
+    args = parser.parse_args()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    down, up, jump = continuation()
+    where = fold()
+    fig, ax = plt.subplots(figsize=(8, 5), dpi=120)
+    draw_closed_form(ax)
+    x0, x1, t0, t1 = draw_down(ax, down, jump)
+    draw_up_and_fold(ax, up, where)
     fig.tight_layout()
     fig.savefig(args.out)
     print(f"fold (closed form)       L0 = {where:.6f} m")

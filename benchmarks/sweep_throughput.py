@@ -133,55 +133,82 @@ def measure(repeats: int, scale: float) -> dict[str, Any]:
     return out
 
 
-def section(data: dict[str, Any]) -> str:
-    today = datetime.date.today().isoformat()
-    lines = [
-        BEGIN,
-        "## Sweeps: throughput",
-        "",
-        f"Measured by `python benchmarks/sweep_throughput.py --write` on this project's 2-core "
-        f"machine ({today}; load average {data['load_before']:.1f} before, "
-        f"{data['load_after']:.1f} after, this run's own two workers included"
-        + (
-            ": other work was running, so the ratios below are uncertain to tens of percent; "
-            "run it again on an idle machine"
-            if data["load_before"] > 1.0
-            else ""
-        )
-        + "). Random starts inside the "
-        "stops, drawn once and passed to every run as an array, solved by a plain Python loop "
-        "over `pinsettle.solve`, by `pinsettle.sweep` on 1 and 2 local threads, and by "
-        "`pinsettle.sweep(client=...)` on a `dask.distributed.LocalCluster` of 2 worker "
-        "processes with 1 thread each (127.0.0.1; default chunks, then one case per task). "
-        f"Median of {data['repeats']} interleaved repeats, each timed whole (planning, the "
-        "table and sending the scene included, starting the cluster not), all in one process "
-        "with the Dask client connected (its thread shares the GIL). Every table was checked "
-        "against the loop's results to the bit (wall times aside).",
-        "",
-        "| scene | cases | solver time per case | GIL released | loop over `solve` | "
-        "sweep, 1 thread | sweep, 2 threads | Dask, 2 processes | Dask, 1 case per task |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
-    ]
-    bounds = []
-    overheads = []
-    for name, item in data["scenes"].items():
-        n, median = item["cases"], item["median"]
+THROUGHPUT_INTRO = (
+    "Measured by `python benchmarks/sweep_throughput.py --write` on this project's 2-core "
+    "machine ({today}; load average {load_before:.1f} before, "
+    "{load_after:.1f} after, this run's own two workers included{busy}). Random starts inside the "
+    "stops, drawn once and passed to every run as an array, solved by a plain Python loop "
+    "over `pinsettle.solve`, by `pinsettle.sweep` on 1 and 2 local threads, and by "
+    "`pinsettle.sweep(client=...)` on a `dask.distributed.LocalCluster` of 2 worker "
+    "processes with 1 thread each (127.0.0.1; default chunks, then one case per task). "
+    "Median of {repeats} interleaved repeats, each timed whole (planning, the "
+    "table and sending the scene included, starting the cluster not), all in one process "
+    "with the Dask client connected (its thread shares the GIL). Every table was checked "
+    "against the loop's results to the bit (wall times aside)."
+)
+#: Said in the intro when the machine was busy before the run.
+BUSY = (
+    ": other work was running, so the ratios below are uncertain to tens of percent; "
+    "run it again on an idle machine"
+)
 
-        def cell(key: str, n: int = n, median: dict[str, float] = median) -> str:
-            rate = n / median[key]
-            return f"{rate:,.0f} /s ({median['loop'] / median[key]:.2f}x)"
+THROUGHPUT_HEADER = [
+    "| scene | cases | solver time per case | GIL released | loop over `solve` | "
+    "sweep, 1 thread | sweep, 2 threads | Dask, 2 processes | Dask, 1 case per task |",
+    "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+]
 
-        # The share of a case's time spent in the C++ solve (the GIL released) in the loop.
-        share = min(1.0, item["solver"] / (median["loop"] / n))
-        bounds.append(f"{name} {1 / ((1 - share) + share / 2):.2f}x")
+
+def gil_share(item: dict[str, Any]) -> float:
+    """The share of a case's time spent in the C++ solve (the GIL released) in the loop."""
+    return float(min(1.0, item["solver"] / (item["median"]["loop"] / item["cases"])))
+
+
+def throughput_row(name: str, item: dict[str, Any]) -> str:
+    n, median = item["cases"], item["median"]
+
+    def cell(key: str) -> str:
+        rate = n / median[key]
+        return f"{rate:,.0f} /s ({median['loop'] / median[key]:.2f}x)"
+
+    return (
+        f"| {name} | {n} | {item['solver'] * 1e3:.3f} ms | {100 * gil_share(item):.0f}% | "
+        f"{cell('loop')} | {cell('sweep1')} | {cell('sweep2')} | {cell('dask')} | "
+        f"{cell('dask1')} |"
+    )
+
+
+def two_thread_bound(name: str, item: dict[str, Any]) -> str:
+    """How much faster two threads can be than one with the scene's share released."""
+    share = gil_share(item)
+    return f"{name} {1 / ((1 - share) + share / 2):.2f}x"
+
+
+def dask_overheads(name: str, item: dict[str, Any]) -> list[str]:
+    """Worker time a case costs on the cluster beyond what it costs on one local thread."""
+    n, median = item["cases"], item["median"]
+    lines = []
+    for key, how in (("dask", "default chunks"), ("dask1", "one case per task")):
+        overhead = (2 * median[key] - median["sweep1"]) / n
         lines.append(
-            f"| {name} | {n} | {item['solver'] * 1e3:.3f} ms | {100 * share:.0f}% | "
-            f"{cell('loop')} | {cell('sweep1')} | {cell('sweep2')} | {cell('dask')} | "
-            f"{cell('dask1')} |"
+            f"- {name}, {how}: {overhead * 1e3:+.3f} ms per case "
+            f"({median[key] / n * 1e3:.3f} ms of wall time per case)"
         )
-        # Worker time a case costs on the cluster beyond what it costs on one local thread.
-        for key in ("dask", "dask1"):
-            overheads.append((name, key, (2 * median[key] - median["sweep1"]) / n, median[key] / n))
+    return lines
+
+
+def section(data: dict[str, Any]) -> str:
+    scenes = data["scenes"]
+    intro = THROUGHPUT_INTRO.format(
+        today=datetime.date.today().isoformat(),
+        load_before=data["load_before"],
+        load_after=data["load_after"],
+        busy=BUSY if data["load_before"] > 1.0 else "",
+        repeats=data["repeats"],
+    )
+    lines = [BEGIN, "## Sweeps: throughput", "", intro, "", *THROUGHPUT_HEADER]
+    lines += [throughput_row(name, item) for name, item in scenes.items()]
+    bounds = [two_thread_bound(name, item) for name, item in scenes.items()]
     lines += [
         "",
         "Solves per second (the loop's time over each run's in brackets). The solver time is "
@@ -197,23 +224,14 @@ def section(data: dict[str, Any]) -> str:
         "local thread:",
         "",
     ]
-    for name, key, overhead, per_case in overheads:
-        how = "default chunks" if key == "dask" else "one case per task"
-        lines.append(
-            f"- {name}, {how}: {overhead * 1e3:+.3f} ms per case "
-            f"({per_case * 1e3:.3f} ms of wall time per case)"
-        )
+    lines += [line for name, item in scenes.items() for line in dask_overheads(name, item)]
+    one = ", ".join(
+        f"{name} {item['median']['dask_one'] * 1e3:.0f} ms" for name, item in scenes.items()
+    )
     lines += [
         "",
         "A sweep of one case on the cluster (the scene sent to both workers, one task there "
-        "and back): "
-        + ", ".join(
-            f"{name} {item['median']['dask_one'] * 1e3:.0f} ms"
-            for name, item in data["scenes"].items()
-        )
-        + ".",
-    ]
-    lines += [
+        f"and back): {one}.",
         "",
         "On one machine the cluster only adds cost (pickling, the scheduler's round trips); it "
         "pays when the cases outnumber one machine's cores. Locally the threads share one "

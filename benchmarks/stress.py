@@ -312,9 +312,9 @@ def _scene_case(name: str, reference: bool = True) -> Callable:
     return build
 
 
-def cases() -> list[Case]:
-    out: list[Case] = []
-    # Stiffness: a 10 g body on a stiff spring next to a 10 kg pendulum.
+def stiffness_cases() -> list[Case]:
+    """A 10 g body on a stiff spring next to a 10 kg pendulum."""
+    out = []
     for k in (1e2, 1e5, 1e8):
         model = heavy_and_light(pinocchio.JointModelPZ())
         physics = Physics(model, joint_springs=[("light", k, 0.0)])
@@ -338,7 +338,12 @@ def cases() -> list[Case]:
             note="tip of the 10 g link tied to a world point",
         )
     )
-    # Mass ratio 1e-4 .. 1e4 kg (unit lengths), link lengths 1 mm .. 100 m (unit masses), both.
+    return out
+
+
+def span_cases() -> list[Case]:
+    """Mass ratio 1e-4 .. 1e4 kg (unit lengths), link lengths 1 mm .. 100 m (unit masses),
+    both."""
     n = 9
     masses = np.logspace(-4, 4, n)
     lengths = np.logspace(-3, 2, n)
@@ -350,6 +355,7 @@ def cases() -> list[Case]:
         ("light short root to heavy long tip", "mass and scale", masses, lengths),
         ("heavy short root to light long tip", "mass and scale", masses, lengths[::-1]),
     ]
+    out = []
     for name, group, ms, ls in spans:
         settings = {}
         if name.startswith("masses 1e4"):
@@ -364,47 +370,77 @@ def cases() -> list[Case]:
                 settings=settings,
             )
         )
-    # Chain length 2 .. 100 (1 kg, 1 m links), released from horizontal.
+    return out
+
+
+def chain_length_cases() -> list[Case]:
+    """Chain length 2 .. 100 (1 kg, 1 m links), released from horizontal."""
+    out = []
     for links in (2, 10, 30, 100):
         q0 = np.zeros(links)
         q0[0] = math.pi / 2
-        out.append(
-            Case(
-                f"chain of {links}",
-                "chain length",
-                _physics_case(Physics(chain([1.0] * links, [1.0] * links)), q0),
-            )
-        )
-    # Gravity 0 .. 1000 m/s^2: five links with joint springs (rest 0.3 rad, 10 N m/rad).
+        physics = Physics(chain([1.0] * links, [1.0] * links))
+        out.append(Case(f"chain of {links}", "chain length", _physics_case(physics, q0)))
+    return out
+
+
+def gravity_cases() -> list[Case]:
+    """Gravity 0 .. 1000 m/s^2: five links with joint springs (rest 0.3 rad, 10 N m/rad)."""
+    out = []
     for g in (0.0, 1e-3, 9.81, 1000.0):
         model = chain([1.0] * 5, [1.0] * 5, gravity=g)
         physics = Physics(model, joint_springs=[(f"j{k}", 10.0, 0.3) for k in range(5)])
         out.append(
             Case(f"gravity {g:g} m/s^2", "gravity", _physics_case(physics, np.full(5, -1.0)))
         )
-    # Far from equilibrium: a chain folded nearly upright, the UR5 in a contorted pose.
-    out.append(
+    return out
+
+
+def far_start_cases() -> list[Case]:
+    """Far from equilibrium: a chain folded nearly upright, the UR5 in a contorted pose."""
+    folded = Physics(chain([1.0] * 5, [1.0] * 5))
+    ur5 = pinsettle.load_robot("ur5")
+    contorted = Physics(ur5, stops=model_stops(ur5))
+    return [
         Case(
             "chain of 5 folded upright",
             "far start",
-            _physics_case(Physics(chain([1.0] * 5, [1.0] * 5)), [3.0, -2.9, 2.8, -2.7, 2.6]),
-        )
-    )
-    ur5 = pinsettle.load_robot("ur5")
-    out.append(
+            _physics_case(folded, [3.0, -2.9, 2.8, -2.7, 2.6]),
+        ),
         Case(
             "UR5 from a contorted pose",
             "far start",
-            _physics_case(Physics(ur5, stops=model_stops(ur5)), [2.5, -2.0, 2.8, -2.5, 1.5, 1.0]),
-        )
+            _physics_case(contorted, [2.5, -2.0, 2.8, -2.5, 1.5, 1.0]),
+        ),
+    ]
+
+
+def saddle_cases() -> list[Case]:
+    """Exactly at an unstable equilibrium."""
+    return [
+        Case("pendulum upright", "saddle start", _scene_case("pendulum_upright")),
+        Case("UR5 on a saddle", "saddle start", _scene_case("ur5_saddle")),
+    ]
+
+
+def no_equilibrium_cases() -> list[Case]:
+    return [
+        Case(name, "no equilibrium", _scene_case(name, False), expect="no_equilibrium")
+        for name in ("torque_disk", "free_fall", "overloaded_pendulum")
+    ]
+
+
+def cases() -> list[Case]:
+    groups = (
+        stiffness_cases,
+        span_cases,
+        chain_length_cases,
+        gravity_cases,
+        far_start_cases,
+        saddle_cases,
+        no_equilibrium_cases,
     )
-    # Exactly at an unstable equilibrium.
-    out.append(Case("pendulum upright", "saddle start", _scene_case("pendulum_upright")))
-    out.append(Case("UR5 on a saddle", "saddle start", _scene_case("ur5_saddle")))
-    # No equilibrium.
-    for name in ("torque_disk", "free_fall", "overloaded_pendulum"):
-        out.append(Case(name, "no equilibrium", _scene_case(name, False), expect="no_equilibrium"))
-    return out
+    return [case for group in groups for case in group()]
 
 
 # --- running them -------------------------------------------------------------------------------

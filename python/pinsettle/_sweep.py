@@ -81,89 +81,115 @@ class Plan:
         return [c * n + start for c in range(len(self.combos))]
 
 
-def random_starts(scene: Scene, limits: bool | None, n: int, seed: int) -> list[np.ndarray]:
-    """``n`` starts drawn uniformly: a 1-DoF joint inside its stops (+-pi where it has none, on
-    a side without one), a multi-DoF joint by a tangent vector of entries in +-pi from neutral;
-    locked joints at the scene's start."""
-    model = scene.model
+def _stop_bounds(scene: Scene, limits: bool | None) -> dict[str, tuple[float, float]]:
+    """The stops the solves keep (``limits`` as for ``solve``), (lower, upper) by joint."""
     compiled = scene.compile()
     stops = compiled.stops_for(scene.limits if limits is None else limits)
-    bounds = {
-        str(name): (lower, upper)
-        for name, _, _, lower, upper in (
-            _core.joint_stops(compiled.model, stops)["stops"] if stops is not None else []
-        )
-    }
+    if stops is None:
+        return {}
+    found = _core.joint_stops(compiled.model, stops)["stops"]
+    return {str(name): (lower, upper) for name, _, _, lower, upper in found}
+
+
+def _draw_range(lower: float, upper: float) -> tuple[float, float]:
+    """Where a 1-DoF joint between ``lower`` and ``upper`` is drawn: inside its stops, +-pi on a
+    side without one."""
+    lo = lower if math.isfinite(lower) else -math.pi
+    hi = upper if math.isfinite(upper) else math.pi
+    if lo > hi:  # a single stop beyond +-pi: a turn from it
+        return (lower, lower + 2 * math.pi) if math.isfinite(lower) else (hi - 2 * math.pi, hi)
+    return lo, hi
+
+
+def _free_joints(scene: Scene) -> list[int]:
+    """The indices of the joints a start sets (the locked ones keep the scene's start)."""
+    model = scene.model
+    return [j for j in range(1, model.njoints) if str(model.names[j]) not in scene.locked]
+
+
+def _draw_ranges(scene: Scene, limits: bool | None) -> tuple[list[float], list[float]]:
+    """The lower and upper ends of each drawn entry: one per 1-DoF joint, one per tangent
+    entry of a multi-DoF joint."""
+    model = scene.model
+    bounds = _stop_bounds(scene, limits)
     lows: list[float] = []
     highs: list[float] = []
-    for j in range(1, model.njoints):
-        name = str(model.names[j])
-        if name in scene.locked:
-            continue
+    for j in _free_joints(scene):
         if model.nvs[j] == 1:
-            lower, upper = bounds.get(name, (-math.inf, math.inf))
-            lo = lower if math.isfinite(lower) else -math.pi
-            hi = upper if math.isfinite(upper) else math.pi
-            if lo > hi:  # a single stop beyond +-pi: a turn from it
-                lo, hi = (
-                    (lower, lower + 2 * math.pi) if math.isfinite(lower) else (hi - 2 * math.pi, hi)
-                )
+            lo, hi = _draw_range(*bounds.get(str(model.names[j]), (-math.inf, math.inf)))
             lows.append(lo)
             highs.append(hi)
         else:
             lows += [-math.pi] * model.nvs[j]
             highs += [math.pi] * model.nvs[j]
+    return lows, highs
+
+
+def _start_of_draw(scene: Scene, base: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """The start of one draw: each multi-DoF joint moved from neutral by its tangent entries,
+    then each 1-DoF joint set to its value (an angle for a continuous joint)."""
+    model = scene.model
+    q: np.ndarray = base.copy()
+    v, k = np.zeros(model.nv), 0
+    neutral = pinocchio.neutral(model)
+    single: list[tuple[int, float]] = []
+    for j in _free_joints(scene):
+        if model.nvs[j] == 1:
+            single.append((j, float(row[k])))
+            k += 1
+        else:
+            iv, nv = model.idx_vs[j], model.nvs[j]
+            iq, nq = model.idx_qs[j], model.nqs[j]
+            v[iv : iv + nv] = row[k : k + nv]
+            q[iq : iq + nq] = neutral[iq : iq + nq]
+            k += nv
+    if v.any():
+        q = pinocchio.integrate(model, q, v)
+    for j, x in single:
+        iq = model.idx_qs[j]
+        if model.nqs[j] == 2:
+            q[iq : iq + 2] = (math.cos(x), math.sin(x))
+        else:
+            q[iq] = x
+    return q
+
+
+def random_starts(scene: Scene, limits: bool | None, n: int, seed: int) -> list[np.ndarray]:
+    """``n`` starts drawn uniformly: a 1-DoF joint inside its stops (+-pi where it has none, on
+    a side without one), a multi-DoF joint by a tangent vector of entries in +-pi from neutral;
+    locked joints at the scene's start."""
+    lows, highs = _draw_ranges(scene, limits)
     draws = np.random.default_rng(seed).uniform(np.array(lows), np.array(highs), (n, len(lows)))
     base = scene.q0()
-    out = []
-    for row in draws:
-        q, v, k = base.copy(), np.zeros(model.nv), 0
-        single: list[tuple[int, float]] = []
-        for j in range(1, model.njoints):
-            if str(model.names[j]) in scene.locked:
-                continue
-            if model.nvs[j] == 1:
-                single.append((j, float(row[k])))
-                k += 1
-            else:
-                iv, nv = model.idx_vs[j], model.nvs[j]
-                v[iv : iv + nv] = row[k : k + nv]
-                q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]] = pinocchio.neutral(model)[
-                    model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]
-                ]
-                k += nv
-        if v.any():
-            q = pinocchio.integrate(model, q, v)
-        for j, x in single:
-            iq = model.idx_qs[j]
-            if model.nqs[j] == 2:
-                q[iq : iq + 2] = (math.cos(x), math.sin(x))
-            else:
-                q[iq] = x
-        out.append(q)
-    return out
+    return [_start_of_draw(scene, base, row) for row in draws]
 
 
-def _starts(scene: Scene, starts: Any, limits: bool | None) -> list[np.ndarray] | None:
-    """The start configurations of ``starts``: None, an array (n, model.nq) or
-    ('random', n, seed)."""
-    if starts is None:
-        return None
-    nq = scene.model.nq
-    if isinstance(starts, tuple) and starts and isinstance(starts[0], str):
-        if starts[0] != "random" or len(starts) != 3:
-            raise ValueError(
-                f"starts must be an array of start configurations or ('random', n, seed), got "
-                f"{starts!r}"
-            )
-        _, n, seed = starts
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"starts ('random', n, seed): n must be an integer >= 1, got {n!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(
-                f"starts ('random', n, seed): seed must be an integer >= 0, got {seed!r}"
-            )
-        return random_starts(scene, limits, int(n), int(seed))
+def _is_count(value: Any, minimum: int) -> bool:
+    """Whether ``value`` is an integer (not a bool) >= ``minimum``."""
+    return (
+        not isinstance(value, bool)
+        and isinstance(value, (int, np.integer))
+        and bool(value >= minimum)
+    )
+
+
+def _random_spec(scene: Scene, starts: tuple[Any, ...], limits: bool | None) -> list[np.ndarray]:
+    """The starts of ``('random', n, seed)``, checked."""
+    if starts[0] != "random" or len(starts) != 3:
+        raise ValueError(
+            f"starts must be an array of start configurations or ('random', n, seed), got "
+            f"{starts!r}"
+        )
+    _, n, seed = starts
+    if not _is_count(n, 1):
+        raise ValueError(f"starts ('random', n, seed): n must be an integer >= 1, got {n!r}")
+    if not _is_count(seed, 0):
+        raise ValueError(f"starts ('random', n, seed): seed must be an integer >= 0, got {seed!r}")
+    return random_starts(scene, limits, int(n), int(seed))
+
+
+def _given_starts(starts: Any, nq: int) -> list[np.ndarray]:
+    """The rows of an array of starts (n, nq), checked."""
     if isinstance(starts, (str, bytes, Mapping)):
         raise TypeError(
             f"starts must be an array of start configurations (n, model.nq = {nq}) or "
@@ -188,30 +214,34 @@ def _starts(scene: Scene, starts: Any, limits: bool | None) -> list[np.ndarray] 
     return [row.copy() for row in array]
 
 
-def make_plan(
-    scene: Scene,
-    vary: Mapping[str, Any] | None,
-    starts: Any,
-    pair: bool,
-    continuation: bool | None,
-    limits: bool | None,
-) -> Plan:
-    """The cases of a sweep, every input checked (errors name the key or argument)."""
-    if vary is not None and not isinstance(vary, Mapping):
-        raise TypeError(f"vary must be a dict of key -> values, got {type(vary).__name__}")
-    vary = dict(vary or {})
-    keys = [parse_key(text, scene) for text in vary]
-    values = [key_values(key, vary[key.text]) for key in keys]
-    if pair:
-        lengths = {key.text: len(v) for key, v in zip(keys, values, strict=True)}
-        if len(set(lengths.values())) > 1:
-            raise ValueError(
-                "zip=True pairs the values of every key: they need as many values each, got "
-                + ", ".join(f"{k}: {n}" for k, n in lengths.items())
-            )
-        combos = list(zip(*values, strict=True)) if values else [()]
-    else:
-        combos = list(itertools.product(*values))
+def _starts(scene: Scene, starts: Any, limits: bool | None) -> list[np.ndarray] | None:
+    """The start configurations of ``starts``: None, an array (n, model.nq) or
+    ('random', n, seed)."""
+    if starts is None:
+        return None
+    if isinstance(starts, tuple) and starts and isinstance(starts[0], str):
+        return _random_spec(scene, starts, limits)
+    return _given_starts(starts, scene.model.nq)
+
+
+def _combos(keys: list[Key], values: list[list[Any]], pair: bool) -> list[tuple[Any, ...]]:
+    """The values of the keys in each case: the full grid, or paired (``zip=True``)."""
+    if not pair:
+        return list(itertools.product(*values))
+    lengths = {key.text: len(v) for key, v in zip(keys, values, strict=True)}
+    if len(set(lengths.values())) > 1:
+        raise ValueError(
+            "zip=True pairs the values of every key: they need as many values each, got "
+            + ", ".join(f"{k}: {n}" for k, n in lengths.items())
+        )
+    return list(zip(*values, strict=True)) if values else [()]
+
+
+def _continuation(
+    continuation: Any, keys: list[Key], combos: list[tuple[Any, ...]], pair: bool
+) -> bool:
+    """Whether the cases run as continuation branches: as asked, or by default for a 1-D
+    sweep without start keys."""
     if not isinstance(continuation, (bool, np.bool_, type(None))):
         raise TypeError(f"continuation must be True, False or None, got {continuation!r}")
     start_keys = [key.text for key in keys if key.kind == "start"]
@@ -221,35 +251,77 @@ def make_plan(
             f"it: remove {', '.join(start_keys)} or pass continuation=False"
         )
     if continuation is None:
-        continuation = len(combos) > 1 and (len(keys) == 1 or pair) and not start_keys
+        return len(combos) > 1 and (len(keys) == 1 or pair) and not start_keys
+    return bool(continuation)
+
+
+def _start_columns(scene: Scene, keys: list[Key], given: list[np.ndarray]) -> list[dict[str, Any]]:
+    """The columns of each given start: its joints' values (``start.JOINT``), those of the
+    start keys aside (they have columns of their own)."""
+    start_joints = {key.name for key in keys if key.kind == "start"}
+    joints = [j for j in joint_columns(scene) if j.name not in start_joints]
+    names = [f"start.{col}" for j in joints for col in j.columns]
+    return [dict(zip(names, joint_row(scene.model, joints, q), strict=True)) for q in given]
+
+
+def _case_q0(model: pinocchio.Model, keys: list[Key], combo: tuple[Any, ...], q: np.ndarray) -> Any:
+    """The start ``q`` with the values of the case's start keys."""
+    for key, value in zip(keys, combo, strict=True):
+        if key.kind == "start":
+            q = start_q(model, q, key, value)
+    return q
+
+
+def _vary(scene: Scene, vary: Mapping[str, Any] | None) -> tuple[list[Key], list[list[Any]]]:
+    """The keys of ``vary`` and the values each takes, checked."""
+    if vary is not None and not isinstance(vary, Mapping):
+        raise TypeError(f"vary must be a dict of key -> values, got {type(vary).__name__}")
+    vary = dict(vary or {})
+    keys = [parse_key(text, scene) for text in vary]
+    return keys, [key_values(key, vary[key.text]) for key in keys]
+
+
+def _case_columns(
+    keys: list[Key],
+    combo: tuple[Any, ...],
+    start: int,
+    start_columns: list[dict[str, Any]] | None,
+) -> dict[str, Any]:
+    """The table columns a case's plan fills: (with given starts) the start's number, the
+    varied values, (with given starts) the start's joints; in that order."""
+    row: dict[str, Any] = {} if start_columns is None else {"start": start}
+    for key, value in zip(keys, combo, strict=True):
+        row.update(value_columns(key, value))
+    row.update({} if start_columns is None else start_columns[start])
+    return row
+
+
+def make_plan(
+    scene: Scene,
+    vary: Mapping[str, Any] | None,
+    starts: Any,
+    pair: bool,
+    continuation: bool | None,
+    limits: bool | None,
+) -> Plan:
+    """The cases of a sweep, every input checked (errors name the key or argument)."""
+    keys, values = _vary(scene, vary)
+    combos = _combos(keys, values, pair)
+    branches = _continuation(continuation, keys, combos, pair)
     given = _starts(scene, starts, limits)
     start_list = given if given is not None else [scene.q0()]
+    start_columns = None if given is None else _start_columns(scene, keys, given)
     columns: dict[str, list[Any]] = {}
     specs: list[Spec] = []
-    model = scene.model
-    start_joints = {key.name for key in keys if key.kind == "start"}
-    start_columns = [j for j in joint_columns(scene) if j.name not in start_joints]
     for c, combo in enumerate(combos):
         changes = tuple((i, v) for i, v in enumerate(combo) if keys[i].kind != "start")
         for s, q_start in enumerate(start_list):
-            q0 = q_start
-            for i, v in enumerate(combo):
-                if keys[i].kind == "start":
-                    q0 = start_q(model, q0, keys[i], v)
-            first = not continuation or c == 0
-            specs.append(Spec(len(specs), changes, q0 if first else None))
-            row: dict[str, Any] = {}
-            if given is not None:
-                row["start"] = s
-            for key, v in zip(keys, combo, strict=True):
-                row.update(value_columns(key, v))
-            if given is not None:
-                values_at = joint_row(model, start_columns, q_start)
-                names = [f"start.{col}" for j in start_columns for col in j.columns]
-                row.update(dict(zip(names, values_at, strict=True)))
-            for name, value in row.items():
+            q0 = _case_q0(scene.model, keys, combo, q_start)
+            # In a continuation branch, a case after the first starts from the previous rest.
+            specs.append(Spec(len(specs), changes, q0 if not branches or c == 0 else None))
+            for name, value in _case_columns(keys, combo, s, start_columns).items():
                 columns.setdefault(name, []).append(value)
-    return Plan(keys, combos, start_list, bool(continuation), columns, specs)
+    return Plan(keys, combos, start_list, branches, columns, specs)
 
 
 def make_tasks(
@@ -384,7 +456,7 @@ class Table:
                 data[name] = pd.array(column, dtype="Int64")
             elif name == "jump":
                 data[name] = pd.array(column, dtype="boolean")
-            elif name in ("status", "stability", "at_limit", "error"):
+            elif name in _TEXT_COLUMNS:
                 data[name] = pd.array(column, dtype="string")
             else:
                 data[name] = np.array(column, dtype=float)
@@ -400,6 +472,20 @@ class Table:
             ValueError: a missing column, a case number outside this sweep, or a case whose
                 varied values differ from this sweep's.
         """
+        cases = self._check_resumed(previous)
+        columns = {name: previous[name].tolist() for name in self.output_columns()}
+        na = pandas().NA
+        for k, case in enumerate(cases):
+            row = {name: _resumed_value(name, values[k], na) for name, values in columns.items()}
+            if row.get("jump") is not None:
+                row["jump"] = str(row["jump"]) in ("True", "true", "1")
+            if row["steps"] is not None:
+                row["steps"] = int(row["steps"])
+            self.add([(int(case), row)])
+
+    def _check_resumed(self, previous: DataFrame) -> np.ndarray:
+        """The case numbers of ``previous``, once its columns and cases are checked to be this
+        sweep's."""
         pd = pandas()
         if not isinstance(previous, pd.DataFrame):
             raise TypeError(f"resume must be a pandas.DataFrame, got {type(previous).__name__}")
@@ -409,7 +495,7 @@ class Table:
             raise ValueError(
                 f"resume: the table is not of this sweep: it has no column {', '.join(missing)}"
             )
-        cases = previous["case"].to_numpy()
+        cases: np.ndarray = previous["case"].to_numpy()
         twice = [
             int(c) for c, n in zip(*np.unique(cases, return_counts=True), strict=True) if n > 1
         ]
@@ -430,27 +516,22 @@ class Table:
                     f"resume: the table is not of this sweep: case {cases[k]} has {name} = "
                     f"{given[k]}, this sweep {planned[k]}"
                 )
-        columns = {name: previous[name].tolist() for name in self.output_columns()}
-        for k, case in enumerate(cases):
-            row: dict[str, Any] = {}
-            for name, values in columns.items():
-                value = values[k]
-                absent = (
-                    value is None
-                    or value is pd.NA
-                    or (isinstance(value, float) and math.isnan(value))
-                )
-                if name in ("status", "stability", "at_limit", "error"):
-                    row[name] = "" if absent else str(value)
-                elif name in ("steps", "jump"):
-                    row[name] = None if absent else value
-                else:
-                    row[name] = value
-            if row.get("jump") is not None:
-                row["jump"] = str(row["jump"]) in ("True", "true", "1")
-            if row["steps"] is not None:
-                row["steps"] = int(row["steps"])
-            self.add([(int(case), row)])
+        return cases
+
+
+#: The output columns of text: '' where a value is missing.
+_TEXT_COLUMNS = ("status", "stability", "at_limit", "error")
+
+
+def _resumed_value(name: str, value: Any, na: Any) -> Any:
+    """A value of a resumed table as the runner gives it: text '' and steps or jump None where
+    the file has none (None, ``na``: pandas.NA, or NaN)."""
+    absent = value is None or value is na or (isinstance(value, float) and math.isnan(value))
+    if name in _TEXT_COLUMNS:
+        return "" if absent else str(value)
+    if name in ("steps", "jump"):
+        return None if absent else value
+    return value
 
 
 # --- progress -------------------------------------------------------------------------------------
@@ -524,9 +605,74 @@ def _as_scene(scene: Any) -> Scene:
 def _workers(workers: Any) -> int:
     if workers is None:
         return cpu_count()
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+    if not _is_count(workers, 1):
         raise ValueError(f"workers must be an integer >= 1 (threads), got {workers!r}")
     return int(workers)
+
+
+@dataclass(frozen=True)
+class _Where:
+    """Where a sweep's cases run: ``threads`` local threads, or (``threads`` 0) a Dask cluster,
+    by its client or its scheduler's address."""
+
+    threads: int
+    client: Any
+    scheduler: str | None
+    connect_timeout: float
+    chunk_size: int | None
+
+    @property
+    def cluster(self) -> bool:
+        return self.client is not None or self.scheduler is not None
+
+
+def _where(
+    workers: Any, client: Any, scheduler: Any, connect_timeout: float, chunk_size: Any
+) -> _Where:
+    """Where the cases run, the arguments that say it checked."""
+    if client is not None and scheduler is not None:
+        raise ValueError("give client= or scheduler=, not both")
+    cluster = client is not None or scheduler is not None
+    if cluster and workers is not None:
+        raise ValueError(
+            "workers= sets local threads; with client= or scheduler= the cluster's workers run "
+            "the cases"
+        )
+    threads = 0 if cluster else _workers(workers)
+    if chunk_size is not None and not _is_count(chunk_size, 1):
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    return _Where(threads, client, scheduler, connect_timeout, chunk_size)
+
+
+def _reporter(progress: bool | Progress) -> tuple[Progress, ProgressBar | None]:
+    """The function told of the cases done, and the progress bar when it is that."""
+    if progress is True:
+        bar = ProgressBar()
+        return bar, bar
+    if callable(progress):
+        return progress, None
+    return (lambda done, total: None), None
+
+
+def _run_cases(
+    plan: Plan, table: Table, runner: Runner, where: _Where, collect: Collect, stop: Interrupts
+) -> int:
+    """Run the cases not yet in ``table``; the number of worker threads that ran them."""
+    if not where.cluster:
+        # Chunks of a few cases: fewer wake-ups of this thread; Ctrl-C still stops
+        # between cases.
+        chunk = where.chunk_size or min(16, max(1, plan.size // (8 * where.threads)))
+        tasks = make_tasks(plan, table.rows, chunk, table.rest_of)
+        run_local(runner, tasks, where.threads, collect, stop)
+        return where.threads
+    from . import _sweep_cluster
+
+    with _sweep_cluster.connect(where.client, where.scheduler, where.connect_timeout) as client:
+        threads = _sweep_cluster.total_threads(client)
+        chunk = where.chunk_size or max(1, math.ceil(plan.size / (4 * threads)))
+        tasks = make_tasks(plan, table.rows, chunk, table.rest_of)
+        _sweep_cluster.run(client, runner, tasks, collect, stop)
+    return threads
 
 
 def sweep(
@@ -605,35 +751,13 @@ def sweep(
         raise TypeError(f"limits must be True, False or None, got {limits!r}")
     if not (callable(progress) or isinstance(progress, bool)):
         raise TypeError(f"progress must be True, False or a function, got {progress!r}")
-    if client is not None and scheduler is not None:
-        raise ValueError("give client= or scheduler=, not both")
-    cluster = client is not None or scheduler is not None
-    if cluster and workers is not None:
-        raise ValueError(
-            "workers= sets local threads; with client= or scheduler= the cluster's workers run "
-            "the cases"
-        )
-    threads = 0 if cluster else _workers(workers)
-    if chunk_size is not None and (
-        isinstance(chunk_size, bool)
-        or not isinstance(chunk_size, (int, np.integer))
-        or chunk_size < 1
-    ):
-        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    where = _where(workers, client, scheduler, connect_timeout, chunk_size)
     plan = make_plan(base, vary, starts, pair, continuation, limits)
     runner = Runner(scene_data(base), plan.keys, use.to_dict(), limits, plan.continuation)
     table = Table(plan, runner)
     if resume is not None:
         table.load(resume)
-    report: Progress
-    bar = None
-    if progress is True:
-        bar = ProgressBar()
-        report = bar
-    elif callable(progress):
-        report = progress
-    else:
-        report = lambda done, total: None  # noqa: E731
+    report, bar = _reporter(progress)
 
     def collect(rows: list[tuple[int, dict[str, Any]]]) -> None:
         table.add(rows)
@@ -644,24 +768,9 @@ def sweep(
     if bar is not None:
         bar.first = resumed
     with Interrupts() as stop:
-        if cluster:
-            from . import _sweep_cluster
-
-            with _sweep_cluster.connect(client, scheduler, connect_timeout) as dask_client:
-                threads = _sweep_cluster.total_threads(dask_client)
-                chunk = chunk_size or max(1, math.ceil(plan.size / (4 * threads)))
-                tasks = make_tasks(plan, table.rows, chunk, table.rest_of)
-                _sweep_cluster.run(dask_client, runner, tasks, collect, stop)
-        else:
-            # Chunks of a few cases: fewer wake-ups of this thread; Ctrl-C still stops
-            # between cases.
-            chunk = chunk_size or min(16, max(1, plan.size // (8 * threads)))
-            tasks = make_tasks(plan, table.rows, chunk, table.rest_of)
-            run_local(runner, tasks, threads, collect, stop)
-    interrupted = stop.count > 0
-    if bar is not None and interrupted:
+        threads = _run_cases(plan, table, runner, where, collect, stop)
+    if bar is not None and stop.count > 0:
         bar.close()
-    elapsed = time.perf_counter() - started
     attrs = {
         "scene": base.name,
         "vary": [key.text for key in plan.keys],
@@ -672,12 +781,85 @@ def sweep(
         "cases": plan.size,
         "solved": len(table.rows) - resumed,
         "resumed": resumed,
-        "interrupted": interrupted,
+        "interrupted": stop.count > 0,
         "workers": threads,
-        "cluster": cluster,
-        "wall_time": elapsed,
+        "cluster": where.cluster,
+        "wall_time": time.perf_counter() - started,
     }
     return table.frame(attrs)
+
+
+def _table_joints(df: DataFrame, scene: Scene | None) -> list[JointColumns]:
+    """The joints of a sweep's table: from ``scene`` (a joint's columns renamed where the table
+    has them so), else from ``df.attrs``."""
+    meta = df.attrs.get("pinsettle", {})
+    if scene is not None:
+        return [
+            j if all(c in df.columns for c in j.columns) else renamed
+            for j, renamed in zip(
+                joint_columns(scene), joint_columns(scene, list(scene.model.names)), strict=True
+            )
+        ]
+    if "joints" in meta:
+        return [JointColumns(j["name"], j["kind"], tuple(j["columns"])) for j in meta["joints"]]
+    raise ValueError(
+        "df has no record of its joints (df.attrs['pinsettle'], which a CSV file does not "
+        "keep): pass the scene, distinct_rests(df, scene=...)"
+    )
+
+
+def _is_varied(column: str, needed: list[str]) -> bool:
+    """Whether a column of a sweep's table holds a varied scene value (not a start's)."""
+    if column in needed or column in OUTPUT_COLUMNS or column == "start":
+        return False
+    return not column.startswith("start.") and column not in (
+        "min_stiffness_eigenvalue",
+        "residual",
+    )
+
+
+def _group_rests(
+    group: DataFrame, joints: list[JointColumns], names: list[str], tol: float
+) -> list[dict[str, Any]]:
+    """The distinct rests of one group's converged cases, each joined by the later cases
+    closer to it than ``tol``, in case order."""
+    rests: list[dict[str, Any]] = []
+    points: list[np.ndarray] = []
+    for _, row in group.sort_values("case").iterrows():
+        if row["status"] != "converged":
+            continue
+        point = row[names].to_numpy(dtype=float)
+        near = next(
+            (k for k, other in enumerate(points) if rest_distance(joints, point, other) < tol), None
+        )
+        if near is not None:
+            rests[near]["count"] += 1
+            continue
+        points.append(point)
+        rests.append(
+            {
+                "rest": len(rests),
+                **dict(zip(names, point, strict=True)),
+                "stability": row["stability"],
+                "count": 1,
+                "first_case": int(row["case"]),
+            }
+        )
+    for rest in rests:
+        rest["fraction"] = rest["count"] / len(group)
+    return rests
+
+
+def _groups(df: DataFrame, varied: list[str]) -> list[tuple[dict[str, Any], DataFrame]]:
+    """The rows of a table grouped by their varied values (one group when nothing varies),
+    each with its values by column."""
+    if not varied:
+        return [({}, df)]
+    out = []
+    for values, group in df.groupby(varied, sort=False, dropna=False):
+        values = values if isinstance(values, tuple) else (values,)
+        out.append((dict(zip(varied, values, strict=True)), group))
+    return out
 
 
 def distinct_rests(
@@ -704,63 +886,17 @@ def distinct_rests(
         raise TypeError(f"df must be a pandas.DataFrame, got {type(df).__name__}")
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
         raise ValueError(f"tol must be a number > 0 (rad or m), got {tol!r}")
-    meta = df.attrs.get("pinsettle", {})
-    if scene is not None:
-        joints = [
-            j if all(c in df.columns for c in j.columns) else renamed
-            for j, renamed in zip(
-                joint_columns(scene), joint_columns(scene, list(scene.model.names)), strict=True
-            )
-        ]
-    elif "joints" in meta:
-        joints = [JointColumns(j["name"], j["kind"], tuple(j["columns"])) for j in meta["joints"]]
-    else:
-        raise ValueError(
-            "df has no record of its joints (df.attrs['pinsettle'], which a CSV file does not "
-            "keep): pass the scene, distinct_rests(df, scene=...)"
-        )
+    joints = _table_joints(df, scene)
     names = [c for joint in joints for c in joint.columns]
     needed = ["case", "status", "stability", *names]
     missing = [c for c in needed if c not in df.columns]
     if missing:
         raise ValueError(f"df is not a sweep table: no column {', '.join(missing)}")
-    varied = [
-        c
-        for c in df.columns
-        if c not in needed
-        and c not in OUTPUT_COLUMNS
-        and c != "start"
-        and not c.startswith("start.")
-        and c not in ("min_stiffness_eigenvalue", "residual")
+    varied = [c for c in df.columns if _is_varied(c, needed)]
+    out = [
+        {**at, **rest}
+        for at, group in _groups(df, varied)
+        for rest in _group_rests(group, joints, names, tol)
     ]
-    out: list[dict[str, Any]] = []
-    groups = df.groupby(varied, sort=False, dropna=False) if varied else [((), df)]
-    for values, group in groups:
-        values = values if isinstance(values, tuple) else (values,)
-        rests: list[dict[str, Any]] = []
-        points: list[np.ndarray] = []
-        for _, row in group.sort_values("case").iterrows():
-            if row["status"] != "converged":
-                continue
-            point = row[names].to_numpy(dtype=float)
-            for k, other in enumerate(points):
-                if rest_distance(joints, point, other) < tol:
-                    rests[k]["count"] += 1
-                    break
-            else:
-                points.append(point)
-                rests.append(
-                    {
-                        **dict(zip(varied, values, strict=True)),
-                        "rest": len(rests),
-                        **dict(zip(names, point, strict=True)),
-                        "stability": row["stability"],
-                        "count": 1,
-                        "first_case": int(row["case"]),
-                    }
-                )
-        for rest in rests:
-            rest["fraction"] = rest["count"] / len(group)
-            out.append(rest)
     columns = [*varied, "rest", *names, "stability", "count", "fraction", "first_case"]
     return pd.DataFrame(out, columns=columns)

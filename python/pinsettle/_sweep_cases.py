@@ -101,37 +101,41 @@ def _unit(vector: Sequence[float]) -> tuple[float, ...] | None:
     return None if norm == 0.0 else tuple(x / norm for x in vector)
 
 
-def parse_key(text: Any, scene: Scene) -> Key:
-    """The ``vary`` key ``text`` resolved against ``scene``.
+def _start_key(text: str, model: pinocchio.Model) -> Key:
+    """The key ``start.JOINT``: the joint's start value."""
+    joint = text[len("start.") :]
+    joints = list(model.names)[1:]
+    if joint not in joints:
+        raise ValueError(f"vary key '{text}': " + unknown_key_message("joint", joint, joints))
+    j = model.getJointId(joint)
+    size = 1 if model.nvs[j] == 1 else int(model.nqs[j])
+    return Key(text, "start", name=joint, size=size)
 
-    Raises:
-        ValueError: an unknown form, field, joint or frame (with a close match), an element
-            index past the scene's elements, a payload on a frame fixed to the world.
-    """
-    if not isinstance(text, str):
-        raise TypeError(f"vary keys must be strings, got {type(text).__name__} {text!r}")
-    model = scene.model
-    if text == "gravity":
-        return Key(text, "gravity", size=3, direction=_unit(scene.gravity.tolist()))
-    if text.startswith("start."):
-        joint = text[len("start.") :]
-        joints = list(model.names)[1:]
-        if joint not in joints:
-            raise ValueError(f"vary key '{text}': " + unknown_key_message("joint", joint, joints))
-        j = model.getJointId(joint)
-        size = 1 if model.nvs[j] == 1 else int(model.nqs[j])
-        return Key(text, "start", name=joint, size=size)
-    if text.startswith("payload.") and text.endswith(".mass") and len(text) > 13:
-        frame = text[len("payload.") : -len(".mass")]
-        frames = list(dict.fromkeys(f.name for f in model.frames))
-        if frame not in frames:
-            raise ValueError(f"vary key '{text}': " + unknown_key_message("frame", frame, frames))
-        if model.frames[model.getFrameId(frame)].parentJoint == 0:
-            raise ValueError(
-                f"vary key '{text}': frame '{frame}' is fixed to the world: a mass there does "
-                "nothing"
-            )
-        return Key(text, "payload", name=frame, field="mass")
+
+def _payload_key(text: str, model: pinocchio.Model) -> Key:
+    """The key ``payload.FRAME.mass``: a point mass at a frame that moves."""
+    frame = text[len("payload.") : -len(".mass")]
+    frames = list(dict.fromkeys(f.name for f in model.frames))
+    if frame not in frames:
+        raise ValueError(f"vary key '{text}': " + unknown_key_message("frame", frame, frames))
+    if model.frames[model.getFrameId(frame)].parentJoint == 0:
+        raise ValueError(
+            f"vary key '{text}': frame '{frame}' is fixed to the world: a mass there does nothing"
+        )
+    return Key(text, "payload", name=frame, field="mass")
+
+
+def _element_fields(kind: str, element: Any) -> tuple[tuple[str, ...], str]:
+    """The fields a sweep may vary on a force element, and what the element is (in words)."""
+    if kind != "load":
+        return _ELEMENT_FIELDS[kind], {"joint_spring": "a joint spring", "spring": "a spring"}[kind]
+    if isinstance(element, JointLoad):
+        return ("effort",), "a joint load"
+    return ("force", "torque", "point"), "a load at a frame"
+
+
+def _element_key(text: str, scene: Scene) -> Key:
+    """The key ``KIND[i].FIELD``: a field of a force element by its index."""
     match = _ELEMENT_RE.match(text)
     if match is None:
         raise ValueError(
@@ -144,22 +148,34 @@ def parse_key(text: Any, scene: Scene) -> Key:
         have = f"{len(items)} [[{kind}]] element" + ("s" if len(items) != 1 else "")
         valid = f" ({kind}[0] to {kind}[{len(items) - 1}])" if items else ""
         raise ValueError(f"vary key '{text}': index {index} is past the scene's {have}{valid}")
-    element = items[index]
-    fields: tuple[str, ...] = _ELEMENT_FIELDS[kind]
-    if kind == "load":
-        fields = ("effort",) if isinstance(element, JointLoad) else ("force", "torque", "point")
+    fields, what = _element_fields(kind, items[index])
     if field not in fields:
-        what = {"joint_spring": "a joint spring", "spring": "a spring"}.get(
-            kind, "a joint load" if isinstance(element, JointLoad) else "a load at a frame"
-        )
         raise ValueError(
             f"vary key '{text}': {kind}[{index}] is {what}: "
             + unknown_key_message("field", field, list(fields))
         )
-    value = getattr(element, field)
+    value = getattr(items[index], field)
     if isinstance(value, tuple):
         return Key(text, kind, index, field=field, size=len(value), direction=_unit(value))
     return Key(text, kind, index, field=field)
+
+
+def parse_key(text: Any, scene: Scene) -> Key:
+    """The ``vary`` key ``text`` resolved against ``scene``.
+
+    Raises:
+        ValueError: an unknown form, field, joint or frame (with a close match), an element
+            index past the scene's elements, a payload on a frame fixed to the world.
+    """
+    if not isinstance(text, str):
+        raise TypeError(f"vary keys must be strings, got {type(text).__name__} {text!r}")
+    if text == "gravity":
+        return Key(text, "gravity", size=3, direction=_unit(scene.gravity.tolist()))
+    if text.startswith("start."):
+        return _start_key(text, scene.model)
+    if text.startswith("payload.") and text.endswith(".mass") and len(text) > 13:
+        return _payload_key(text, scene.model)
+    return _element_key(text, scene)
 
 
 def _number(value: Any, where: str) -> float:
@@ -168,6 +184,28 @@ def _number(value: Any, where: str) -> float:
     x = float(value)
     if not math.isfinite(x):
         raise ValueError(f"{where} must be finite, got {x}")
+    return x
+
+
+def _key_value(key: Key, value: Any, at: str) -> float | tuple[float, ...]:
+    """One value of a key (``at``: where it is, for the errors), checked."""
+    if isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str):
+        if key.size == 1:
+            raise TypeError(f"{at} must be a number, got {value!r}")
+        if len(value) != key.size:
+            raise ValueError(f"{at} must have {key.size} entries, got {len(value)}")
+        return tuple(_number(x, f"{at}[{i}]") for i, x in enumerate(value))
+    x = _number(value, at)
+    if key.size > 1 and key.kind == "start":
+        raise TypeError(
+            f"{at}: joint '{key.name}' has {key.size} configuration entries: give lists "
+            f"of {key.size} numbers, got {value!r}"
+        )
+    if key.size > 1 and key.direction is None:
+        raise ValueError(
+            f"{at}: the scene's {key.text} is zero, so a number (a magnitude along it) "
+            f"has no direction: give vectors of {key.size} numbers"
+        )
     return x
 
 
@@ -185,28 +223,7 @@ def key_values(key: Key, values: Any) -> list[float | tuple[float, ...]]:
     items = list(values)
     if not items:
         raise ValueError(f"{where} has no values (a range needs N >= 1)")
-    out: list[float | tuple[float, ...]] = []
-    for k, value in enumerate(items):
-        at = f"{where}[{k}]"
-        if isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str):
-            if key.size == 1:
-                raise TypeError(f"{at} must be a number, got {value!r}")
-            if len(value) != key.size:
-                raise ValueError(f"{at} must have {key.size} entries, got {len(value)}")
-            out.append(tuple(_number(x, f"{at}[{i}]") for i, x in enumerate(value)))
-        else:
-            x = _number(value, at)
-            if key.size > 1 and key.kind == "start":
-                raise TypeError(
-                    f"{at}: joint '{key.name}' has {key.size} configuration entries: give lists "
-                    f"of {key.size} numbers, got {value!r}"
-                )
-            if key.size > 1 and key.direction is None:
-                raise ValueError(
-                    f"{at}: the scene's {key.text} is zero, so a number (a magnitude along it) "
-                    f"has no direction: give vectors of {key.size} numbers"
-                )
-            out.append(x)
+    out = [_key_value(key, value, f"{where}[{k}]") for k, value in enumerate(items)]
     if len({isinstance(x, tuple) for x in out}) > 1:
         raise TypeError(f"{where}: give all numbers or all vectors, not both")
     return out
@@ -268,35 +285,58 @@ def _add_payload(model: pinocchio.Model, frame: str, mass: float) -> None:
 Changes = tuple[tuple[int, Any], ...]
 
 
-def build_scene(data: Mapping[str, Any], keys: Sequence[Key], changes: Changes) -> Scene:
-    """The scene of ``data`` with the values of ``changes`` ((key index, value), ...) in place
-    of its own, built through the public Scene API (so every value is checked as there).
+@dataclass
+class _Sorted:
+    """A case's changes by what they change: fields of force elements by (kind, index), the
+    gravity, payloads; each with the key that changes it."""
 
-    Raises:
-        SceneError: a value the scene refuses (a negative stiffness or mass), naming the key.
-    """
-    by_kind: dict[tuple[str, int], dict[str, Any]] = {}
-    gravity = None
-    payloads: list[tuple[Key, float]] = []
+    fields: dict[tuple[str, int], dict[str, tuple[Key, Any]]]
+    gravity: tuple[Key, tuple[float, ...]] | None
+    payloads: list[tuple[Key, float]]
+
+    def element(self, kind: str, k: int, element: Any) -> tuple[Key | None, dict[str, Any]]:
+        """The fields of element ``k`` of ``kind`` with the changed ones in place, and the key
+        of its first changed field (None: none changed)."""
+        values = dataclasses.asdict(element)
+        changed = self.fields.get((kind, k), {})
+        for name, (_, value) in changed.items():
+            values[name] = value
+        first = next(iter(changed.values()))[0] if changed else None
+        return first, values
+
+
+def _sort_changes(keys: Sequence[Key], changes: Changes) -> _Sorted:
+    """``changes`` ((key index, value), ...) sorted by what they change, vectors in full."""
+    out = _Sorted({}, None, [])
     for index, value in changes:
         key = keys[index]
         if key.kind == "gravity":
-            gravity = (key, _vector_value(key, value))
+            out.gravity = (key, _vector_value(key, value))
         elif key.kind == "payload":
-            payloads.append((key, value))
+            out.payloads.append((key, value))
         elif key.kind in _ELEMENT_FIELDS:
             fixed = _vector_value(key, value) if key.size > 1 else value
-            by_kind.setdefault((key.kind, key.index), {})[key.field] = (key, fixed)
+            out.fields.setdefault((key.kind, key.index), {})[key.field] = (key, fixed)
+    return out
 
-    def at(key: Key, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
-        try:
-            fn(*args, **kwargs)
-        except SceneError as error:
-            raise SceneError(f"{key.text}: {error}") from None
 
+def _at(key: Key | None, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+    """``fn(*args, **kwargs)``; the SceneError it raises names ``key``, the value that caused
+    it (None: a value of the scene's own, the error as it is)."""
+    try:
+        fn(*args, **kwargs)
+    except SceneError as error:
+        if key is None:
+            raise
+        raise SceneError(f"{key.text}: {error}") from None
+
+
+def _scene_of(data: Mapping[str, Any], changed: _Sorted) -> Scene:
+    """The scene of ``data`` with its model (and the payloads), files, notes and gravity; no
+    elements yet."""
     model = pinocchio.Model(data["model"])
-    for key, mass in payloads:
-        at(key, _add_payload, model, key.name, mass)
+    for key, mass in changed.payloads:
+        _at(key, _add_payload, model, key.name, mass)
     scene = Scene(
         model,
         settings=data["settings"],
@@ -309,46 +349,45 @@ def build_scene(data: Mapping[str, Any], keys: Sequence[Key], changes: Changes) 
     scene.mjcf = None if data["mjcf"] is None else Path(data["mjcf"])
     scene.srdf = [Path(path) for path in data["srdf"]]
     scene.notes = list(data["notes"])
-    if gravity is not None:
-        at(gravity[0], setattr, scene, "gravity", gravity[1])
+    if changed.gravity is not None:
+        _at(changed.gravity[0], setattr, scene, "gravity", changed.gravity[1])
+    return scene
 
-    def fields(kind: str, k: int, element: Any) -> tuple[Key | None, dict[str, Any]]:
-        values = dataclasses.asdict(element)
-        changed = by_kind.get((kind, k), {})
-        for name, (_, value) in changed.items():
-            values[name] = value
-        first = next(iter(changed.values()))[0] if changed else None
-        return first, values
 
-    def add(key: Key | None, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
-        if key is None:
-            fn(*args, **kwargs)
-        else:
-            at(key, fn, *args, **kwargs)
+def _add_load(
+    scene: Scene, load: JointLoad | PointLoad, key: Key | None, v: dict[str, Any]
+) -> None:
+    if isinstance(load, JointLoad):
+        effort = v["effort"] if isinstance(v["effort"], tuple) else (v["effort"],)
+        _at(key, scene.add_load, v["joint"], effort[0] if len(effort) == 1 else effort)
+        return
+    _at(
+        key,
+        scene.add_load,
+        frame=v["frame"],
+        point=v["point"],
+        force=v["force"],
+        torque=v["torque"],
+    )
 
+
+def _add_force_elements(scene: Scene, data: Mapping[str, Any], changed: _Sorted) -> None:
+    """The joint springs, springs and loads of ``data``, with the changed fields."""
     for k, s in enumerate(data["joint_springs"]):
-        changed, v = fields("joint_spring", k, s)
-        add(changed, scene.add_joint_spring, v["joint"], v["stiffness"], v["rest"], v["damping"])
+        key, v = changed.element("joint_spring", k, s)
+        _at(key, scene.add_joint_spring, v["joint"], v["stiffness"], v["rest"], v["damping"])
     for k, s in enumerate(data["springs"]):
-        changed, v = fields("spring", k, s)
+        key, v = changed.element("spring", k, s)
         a = {"frame": v["a_frame"], "point": v["a_point"]}
         b = {"frame": v["b_frame"], "point": v["b_point"]}
-        add(changed, scene.add_spring, a, b, v["stiffness"], v["rest_length"], v["damping"])
+        _at(key, scene.add_spring, a, b, v["stiffness"], v["rest_length"], v["damping"])
     for k, load in enumerate(data["loads"]):
-        changed, v = fields("load", k, load)
-        if isinstance(load, JointLoad):
-            effort = v["effort"] if isinstance(v["effort"], tuple) else (v["effort"],)
-            add(changed, scene.add_load, v["joint"], effort[0] if len(effort) == 1 else effort)
-        else:
-            assert isinstance(load, PointLoad)
-            add(
-                changed,
-                scene.add_load,
-                frame=v["frame"],
-                point=v["point"],
-                force=v["force"],
-                torque=v["torque"],
-            )
+        key, v = changed.element("load", k, load)
+        _add_load(scene, load, key, v)
+
+
+def _add_constraints(scene: Scene, data: Mapping[str, Any]) -> None:
+    """The loops, couplings, locked joints and stops of ``data`` (a sweep changes none)."""
     for loop in data["loops"]:
         scene.add_loop((loop.a_frame, loop.a_point), (loop.b_frame, loop.b_point), loop.kind)
     for c in data["couplings"]:
@@ -357,6 +396,19 @@ def build_scene(data: Mapping[str, Any], keys: Sequence[Key], changes: Changes) 
         scene.lock(*data["locked"])
     for limit in data["joint_limits"]:
         scene.set_limit(limit.joint, limit.lower, limit.upper)
+
+
+def build_scene(data: Mapping[str, Any], keys: Sequence[Key], changes: Changes) -> Scene:
+    """The scene of ``data`` with the values of ``changes`` ((key index, value), ...) in place
+    of its own, built through the public Scene API (so every value is checked as there).
+
+    Raises:
+        SceneError: a value the scene refuses (a negative stiffness or mass), naming the key.
+    """
+    changed = _sort_changes(keys, changes)
+    scene = _scene_of(data, changed)
+    _add_force_elements(scene, data, changed)
+    _add_constraints(scene, data)
     scene.compile()  # every element resolved now, once, not in each solve
     return scene
 

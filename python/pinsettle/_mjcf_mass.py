@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,17 +83,11 @@ def _read_obj(mesh: _MeshAsset, text: str) -> tuple[np.ndarray, np.ndarray]:
             continue
         try:
             if parts[0] == "v":
-                vertices.append([float(x) for x in parts[1:4]])
-                if len(vertices[-1]) != 3:
-                    raise ValueError
+                vertices.append(_obj_vertex(parts))
             elif parts[0] in ("g", "o") and faces:
                 first_shape = False
             elif parts[0] == "f" and first_shape:
-                index = [int(p.split("/")[0]) for p in parts[1:]]
-                index = [i - 1 if i > 0 else len(vertices) + i for i in index]
-                if len(index) < 3:
-                    raise ValueError
-                faces.extend(_triangles(index, vertices))
+                faces.extend(_obj_face(parts, vertices))
         except ValueError:
             shown = line.strip()[:60]
             raise _mesh_refusal(mesh, f"line {number} is not a valid OBJ line: {shown!r}") from None
@@ -101,6 +96,24 @@ def _read_obj(mesh: _MeshAsset, text: str) -> tuple[np.ndarray, np.ndarray]:
     if triangles.size and (triangles.min() < 0 or triangles.max() >= len(points)):
         raise _mesh_refusal(mesh, "a face names a vertex the file does not have")
     return points, triangles
+
+
+def _obj_vertex(parts: list[str]) -> list[float]:
+    """A 'v' line's point (ValueError: not three numbers)."""
+    point = [float(x) for x in parts[1:4]]
+    if len(point) != 3:
+        raise ValueError
+    return point
+
+
+def _obj_face(parts: list[str], vertices: list[list[float]]) -> list[list[int]]:
+    """An 'f' line's triangles, indices from 0 (a negative one counts back from the last
+    vertex read); ValueError: not a face."""
+    index = [int(p.split("/")[0]) for p in parts[1:]]
+    index = [i - 1 if i > 0 else len(vertices) + i for i in index]
+    if len(index) < 3:
+        raise ValueError
+    return _triangles(index, vertices)
 
 
 def _triangles(index: list[int], vertices: list[list[float]]) -> list[list[int]]:
@@ -204,15 +217,37 @@ def _mesh_mass(mesh: _MeshAsset, where: str) -> _MeshMass:
     ComputeInertia), for its ``inertia`` rule: legacy (MuJoCo's default: every face's pyramid
     counted positive), exact (signed, a closed mesh), convex (the convex hull), shell (mass on
     the surface)."""
+    rule = _flag(mesh.attrs.get("inertia", "legacy"), f"{mesh.label} inertia", _MESH_INERTIA)
+    vertices, faces = _placed_geometry(mesh)
+    if rule == "convex" or not len(faces):
+        vertices, faces = _convex_hull(mesh, vertices)
+    if rule == "exact":
+        _check_oriented(mesh, faces)
+    d, e, f = (vertices[faces[:, k]] for k in range(3))
+    surface = _Faces.of(mesh, d, e, f)
+    com = _mesh_com(mesh, rule, surface)
+    # Second moments about the centre of mass, per face (MuJoCo's ComputeInertia).
+    weight = _face_weights(rule, surface.center - com, surface)
+    volume = float(weight.sum())
+    divisor = 12.0 if rule == "shell" else 20.0
+    products = _second_moments(d - com, e - com, f - com, weight / divisor)
+    inertia = np.trace(products) * np.eye(3) - products
+    eigen = np.linalg.eigvalsh(inertia)
+    if eigen[0] <= 0:
+        raise _mesh_refusal(mesh, "its inertia is not positive (MuJoCo refuses it too)")
+    return _MeshMass(volume, com, inertia)
+
+
+def _placed_geometry(mesh: _MeshAsset) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's vertices and faces after the user's offset, rotation and scale (MuJoCo:
+    minus refpos, by refquat's inverse, times scale; a mirroring scale turns the faces
+    over)."""
     a = mesh.attrs
-    rule = _flag(a.get("inertia", "legacy"), f"{mesh.label} inertia", _MESH_INERTIA)
     vertices, faces = _mesh_geometry(mesh)
     if len(vertices) < 4:
         raise _mesh_refusal(mesh, f"{len(vertices)} vertices; MuJoCo needs at least 4")
     if not np.all(np.isfinite(vertices)):
         raise _mesh_refusal(mesh, "a vertex coordinate is not finite")
-    # The user's offset, rotation and scale (MuJoCo: minus refpos, by refquat's inverse,
-    # times scale; a mirroring scale turns the faces over).
     refpos = _floats(a.get("refpos", "0 0 0"), f"{mesh.label} refpos", (3,))
     w, x, y, z = _floats(a.get("refquat", "1 0 0 0"), f"{mesh.label} refquat", (4,))
     scale = _floats(a.get("scale", "1 1 1"), f"{mesh.label} scale", (3,))
@@ -226,34 +261,53 @@ def _mesh_mass(mesh: _MeshAsset, where: str) -> _MeshMass:
     vertices = vertices * scale
     if scale[0] * scale[1] * scale[2] < 0:
         faces = faces[:, [0, 2, 1]]
-    if rule == "convex" or not len(faces):
-        vertices, faces = _convex_hull(mesh, vertices)
-    if rule == "exact":
-        edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-        if len(np.unique(edges, axis=0)) < len(edges):
-            raise _mesh_refusal(
-                mesh,
-                'inertia="exact" needs consistently oriented faces and two faces run along '
-                "an edge the same way (MuJoCo refuses this too): fix the mesh, or use "
-                'inertia="convex"',
-            )
-    d, e, f = (vertices[faces[:, k]] for k in range(3))
-    cross = np.cross(e - d, f - d)
-    length = np.linalg.norm(cross, axis=1)
-    small = length < _MINVAL
-    area = np.where(small, 0.0, 0.5 * length)
-    normal = cross / np.where(small, 1.0, length)[:, None]
-    center = (d + e + f) / 3
-    total_area = float(area.sum())
-    if total_area < _MINVAL:
-        raise _mesh_refusal(mesh, "its surface area is too small (MuJoCo refuses it too)")
-    facecen = (area[:, None] * center).sum(axis=0) / total_area
+    return vertices, faces
+
+
+def _check_oriented(mesh: _MeshAsset, faces: np.ndarray) -> None:
+    """inertia="exact": no two faces run along an edge the same way."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    if len(np.unique(edges, axis=0)) < len(edges):
+        raise _mesh_refusal(
+            mesh,
+            'inertia="exact" needs consistently oriented faces and two faces run along '
+            "an edge the same way (MuJoCo refuses this too): fix the mesh, or use "
+            'inertia="convex"',
+        )
+
+
+@dataclass
+class _Faces:
+    """Each face's area (0 for a degenerate one), unit normal and centre."""
+
+    area: np.ndarray
+    normal: np.ndarray
+    center: np.ndarray
+
+    @staticmethod
+    def of(mesh: _MeshAsset, d: np.ndarray, e: np.ndarray, f: np.ndarray) -> _Faces:
+        cross = np.cross(e - d, f - d)
+        length = np.linalg.norm(cross, axis=1)
+        small = length < _MINVAL
+        area = np.where(small, 0.0, 0.5 * length)
+        if float(area.sum()) < _MINVAL:
+            raise _mesh_refusal(mesh, "its surface area is too small (MuJoCo refuses it too)")
+        return _Faces(area, cross / np.where(small, 1.0, length)[:, None], (d + e + f) / 3)
+
+
+def _face_weights(rule: str, offset: np.ndarray, faces: _Faces) -> np.ndarray:
+    """Each face's share: its area for a shell, else the volume of its pyramid from a point
+    (``offset``: the face's centre from that point), positive under the legacy rule."""
     if rule == "shell":
-        weight = area
-    else:
-        weight = np.einsum("ij,ij->i", center - facecen, normal) * area / 3
-        if rule == "legacy":
-            weight = np.abs(weight)
+        return faces.area
+    weight: np.ndarray = np.einsum("ij,ij->i", offset, faces.normal) * faces.area / 3
+    return np.abs(weight) if rule == "legacy" else weight
+
+
+def _mesh_com(mesh: _MeshAsset, rule: str, faces: _Faces) -> np.ndarray:
+    """The centre of mass (MuJoCo's ComputeVolume: pyramids from the faces' mean centre)."""
+    facecen = (faces.area[:, None] * faces.center).sum(axis=0) / float(faces.area.sum())
+    weight = _face_weights(rule, faces.center - facecen, faces)
     total = float(weight.sum())
     if rule != "shell" and total < _MINVAL:
         raise _mesh_refusal(
@@ -263,20 +317,15 @@ def _mesh_mass(mesh: _MeshAsset, where: str) -> _MeshMass:
             else "its volume is too small; MuJoCo refuses it too unless the mesh has "
             'inertia="shell"',
         )
-    com = (
-        (weight[:, None] * center).sum(axis=0) / total
-        if rule == "shell"
-        else (weight[:, None] * (center * 0.75 + facecen / 4)).sum(axis=0) / total
-    )
-    # Second moments about the centre of mass, per face (MuJoCo's ComputeInertia).
-    d, e, f, center = d - com, e - com, f - com, center - com
     if rule == "shell":
-        weight, divisor = area, 12.0
+        com: np.ndarray = (weight[:, None] * faces.center).sum(axis=0) / total
     else:
-        weight, divisor = np.einsum("ij,ij->i", center, normal) * area / 3, 20.0
-        if rule == "legacy":
-            weight = np.abs(weight)
-    volume = float(weight.sum())
+        com = (weight[:, None] * (faces.center * 0.75 + facecen / 4)).sum(axis=0) / total
+    return com
+
+
+def _second_moments(d: np.ndarray, e: np.ndarray, f: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The weighted sum of the faces' second moments (vertices about the centre of mass)."""
     products = np.zeros((3, 3))
     for i in range(3):
         for j in range(i, 3):
@@ -289,75 +338,85 @@ def _mesh_mass(mesh: _MeshAsset, where: str) -> _MeshMass:
                 + e[:, i] * f[:, j]
                 + e[:, j] * f[:, i]
             )
-            products[i, j] = products[j, i] = float((weight / divisor * terms).sum())
-    inertia = np.trace(products) * np.eye(3) - products
-    eigen = np.linalg.eigvalsh(inertia)
-    if eigen[0] <= 0:
-        raise _mesh_refusal(mesh, "its inertia is not positive (MuJoCo refuses it too)")
-    return _MeshMass(volume, com, inertia)
+            products[i, j] = products[j, i] = float((weight * terms).sum())
+    return products
 
 
 def _shape_mass(kind: str, size: np.ndarray, shell: bool) -> tuple[float, np.ndarray]:
     """A primitive's volume (its area for a shell) and its principal moments per unit mass,
     MuJoCo's formulas."""
-    pi = math.pi
-    if kind == "sphere":
-        r = size[0]
-        if shell:
-            return 4 * pi * r**2, np.full(3, 2 * r**2 / 3)
-        return 4 * pi * r**3 / 3, np.full(3, 2 * r**2 / 5)
-    if kind in ("capsule", "cylinder"):
-        r, half = size
-        h = 2 * half
-        if kind == "cylinder" and not shell:
-            return pi * r * r * h, np.array([(3 * r * r + h * h) / 12] * 2 + [r * r / 2])
-        if kind == "cylinder":
-            disk, side = pi * r * r, 2 * pi * r * h
-            m_disk = disk / (2 * disk + side)
-            m_side = 1 - 2 * m_disk
-            across = m_side * (6 * r * r + h * h) / 12 + 2 * (m_disk * r * r / 4 + m_disk * half**2)
-            along = m_side * r * r + 2 * m_disk * r * r / 2
-            return 2 * disk + side, np.array([across, across, along])
-        if not shell:
-            m_sphere = 4 * r / (4 * r + 3 * h)
-            m_cyl = 1 - m_sphere
-            across = (
-                m_cyl * (3 * r * r + h * h) / 12
-                + 2 * m_sphere * r * r / 5
-                + m_sphere * h * (3 * r + 2 * h) / 8
-            )
-            along = m_cyl * r * r / 2 + 2 * m_sphere * r * r / 5
-            return pi * (r * r * h + 4 * r**3 / 3), np.array([across, across, along])
-        a_sphere, a_cyl = 4 * pi * r * r, 2 * pi * r * h
-        m_sphere = a_sphere / (a_sphere + a_cyl)
+    return _SHAPE_MASS[kind](size, shell)
+
+
+def _sphere_mass(size: np.ndarray, shell: bool) -> tuple[float, np.ndarray]:
+    r = size[0]
+    if shell:
+        return 4 * math.pi * r**2, np.full(3, 2 * r**2 / 3)
+    return 4 * math.pi * r**3 / 3, np.full(3, 2 * r**2 / 5)
+
+
+def _cylinder_mass(size: np.ndarray, shell: bool) -> tuple[float, np.ndarray]:
+    r, half = size
+    h = 2 * half
+    if not shell:
+        return math.pi * r * r * h, np.array([(3 * r * r + h * h) / 12] * 2 + [r * r / 2])
+    disk, side = math.pi * r * r, 2 * math.pi * r * h
+    m_disk = disk / (2 * disk + side)
+    m_side = 1 - 2 * m_disk
+    across = m_side * (6 * r * r + h * h) / 12 + 2 * (m_disk * r * r / 4 + m_disk * half**2)
+    along = m_side * r * r + 2 * m_disk * r * r / 2
+    return 2 * disk + side, np.array([across, across, along])
+
+
+def _capsule_mass(size: np.ndarray, shell: bool) -> tuple[float, np.ndarray]:
+    r, half = size
+    h = 2 * half
+    if not shell:
+        m_sphere = 4 * r / (4 * r + 3 * h)
         m_cyl = 1 - m_sphere
-        hs_com, hs_pos = r / 2, half + r / 2
         across = (
-            m_cyl * (6 * r * r + h * h) / 12
-            + 2 * m_sphere * r * r / 3
-            + m_sphere * (hs_pos**2 - hs_com**2)
+            m_cyl * (3 * r * r + h * h) / 12
+            + 2 * m_sphere * r * r / 5
+            + m_sphere * h * (3 * r + 2 * h) / 8
         )
-        along = m_cyl * r * r + 2 * m_sphere * r * r / 3
-        return a_sphere + a_cyl, np.array([across, across, along])
+        along = m_cyl * r * r / 2 + 2 * m_sphere * r * r / 5
+        return math.pi * (r * r * h + 4 * r**3 / 3), np.array([across, across, along])
+    a_sphere, a_cyl = 4 * math.pi * r * r, 2 * math.pi * r * h
+    m_sphere = a_sphere / (a_sphere + a_cyl)
+    m_cyl = 1 - m_sphere
+    hs_com, hs_pos = r / 2, half + r / 2
+    across = (
+        m_cyl * (6 * r * r + h * h) / 12
+        + 2 * m_sphere * r * r / 3
+        + m_sphere * (hs_pos**2 - hs_com**2)
+    )
+    along = m_cyl * r * r + 2 * m_sphere * r * r / 3
+    return a_sphere + a_cyl, np.array([across, across, along])
+
+
+def _ellipsoid_mass(size: np.ndarray, shell: bool) -> tuple[float, np.ndarray]:
+    pi = math.pi
     s2 = size**2
-    if kind == "ellipsoid":
-        solid = np.array([s2[1] + s2[2], s2[0] + s2[2], s2[0] + s2[1]]) / 5
-        if not shell:
-            return 4 * pi * size.prod() / 3, solid
-        p = 1.6075
-        area = (
-            4
-            * pi
-            * (((size[0] * size[1]) ** p + (size[1] * size[2]) ** p + (size[2] * size[0]) ** p) / 3)
-            ** (1 / p)
-        )
-        # MuJoCo's approximation: the solid grown by 1e-6 minus the solid, at one density.
-        grown = size + 1e-6
-        v_a, v_b = 4 * pi * size.prod() / 3, 4 * pi * grown.prod() / 3
-        g2 = grown**2
-        outer = np.array([g2[1] + g2[2], g2[0] + g2[2], g2[0] + g2[1]]) / 5
-        return area, (v_b * outer - v_a * solid) / (v_b - v_a)
-    # box
+    solid = np.array([s2[1] + s2[2], s2[0] + s2[2], s2[0] + s2[1]]) / 5
+    if not shell:
+        return 4 * pi * size.prod() / 3, solid
+    p = 1.6075
+    area = (
+        4
+        * pi
+        * (((size[0] * size[1]) ** p + (size[1] * size[2]) ** p + (size[2] * size[0]) ** p) / 3)
+        ** (1 / p)
+    )
+    # MuJoCo's approximation: the solid grown by 1e-6 minus the solid, at one density.
+    grown = size + 1e-6
+    v_a, v_b = 4 * pi * size.prod() / 3, 4 * pi * grown.prod() / 3
+    g2 = grown**2
+    outer = np.array([g2[1] + g2[2], g2[0] + g2[2], g2[0] + g2[1]]) / 5
+    return area, (v_b * outer - v_a * solid) / (v_b - v_a)
+
+
+def _box_mass(size: np.ndarray, shell: bool) -> tuple[float, np.ndarray]:
+    s2 = size**2
     if not shell:
         return 8 * size.prod(), np.array([s2[1] + s2[2], s2[0] + s2[2], s2[0] + s2[1]]) / 3
     lx, ly, lz = 2 * size
@@ -374,3 +433,13 @@ def _shape_mass(kind: str, size: np.ndarray, shell: bool) -> tuple[float, np.nda
         m1 * s2[0] + m2 * s2[1] + m0 * (lx**2 + ly**2) / 12 + m1 * ly**2 / 12 + m2 * lx**2 / 12
     )
     return total, np.array([ix, iy, iz])
+
+
+# The primitives whose mass MuJoCo computes (the keys of _MASS_SHAPES).
+_SHAPE_MASS: dict[str, Callable[[np.ndarray, bool], tuple[float, np.ndarray]]] = {
+    "sphere": _sphere_mass,
+    "capsule": _capsule_mass,
+    "cylinder": _cylinder_mass,
+    "ellipsoid": _ellipsoid_mass,
+    "box": _box_mass,
+}

@@ -21,12 +21,79 @@ from typing import Any
 import numpy as np
 
 from . import _sweep, _sweep_cases
+from ._cli_flags import add_flags, check_flags, flag, switch
 from ._scene import load_scene
 from .scenes import scene_path
 
 #: Exit status of a sweep stopped by Ctrl-C (what a shell reports for SIGINT).
 EXIT_INTERRUPTED = 130
 FORMATS = (".parquet", ".csv")
+
+
+def _random_count(args: argparse.Namespace) -> str | None:
+    if args.random is not None and args.random < 1:
+        return f"--random N: N must be an integer >= 1, got {args.random}"
+    return None
+
+
+def _seed_with_random(args: argparse.Namespace) -> str | None:
+    return "--seed goes with --random N" if args.seed is not None and args.random is None else None
+
+
+def _workers_here(args: argparse.Namespace) -> str | None:
+    if args.workers is not None and args.scheduler is not None:
+        return "--workers sets local threads; with --scheduler the cluster's run"
+    return None
+
+
+#: The sweep's own arguments, in the order of its help; the checks run in this order too.
+FLAGS = (
+    flag("scene", help="scene file (.toml) or scene name"),
+    flag(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="KEY=LO:HI:N",
+        help="a scene value and its values: N evenly spaced from LO to HI, or a list V1,V2,... "
+        "(repeatable: the full grid). Keys: start.JOINT, joint_spring[i].stiffness|rest|damping, "
+        "spring[i].stiffness|rest_length|damping, load[i].effort|force|torque|point, gravity, "
+        "payload.FRAME.mass (a vector value: a magnitude along the scene's own vector)",
+    ),
+    flag(
+        "--random",
+        type=int,
+        metavar="N",
+        help="N random starts in the limits",
+        check=_random_count,
+    ),
+    flag(
+        "--seed",
+        type=int,
+        metavar="S",
+        help="seed of --random (default 0)",
+        check=_seed_with_random,
+    ),
+    flag("--zip", action="store_true", help="pair the --vary values, no grid"),
+    switch(
+        "--continuation",
+        help="start each case from the previous rest and mark jumps (default: on for one "
+        "--vary key or --zip)",
+    ),
+    flag(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="local threads (default: cores)",
+        check=_workers_here,
+    ),
+    flag(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the cases on the Dask scheduler at tcp://HOST:PORT (pinsettle[cluster])",
+    ),
+    flag("--out", metavar="FILE", help="the table: FILE.parquet or FILE.csv"),
+    flag("--json", action="store_true", help="print one JSON object, no bar"),
+)
 
 
 def add_parser(
@@ -45,35 +112,7 @@ def add_parser(
         "again resumes. Exit status: 0 every case converged, 1 some did not, 2 bad input, 130 "
         "interrupted.",
     )
-    parser.add_argument("scene", help="scene file (.toml) or scene name")
-    parser.add_argument(
-        "--vary",
-        action="append",
-        default=[],
-        metavar="KEY=LO:HI:N",
-        help="a scene value and its values: N evenly spaced from LO to HI, or a list V1,V2,... "
-        "(repeatable: the full grid). Keys: start.JOINT, joint_spring[i].stiffness|rest|damping, "
-        "spring[i].stiffness|rest_length|damping, load[i].effort|force|torque|point, gravity, "
-        "payload.FRAME.mass (a vector value: a magnitude along the scene's own vector)",
-    )
-    parser.add_argument("--random", type=int, metavar="N", help="N random starts in the limits")
-    parser.add_argument("--seed", type=int, metavar="S", help="seed of --random (default 0)")
-    parser.add_argument("--zip", action="store_true", help="pair the --vary values, no grid")
-    parser.add_argument(
-        "--continuation",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="start each case from the previous rest and mark jumps (default: on for one "
-        "--vary key or --zip)",
-    )
-    parser.add_argument("--workers", type=int, metavar="N", help="local threads (default: cores)")
-    parser.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="run the cases on the Dask scheduler at tcp://HOST:PORT (pinsettle[cluster])",
-    )
-    parser.add_argument("--out", metavar="FILE", help="the table: FILE.parquet or FILE.csv")
-    parser.add_argument("--json", action="store_true", help="print one JSON object, no bar")
+    add_flags(parser, FLAGS)
     add_limits_flag(parser, "scene model")
     add_setting_flags(parser)
     parser.set_defaults(func=lambda args: run(args, overrides(args)))
@@ -176,13 +215,18 @@ def records(df: Any) -> list[dict[str, Any]]:
     return [{k: plain(v) for k, v in row.items()} for row in df.to_dict(orient="records")]
 
 
+def _varied(df: Any) -> list[str]:
+    """The table's columns of the varied values (``KEY``, or ``KEY[k]`` for a vector)."""
+    vary = df.attrs["pinsettle"]["vary"]
+    return [c for c in df.columns if c in vary or c.split("[")[0] in vary]
+
+
 def summary(df: Any, out: Path | None) -> dict[str, Any]:
     """What the sweep found, as JSON-ready values."""
     meta = df.attrs["pinsettle"]
     counts = {str(k): int(v) for k, v in df["status"].value_counts(sort=False).items()}
     rests = _sweep.distinct_rests(df)
     jumps = df[df["jump"].fillna(False)] if "jump" in df.columns else df.iloc[0:0]
-    varied = [c for c in df.columns if c in meta["vary"] or c.split("[")[0] in meta["vary"]]
     solved, wall = meta["solved"], meta["wall_time"]
     return {
         "scene": meta["scene"],
@@ -197,12 +241,13 @@ def summary(df: Any, out: Path | None) -> dict[str, Any]:
         "cases_per_s": solved / wall if wall > 0 else None,
         "status_counts": counts,
         "distinct_rests": records(rests),
-        "jumps": records(jumps[["case", *varied]]),
+        "jumps": records(jumps[["case", *_varied(df)]]),
         "out": None if out is None else str(out),
     }
 
 
-def _print_summary(df: Any, info: dict[str, Any]) -> None:
+def _print_totals(info: dict[str, Any]) -> None:
+    """The cases done, where and how fast, and their count by status."""
     where = "on the cluster's" if info["cluster"] else "on"
     rate = info["cases_per_s"]
     print(
@@ -213,51 +258,70 @@ def _print_summary(df: Any, info: dict[str, Any]) -> None:
         + (f", {rate:.4g} cases/s" if rate else "")
     )
     print("status   " + ", ".join(f"{k} {v}" for k, v in info["status_counts"].items()))
-    failed = df[df["error"].fillna("") != ""]
+
+
+def _print_errors(failed: Any) -> None:
+    """The first three errors, each with its first case and how many more had it."""
     for message, cases in list(failed.groupby("error", sort=False)["case"])[:3]:
         first = int(cases.iloc[0])
         more = f" and {len(cases) - 1} more" if len(cases) > 1 else ""
         print(f"error    case {first}{more}: {message}")
-    rests = info["distinct_rests"]
-    meta = df.attrs["pinsettle"]
-    varied = [c for c in df.columns if c in meta["vary"] or c.split("[")[0] in meta["vary"]]
-    varied = [c for c in varied if not c.startswith("start.")]
-    joints = [c for j in meta["joints"] for c in j["columns"]]
+
+
+def _print_rests(rests: list[dict[str, Any]], varied: list[str], joints: list[str]) -> None:
+    """The distinct rests (the first ten) or, when the varied values make groups, how many
+    there are in each group."""
     groups = {tuple(r.get(c) for c in varied) for r in rests}
-    if len(groups) <= 1:
-        tolerance = _sweep_cases.REST_TOLERANCE
-        print(f"rests    {len(rests)} distinct (stable or neutral, to {tolerance:g})")
-        for rest in rests[:10]:
-            values = "  ".join(f"{c} {rest[c]: .6f}" for c in joints[:6])
-            print(
-                f"  {values}  {rest['stability']}, {rest['count']} cases "
-                f"({100 * rest['fraction']:.1f}%)"
-            )
-        if len(rests) > 10:
-            print(f"  ... {len(rests) - 10} more")
-    else:
+    if len(groups) > 1:
         per = [sum(1 for r in rests if tuple(r.get(c) for c in varied) == g) for g in groups]
         count = f"{min(per)}" if min(per) == max(per) else f"{min(per)} to {max(per)}"
         print(f"rests    {count} distinct at each of the {len(groups)} values of the varied keys")
-    if "jump" in df.columns:
-        jumps = info["jumps"]
-        text = ", ".join(
-            f"case {j['case']} (" + ", ".join(f"{c} = {j[c]:.6g}" for c in j if c != "case") + ")"
-            for j in jumps[:10]
+        return
+    tolerance = _sweep_cases.REST_TOLERANCE
+    print(f"rests    {len(rests)} distinct (stable or neutral, to {tolerance:g})")
+    for rest in rests[:10]:
+        values = "  ".join(f"{c} {rest[c]: .6f}" for c in joints[:6])
+        print(
+            f"  {values}  {rest['stability']}, {rest['count']} cases "
+            f"({100 * rest['fraction']:.1f}%)"
         )
-        found = f": {text}" if jumps else " (each rest stayed on its branch)"
-        print(f"jumps    {len(jumps)}{found}")
+    if len(rests) > 10:
+        print(f"  ... {len(rests) - 10} more")
+
+
+def _print_jumps(jumps: list[dict[str, Any]]) -> None:
+    """The cases whose rest left its continuation branch (the first ten)."""
+    text = ", ".join(
+        f"case {j['case']} (" + ", ".join(f"{c} = {j[c]:.6g}" for c in j if c != "case") + ")"
+        for j in jumps[:10]
+    )
+    found = f": {text}" if jumps else " (each rest stayed on its branch)"
+    print(f"jumps    {len(jumps)}{found}")
+
+
+def _print_rows(df: Any, info: dict[str, Any], shown: list[str]) -> None:
+    """Where the table went, or the table itself (its ``shown`` columns) when it is short."""
     if info["out"]:
         print(f"wrote    {info['out']} ({len(df)} rows)")
     elif len(df) <= 30:
-        shown = ["case", *varied, "status", *joints[:6], "residual", "stability"]
-        if "jump" in df.columns:
-            shown.append("jump")
-        if len(failed):
-            shown.append("error")
         print(df[shown].to_string(index=False))
     else:
         print("(the table has more than 30 rows: --out FILE.parquet or FILE.csv keeps it)")
+
+
+def _print_summary(df: Any, info: dict[str, Any]) -> None:
+    _print_totals(info)
+    failed = df[df["error"].fillna("") != ""]
+    _print_errors(failed)
+    varied = [c for c in _varied(df) if not c.startswith("start.")]
+    joints = [c for j in df.attrs["pinsettle"]["joints"] for c in j["columns"]]
+    _print_rests(info["distinct_rests"], varied, joints)
+    if "jump" in df.columns:
+        _print_jumps(info["jumps"])
+    shown = ["case", *varied, "status", *joints[:6], "residual", "stability"]
+    shown += ["jump"] if "jump" in df.columns else []
+    shown += ["error"] if len(failed) else []
+    _print_rows(df, info, shown)
     if info["interrupted"]:
         print(
             "interrupted: run the same command again to solve the cases left"
@@ -278,18 +342,18 @@ def run(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
         return EXIT_INTERRUPTED
 
 
-def _run(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
-    _sweep_cases.pandas()
+def _sweep_args(args: argparse.Namespace) -> tuple[dict[str, list[float]], Path | None]:
+    """The values of --vary and the file of --out, every flag checked."""
     vary = parse_vary(args.vary)
-    if args.seed is not None and args.random is None:
-        raise ValueError("--seed goes with --random N")
-    if args.random is not None and args.random < 1:
-        raise ValueError(f"--random N: N must be an integer >= 1, got {args.random}")
-    if args.workers is not None and args.scheduler is not None:
-        raise ValueError("--workers sets local threads; with --scheduler the cluster's run")
+    check_flags(args, FLAGS)
     if not vary and args.random is None:
         raise ValueError("nothing to sweep: give --vary KEY=LO:HI:N and/or --random N")
-    out = _out_path(args.out)
+    return vary, _out_path(args.out)
+
+
+def _run(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
+    _sweep_cases.pandas()
+    vary, out = _sweep_args(args)
     scene = load_scene(scene_path(args.scene))
     resume = read_table(out) if out is not None and out.exists() else None
     starts = None if args.random is None else ("random", args.random, args.seed or 0)

@@ -1,0 +1,57 @@
+"""Command-line flags declared once, as tables: a table of ``Flag`` makes a command's parser
+and the checks of the values given, so that a flag's name, help and check sit together."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
+
+#: A check of the parsed arguments: the error message, or None when they are good.
+Check = Callable[[argparse.Namespace], str | None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Flag:
+    """One argument of a command: its names (a positional's name, or the option strings), its
+    help, the other options of ``add_argument`` (type, metavar, action, default, ...) and a
+    check of the value given (None: argparse's own checks are all)."""
+
+    names: tuple[str, ...]
+    help: str
+    options: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    check: Check | None = None
+
+    def add_to(self, parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+        parser.add_argument(*self.names, help=self.help, **self.options)
+
+
+def flag(*names: str, help: str, check: Check | None = None, **options: Any) -> Flag:
+    """A ``Flag`` written as ``add_argument`` is called."""
+    return Flag(names, help, options, check)
+
+
+def switch(name: str, help: str) -> Flag:
+    """A --NAME / --no-NAME flag, None when neither is given (the default applies)."""
+    return flag(name, action=argparse.BooleanOptionalAction, default=None, help=help)
+
+
+def add_flags(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, flags: Iterable[Flag]
+) -> None:
+    """Add ``flags`` to a parser (or a group of its arguments), in order."""
+    for item in flags:
+        item.add_to(parser)
+
+
+def check_flags(args: argparse.Namespace, flags: Iterable[Flag]) -> None:
+    """Run the checks of ``flags`` in order.
+
+    Raises:
+        ValueError: the message of the first check that fails.
+    """
+    for item in flags:
+        message = None if item.check is None else item.check(args)
+        if message is not None:
+            raise ValueError(message)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -202,6 +202,52 @@ class _MeshAsset:
     label: str
 
 
+def _choice(choices: tuple[str, ...]) -> Callable[[str, str], str]:
+    return lambda text, where: _flag(text, where, choices)
+
+
+def _is(choices: tuple[str, ...], yes: str) -> Callable[[str, str], bool]:
+    return lambda text, where: _flag(text, where, choices) == yes
+
+
+def _number(text: str, where: str) -> float:
+    return float(_floats(text, where, (1,))[0])
+
+
+def _as_text(text: str, where: str) -> str:
+    return text
+
+
+def _group_range(text: str, where: str) -> tuple[int, int]:
+    low, high = _floats(text, where, (2,))
+    return int(low), int(high)
+
+
+def _eulerseq(text: str, where: str) -> str:
+    if len(text) != 3 or any(ch not in "xyzXYZ" for ch in text):
+        raise MjcfError(f"{where}: three of x y z X Y Z, got '{text}'")
+    return text
+
+
+# The <compiler> attributes read, in the order they are checked: (attribute, the _Compiler
+# field it sets or None for one that is refused by its value, the reader of its text).
+_COMPILER_ATTRIBUTES: tuple[tuple[str, str | None, Callable[[str, str], Any]], ...] = (
+    ("angle", "degree", _is(("degree", "radian"), "degree")),
+    ("eulerseq", "eulerseq", _eulerseq),
+    ("autolimits", "autolimits", _is(("true", "false"), "true")),
+    ("inertiafromgeom", "inertiafromgeom", _choice(("true", "false", "auto"))),
+    ("inertiagrouprange", "inertiagrouprange", _group_range),
+    ("boundmass", "boundmass", _number),
+    ("boundinertia", "boundinertia", _number),
+    ("settotalmass", None, _number),
+    ("coordinate", None, _as_text),
+    ("meshdir", "meshdir", _as_text),
+    ("texturedir", "texturedir", _as_text),
+    ("assetdir", "assetdir", _as_text),
+    ("strippath", "strippath", _is(("true", "false"), "true")),
+)
+
+
 class _Reader:
     """One MJCF file read with MuJoCo's rules; refusals are collected, then raised at once."""
 
@@ -308,51 +354,20 @@ class _Reader:
         c = _Compiler()
         for el in self.root.findall("compiler"):
             where = f"{self.path}: <compiler>"
-            a = el.attrib
-            if "angle" in a:
-                c.degree = _flag(a["angle"], f"{where} angle", ("degree", "radian")) == "degree"
-            if "eulerseq" in a:
-                seq = a["eulerseq"]
-                if len(seq) != 3 or any(ch not in "xyzXYZ" for ch in seq):
-                    raise MjcfError(f"{where} eulerseq: three of x y z X Y Z, got '{seq}'")
-                c.eulerseq = seq
-            if "autolimits" in a:
-                c.autolimits = _flag(a["autolimits"], f"{where} autolimits", ("true", "false")) == (
-                    "true"
-                )
-            if "inertiafromgeom" in a:
-                c.inertiafromgeom = _flag(
-                    a["inertiafromgeom"], f"{where} inertiafromgeom", ("true", "false", "auto")
-                )
-            if "inertiagrouprange" in a:
-                low, high = _floats(a["inertiagrouprange"], f"{where} inertiagrouprange", (2,))
-                c.inertiagrouprange = (int(low), int(high))
-            if "boundmass" in a:
-                c.boundmass = float(_floats(a["boundmass"], f"{where} boundmass", (1,))[0])
-            if "boundinertia" in a:
-                c.boundinertia = float(_floats(a["boundinertia"], f"{where} boundinertia", (1,))[0])
-            if (
-                "settotalmass" in a
-                and _floats(a["settotalmass"], f"{where} settotalmass", (1,))[0] > 0
-            ):
-                self.refuse(
-                    "<compiler settotalmass>",
-                    "(masses scaled to a total)",
-                    _EXPAND,
-                )
-            if a.get("coordinate", "local") != "local":
-                self.refuse(
-                    f'<compiler coordinate="{a["coordinate"]}">',
-                    "(global coordinates; MuJoCo 2.3.4 and later refuse them too)",
-                    "load and save the file in MuJoCo 2.3.3 or older, as MuJoCo says",
-                )
-            for key in ("meshdir", "texturedir", "assetdir"):
-                if key in a:
-                    setattr(c, key, a[key])
-            if "strippath" in a:
-                c.strippath = _flag(a["strippath"], f"{where} strippath", ("true", "false")) == (
-                    "true"
-                )
+            for key, name, read in _COMPILER_ATTRIBUTES:
+                if key not in el.attrib:
+                    continue
+                value = read(el.attrib[key], f"{where} {key}")
+                if name is not None:
+                    setattr(c, name, value)
+                elif key == "settotalmass" and value > 0:
+                    self.refuse("<compiler settotalmass>", "(masses scaled to a total)", _EXPAND)
+                elif key == "coordinate" and value != "local":
+                    self.refuse(
+                        f'<compiler coordinate="{value}">',
+                        "(global coordinates; MuJoCo 2.3.4 and later refuse them too)",
+                        "load and save the file in MuJoCo 2.3.3 or older, as MuJoCo says",
+                    )
         return c
 
     def _defaults(self) -> tuple[dict[str, dict[str, dict[str, str]]], str]:
@@ -413,7 +428,6 @@ class _Reader:
 
     def _check_assets(self) -> None:
         """Every file an asset names exists (MuJoCo refuses a model otherwise)."""
-        c = self.compiler
         missing: list[str] = []
         folders: dict[str, None] = {}  # in order, once each
         sections = [*self.root.findall("asset"), *self.root.findall("deformable")]
@@ -425,21 +439,10 @@ class _Reader:
                         "in <asset> (models attached with <attach>)",
                         _EXPAND,
                     )
-                files: dict[str, Path] = {}
-                for key in _ASSET_FILES.get(el.tag, ()):
-                    name = el.get(key)
-                    if not name:
-                        continue
-                    file = Path(name)
-                    if c.strippath:
-                        file = Path(file.name)
-                    if not file.is_absolute():
-                        folder = c.texturedir if el.tag == "texture" else c.meshdir
-                        folder = folder if folder is not None else c.assetdir
-                        file = self.path.parent / (folder or "") / file
-                    files[key] = file
+                files = self._asset_files(el)
+                for key, file in files.items():
                     if not file.is_file():
-                        missing.append(f"{el.tag} {_describe(el)} file '{name}'")
+                        missing.append(f"{el.tag} {_describe(el)} file '{el.get(key)}'")
                         folders.setdefault(str(file.parent), None)
                 if el.tag == "mesh" and section.tag == "asset":
                     self._mesh_asset(el, files.get("file"))
@@ -450,6 +453,23 @@ class _Reader:
                 "paths are taken from the main file's folder and <compiler meshdir, texturedir, "
                 "assetdir>: check them, and that the files are there"
             )
+
+    def _asset_files(self, el: ET.Element) -> dict[str, Path]:
+        """The files an asset names, by attribute, where MuJoCo looks for them: from the main
+        file's folder and <compiler meshdir, texturedir, assetdir>, strippath applied."""
+        c = self.compiler
+        files: dict[str, Path] = {}
+        for key in _ASSET_FILES.get(el.tag, ()):
+            name = el.get(key)
+            if not name:
+                continue
+            file = Path(Path(name).name) if c.strippath else Path(name)
+            if not file.is_absolute():
+                folder = c.texturedir if el.tag == "texture" else c.meshdir
+                folder = folder if folder is not None else c.assetdir
+                file = self.path.parent / (folder or "") / file
+            files[key] = file
+        return files
 
     def _mesh_asset(self, el: ET.Element, file: Path | None) -> None:
         """A mesh of <asset>, kept by name for the geoms whose mass comes from it (its name

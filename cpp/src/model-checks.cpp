@@ -157,61 +157,113 @@ namespace pinsettle
           checkJoint(model, j, part, true);
     }
 
-    // Tables of the model that Pinocchio's algorithms index without checking.
-    void checkTables(const pinocchio::Model & model)
+    // One of the model's per-joint tables: its name (in the message), its length and whether
+    // that is the number of joints.
+    struct TableSize
+    {
+      const char * table;
+      std::size_t size;
+      bool agrees;
+    };
+
+    TableSize listSize(const char * table, std::size_t size, std::size_t n)
+    {
+      return {table, size, size == n};
+    }
+
+    // Start indices and lengths are read together: the pair agrees when both do; the shorter
+    // is the one named.
+    TableSize pairSize(const char * table, std::size_t starts, std::size_t lengths, std::size_t n)
+    {
+      return {table, std::min(starts, lengths), starts == n && lengths == n};
+    }
+
+    TableSize njointsSize(const pinocchio::Model & model, std::size_t n)
+    {
+      return {
+        "njoints", static_cast<std::size_t>(model.njoints),
+        n != 0 && model.njoints == static_cast<int>(n)};
+    }
+
+    void checkTableSizes(const pinocchio::Model & model)
     {
       const std::size_t n = model.joints.size();
-      auto sizeError = [&](const char * table, std::size_t size) {
-        std::ostringstream msg;
-        msg << "model: its tables disagree: " << n << " joints (with the universe) but " << size
-            << " entries in " << table << "; the model was changed by hand after it was built";
-        throw std::invalid_argument(msg.str());
+      // In this order: the first that disagrees is the one reported.
+      const TableSize tables[] = {
+        njointsSize(model, n),
+        listSize("parents", model.parents.size(), n),
+        listSize("names", model.names.size(), n),
+        listSize("jointPlacements", model.jointPlacements.size(), n),
+        listSize("inertias", model.inertias.size(), n),
+        pairSize("idx_qs/nqs", model.idx_qs.size(), model.nqs.size(), n),
+        pairSize("idx_vs/nvs", model.idx_vs.size(), model.nvs.size(), n),
       };
-      if (n == 0 || model.njoints != static_cast<int>(n))
-        sizeError("njoints", static_cast<std::size_t>(model.njoints));
-      if (model.parents.size() != n)
-        sizeError("parents", model.parents.size());
-      if (model.names.size() != n)
-        sizeError("names", model.names.size());
-      if (model.jointPlacements.size() != n)
-        sizeError("jointPlacements", model.jointPlacements.size());
-      if (model.inertias.size() != n)
-        sizeError("inertias", model.inertias.size());
-      if (model.idx_qs.size() != n || model.nqs.size() != n)
-        sizeError("idx_qs/nqs", std::min(model.idx_qs.size(), model.nqs.size()));
-      if (model.idx_vs.size() != n || model.nvs.size() != n)
-        sizeError("idx_vs/nvs", std::min(model.idx_vs.size(), model.nvs.size()));
+      for (const TableSize & t : tables)
+      {
+        if (t.agrees)
+          continue;
+        std::ostringstream msg;
+        msg << "model: its tables disagree: " << n << " joints (with the universe) but " << t.size
+            << " entries in " << t.table << "; the model was changed by hand after it was built";
+        throw std::invalid_argument(msg.str());
+      }
+    }
+
+    void checkNoMimicSpace(const pinocchio::Model & model)
+    {
       if (model.nv != model.nvExtended)
         throw std::invalid_argument(
           "model: its extended velocity space (nvExtended " + std::to_string(model.nvExtended)
           + ") differs from its velocity space (nv " + std::to_string(model.nv)
           + "): a joint mimics another, which pinocchio::aba does not support (releaseMimicJoints "
             "makes it an ordinary joint to couple as a constraint)");
+    }
 
+    // Joint j's indices in q and v, as the joint and the model's tables give them, are where the
+    // joints before it end (iq, iv).
+    bool indicesFollow(const pinocchio::Model & model, std::size_t j, int iq, int iv)
+    {
+      const pinocchio::JointModel & jmodel = model.joints[j];
+      const bool q_follows =
+        jmodel.idx_q() == iq && jmodel.nq() == model.nqs[j] && model.idx_qs[j] == iq;
+      const bool v_follows =
+        jmodel.idx_v() == iv && jmodel.nv() == model.nvs[j] && model.idx_vs[j] == iv;
+      return q_follows && v_follows;
+    }
+
+    // Each joint's parent comes before it and its q and v segments follow the previous joint's,
+    // and together they tile q and v.
+    void checkJointOrderAndIndices(const pinocchio::Model & model)
+    {
       int iq = 0, iv = 0;
-      for (std::size_t j = 1; j < n; ++j)
+      for (std::size_t j = 1; j < model.joints.size(); ++j)
       {
-        const pinocchio::JointModel & jmodel = model.joints[j];
         if (model.parents[j] >= j)
           refuse(
             model, j,
             "has parent index " + std::to_string(model.parents[j])
               + ", not before it: the joints are not a tree in order");
-        if (
-          jmodel.idx_q() != iq || jmodel.nq() != model.nqs[j] || model.idx_qs[j] != iq
-          || jmodel.idx_v() != iv || jmodel.nv() != model.nvs[j] || model.idx_vs[j] != iv)
+        if (!indicesFollow(model, j, iq, iv))
           refuse(
             model, j,
             "has configuration or velocity indices that do not follow the joint before it (the "
             "model was changed by hand after it was built)");
-        iq += jmodel.nq();
-        iv += jmodel.nv();
+        iq += model.joints[j].nq();
+        iv += model.joints[j].nv();
       }
       if (iq != model.nq || iv != model.nv)
         throw std::invalid_argument(
           "model: its joints span " + std::to_string(iq) + " configuration and "
           + std::to_string(iv) + " velocity entries, but nq = " + std::to_string(model.nq)
           + " and nv = " + std::to_string(model.nv));
+    }
+
+    // Tables of the model that Pinocchio's algorithms index without checking.
+    void checkTables(const pinocchio::Model & model)
+    {
+      checkTableSizes(model);
+      checkNoMimicSpace(model);
+      checkJointOrderAndIndices(model);
     }
 
     // Pinocchio's algorithms that work on subtrees (crba, computeMinverse, the gravity
@@ -263,70 +315,91 @@ namespace pinsettle
       throw std::invalid_argument(msg.str());
     }
 
+    // The per-joint limits and properties a released model keeps, by configuration entry and
+    // by velocity entry.
+    using ModelVector = pinocchio::Model::VectorXs pinocchio::Model::*;
+    constexpr ModelVector kConfigurationProperties[] = {
+      &pinocchio::Model::lowerPositionLimit, &pinocchio::Model::upperPositionLimit};
+    constexpr ModelVector kVelocityProperties[] = {
+      &pinocchio::Model::lowerEffortLimit,   &pinocchio::Model::upperEffortLimit,
+      &pinocchio::Model::lowerVelocityLimit, &pinocchio::Model::upperVelocityLimit,
+      &pinocchio::Model::armature,           &pinocchio::Model::rotorInertia,
+      &pinocchio::Model::rotorGearRatio,     &pinocchio::Model::damping};
+
+    // The tables releaseMimicJoints reads for every joint.
+    bool joinedTablesAgree(const pinocchio::Model & model)
+    {
+      const std::size_t n = model.joints.size();
+      return model.parents.size() == n && model.names.size() == n
+             && model.jointPlacements.size() == n && model.inertias.size() == n;
+    }
+
+    // Joint j as it is, with its limits and properties (each joint's own segment: the indices
+    // shift after a follower).
+    void copyJoint(const pinocchio::Model & model, std::size_t j, pinocchio::Model & out)
+    {
+      const pinocchio::JointModel & jmodel = model.joints[j];
+      const pinocchio::JointIndex id =
+        out.addJoint(model.parents[j], jmodel, model.jointPlacements[j], model.names[j]);
+      const pinocchio::JointModel & copy = out.joints[id];
+      for (const ModelVector property : kConfigurationProperties)
+        copy.jointConfigSelector(out.*property) = jmodel.jointConfigSelector(model.*property);
+      for (const ModelVector property : kVelocityProperties)
+        copy.jointVelocitySelector(out.*property) = jmodel.jointVelocitySelector(model.*property);
+    }
+
+    // A follower pinsettle can couple back: a 1-DoF joint following an ordinary joint before it.
+    void checkFollower(
+      const pinocchio::Model & model, std::size_t j, const pinocchio::JointModel & own)
+    {
+      const pinocchio::JointIndex leader = own.id();
+      if (leader == 0 || leader >= j)
+        refuse(model, j, "is a mimic joint of a joint that does not come before it");
+      if (boost::get<pinocchio::JointModelMimic>(&model.joints[leader].toVariant()) != nullptr)
+        refuse(
+          model, j, "is a mimic joint of another mimic joint (" + jointName(model, leader) + ")");
+      if (own.nq() != 1 || own.nv() != 1)
+        refuse(
+          model, j,
+          "is a mimic joint of type " + own.shortname() + " (" + std::to_string(own.nq())
+            + " configuration entries, " + std::to_string(own.nv())
+            + " velocities); pinsettle couples 1-DoF joints with one of each (revolute, "
+              "prismatic, helical)");
+    }
+
+    // Follower j as an ordinary joint of its own type and axis, without the mimic model's
+    // limits (it keeps none for a follower); returns its coupling.
+    MimicJoint releaseFollower(
+      const pinocchio::Model & model,
+      std::size_t j,
+      const pinocchio::JointModelMimic & mimic,
+      pinocchio::Model & out)
+    {
+      // The follower's own joint (type and axis); its id is the leader's.
+      const pinocchio::JointModel own = mimic.jmodel();
+      checkFollower(model, j, own);
+      const pinocchio::JointIndex id =
+        out.addJoint(model.parents[j], own, model.jointPlacements[j], model.names[j]);
+      return MimicJoint{id, own.id(), mimic.scaling(), mimic.offset()};
+    }
   } // namespace
 
   pinocchio::Model releaseMimicJoints(
     const pinocchio::Model & model, std::vector<MimicJoint> & mimics)
   {
     mimics.clear();
-    const std::size_t n = model.joints.size();
-    if (
-      model.parents.size() != n || model.names.size() != n || model.jointPlacements.size() != n
-      || model.inertias.size() != n)
+    if (!joinedTablesAgree(model))
       checkTables(model); // names the table that disagrees
     pinocchio::Model out;
     out.name = model.name;
     out.gravity = model.gravity;
-    for (std::size_t j = 1; j < n; ++j)
+    for (std::size_t j = 1; j < model.joints.size(); ++j)
     {
-      const pinocchio::JointModel & jmodel = model.joints[j];
-      const auto * mimic = boost::get<pinocchio::JointModelMimic>(&jmodel.toVariant());
+      const auto * mimic = boost::get<pinocchio::JointModelMimic>(&model.joints[j].toVariant());
       if (mimic == nullptr)
-      {
-        const pinocchio::JointIndex id =
-          out.addJoint(model.parents[j], jmodel, model.jointPlacements[j], model.names[j]);
-        const pinocchio::JointModel & copy = out.joints[id];
-        // Limits and joint properties, each joint's segment (indices shift after a follower).
-        copy.jointConfigSelector(out.lowerPositionLimit) =
-          jmodel.jointConfigSelector(model.lowerPositionLimit);
-        copy.jointConfigSelector(out.upperPositionLimit) =
-          jmodel.jointConfigSelector(model.upperPositionLimit);
-        copy.jointVelocitySelector(out.lowerEffortLimit) =
-          jmodel.jointVelocitySelector(model.lowerEffortLimit);
-        copy.jointVelocitySelector(out.upperEffortLimit) =
-          jmodel.jointVelocitySelector(model.upperEffortLimit);
-        copy.jointVelocitySelector(out.lowerVelocityLimit) =
-          jmodel.jointVelocitySelector(model.lowerVelocityLimit);
-        copy.jointVelocitySelector(out.upperVelocityLimit) =
-          jmodel.jointVelocitySelector(model.upperVelocityLimit);
-        copy.jointVelocitySelector(out.armature) = jmodel.jointVelocitySelector(model.armature);
-        copy.jointVelocitySelector(out.rotorInertia) =
-          jmodel.jointVelocitySelector(model.rotorInertia);
-        copy.jointVelocitySelector(out.rotorGearRatio) =
-          jmodel.jointVelocitySelector(model.rotorGearRatio);
-        copy.jointVelocitySelector(out.damping) = jmodel.jointVelocitySelector(model.damping);
-      }
+        copyJoint(model, j, out);
       else
-      {
-        // The follower's own joint (type and axis); its id is the leader's.
-        const pinocchio::JointModel own = mimic->jmodel();
-        const pinocchio::JointIndex leader = own.id();
-        if (leader == 0 || leader >= j)
-          refuse(model, j, "is a mimic joint of a joint that does not come before it");
-        if (boost::get<pinocchio::JointModelMimic>(&model.joints[leader].toVariant()) != nullptr)
-          refuse(
-            model, j, "is a mimic joint of another mimic joint (" + jointName(model, leader) + ")");
-        if (own.nq() != 1 || own.nv() != 1)
-          refuse(
-            model, j,
-            "is a mimic joint of type " + own.shortname() + " (" + std::to_string(own.nq())
-              + " configuration entries, " + std::to_string(own.nv())
-              + " velocities); pinsettle couples 1-DoF joints with one of each (revolute, "
-                "prismatic, helical)");
-        const pinocchio::JointIndex id =
-          out.addJoint(model.parents[j], own, model.jointPlacements[j], model.names[j]);
-        mimics.push_back(MimicJoint{id, leader, mimic->scaling(), mimic->offset()});
-      }
+        mimics.push_back(releaseFollower(model, j, *mimic, out));
       out.appendBodyToJoint(
         static_cast<pinocchio::JointIndex>(j), model.inertias[j], pinocchio::SE3::Identity());
     }

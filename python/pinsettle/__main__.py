@@ -9,7 +9,9 @@ import signal
 import sys
 import time
 import webbrowser
+from collections.abc import Callable
 from contextlib import AbstractContextManager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +19,7 @@ import numpy as np
 import pinocchio
 
 import pinsettle
+from pinsettle._cli_flags import Flag, add_flags, flag, switch
 from pinsettle._progress import StatusLine, status_line
 from pinsettle._settings import SETTING_TYPES
 
@@ -30,94 +33,91 @@ def _step(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"expected 'auto' or seconds, got '{text}'") from None
 
 
-def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("solver settings (defaults: pinsettle.Settings())")
-    group.add_argument("--energy", choices=["exact", "simplified"], help="peak-detector signal")
-    group.add_argument("--kt", type=float, help="velocity scale at each energy peak, in [0, 1)")
-    group.add_argument("--dt", type=_step, help="time step (s), or 'auto' (the default)")
-    group.add_argument("--dt-safety", type=float, help="fraction of the stable step (dt auto)")
-    group.add_argument(
-        "--dt-growth", type=float, help="largest growth of the step between peaks (dt auto)"
-    )
-    group.add_argument(
-        "--polish",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="Newton polish after convergence (default: on)",
-    )
-    group.add_argument(
+#: The solver settings' flags (a flag's name is its setting's, as _setting_overrides reads it).
+SETTING_FLAGS = (
+    flag("--energy", choices=["exact", "simplified"], help="peak-detector signal"),
+    flag("--kt", type=float, help="velocity scale at each energy peak, in [0, 1)"),
+    flag("--dt", type=_step, help="time step (s), or 'auto' (the default)"),
+    flag("--dt-safety", type=float, help="fraction of the stable step (dt auto)"),
+    flag("--dt-growth", type=float, help="largest growth of the step between peaks (dt auto)"),
+    switch("--polish", help="Newton polish after convergence (default: on)"),
+    switch(
         "--newton-takeover",
-        action=argparse.BooleanOptionalAction,
-        default=None,
         help="with the polish, Newton tried at damping events may end the run at its rest "
         "(default: on)",
-    )
-    group.add_argument(
+    ),
+    switch(
         "--scale-stiff-modes",
-        action=argparse.BooleanOptionalAction,
-        default=None,
         help="with dt auto, slow modes far faster than the rest (default: on)",
-    )
-    group.add_argument(
+    ),
+    switch(
         "--scale-joint-inertia",
-        action=argparse.BooleanOptionalAction,
-        default=None,
         help="with dt auto, raise each joint's inertia towards the slowest joint's rate "
         "(default: off)",
-    )
-    group.add_argument("--err", type=float, help="relative peak threshold")
-    group.add_argument("--ds", type=int, help="stopping window (steps)")
-    group.add_argument("--max-e", type=float, help="bound on the energy summed over the window")
-    group.add_argument("--max-steps", type=int, help="largest number of steps")
-    group.add_argument("--max-time", type=float, help="wall-clock budget (s)")
-    group.add_argument(
-        "--backtrack",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="back up to the interpolated peak before damping (default: on)",
-    )
+    ),
+    flag("--err", type=float, help="relative peak threshold"),
+    flag("--ds", type=int, help="stopping window (steps)"),
+    flag("--max-e", type=float, help="bound on the energy summed over the window"),
+    flag("--max-steps", type=int, help="largest number of steps"),
+    flag("--max-time", type=float, help="wall-clock budget (s)"),
+    switch("--backtrack", help="back up to the interpolated peak before damping (default: on)"),
+)
 
-
-def _add_model_file_flags(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
+#: How a model file (URDF, MJCF) becomes a scene.
+MODEL_FILE_FLAGS = (
+    flag(
         "--floating",
         action="store_true",
         help="with a model file (URDF, MJCF): a free-flyer joint on the root body of a file "
         "that has none (default: the root as the file has it: fixed, or free by an MJCF "
         "<freejoint>, which floats without this flag)",
-    )
-    parser.add_argument(
+    ),
+    flag(
         "--free-objects",
         choices=["keep", "lock"],
         help="with an MJCF file: its free objects (bodies whose only joint is a free joint, "
         "beside the mechanism) stay free and fall (keep, the default) or are fixed where the "
         "file places them (lock)",
-    )
-    parser.add_argument(
+    ),
+    flag(
         "--actuator-springs",
         action="store_true",
         help="with an MJCF file: each position actuator on a hinge or slide joint is a joint "
         "spring of stiffness kp towards its control (0, or the ctrl of the keyframe a scene "
         "file's [start] pose names) (default: actuators left out)",
-    )
+    ),
+)
+
+START_FLAG = flag(
+    "--start",
+    action="append",
+    default=[],
+    metavar="JOINT=VALUE",
+    help="override a joint's start value (repeatable): a number (rad or m), or "
+    "comma-separated values for a multi-DoF joint, a quaternion w first as in MuJoCo's "
+    "qpos: a free joint x,y,z,qw,qx,qy,qz (root=0,0,1.4,1,0,0,0: 1.4 m up, not turned), "
+    "a ball joint qw,qx,qy,qz. The JSON's 'joints' use this order too; its 'q' is "
+    "Pinocchio's (w last)",
+)
+
+QUIET_FLAG = flag(
+    "-q",
+    "--quiet",
+    action="store_true",
+    help="no live progress line (shown on stderr, when it is a terminal, once a solve has "
+    "run 0.5 s)",
+)
+
+JSON_FLAG = flag("--json", action="store_true", help="print one JSON object")
+
+SCENE_ARGUMENT = flag(
+    "scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"
+)
 
 
-def _add_start_flag(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--start",
-        action="append",
-        default=[],
-        metavar="JOINT=VALUE",
-        help="override a joint's start value (repeatable): a number (rad or m), or "
-        "comma-separated values for a multi-DoF joint, a quaternion w first as in MuJoCo's "
-        "qpos: a free joint x,y,z,qw,qx,qy,qz (root=0,0,1.4,1,0,0,0: 1.4 m up, not turned), "
-        "a ball joint qw,qx,qy,qz. The JSON's 'joints' use this order too; its 'q' is "
-        "Pinocchio's (w last)",
-    )
-
-
-def _add_limits_flag(parser: argparse.ArgumentParser, what: str) -> None:
-    parser.add_argument(
+def _limits_flag(what: str) -> Flag:
+    """--no-limits, for a model (``what``: 'robot', or 'scene model' that has [[limit]] too)."""
+    return flag(
         "--no-limits",
         action="store_true",
         help=f"ignore the {what}'s position limits: no joint stops"
@@ -125,14 +125,13 @@ def _add_limits_flag(parser: argparse.ArgumentParser, what: str) -> None:
     )
 
 
-def _add_quiet_flag(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "-q",
-        "--quiet",
-        action="store_true",
-        help="no live progress line (shown on stderr, when it is a terminal, once a solve has "
-        "run 0.5 s)",
-    )
+def _add_setting_flags(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("solver settings (defaults: pinsettle.Settings())")
+    add_flags(group, SETTING_FLAGS)
+
+
+def _add_limits_flag(parser: argparse.ArgumentParser, what: str) -> None:
+    _limits_flag(what).add_to(parser)
 
 
 def _progress_line(args: argparse.Namespace) -> AbstractContextManager[StatusLine | None]:
@@ -252,6 +251,13 @@ def _for_the_command_line(message: str) -> str:
     )
 
 
+def _print_title(scene: pinsettle.Scene) -> None:
+    """The scene's name and description, and its notes."""
+    print(f"{scene.name}: {scene.description}" if scene.description else scene.name)
+    for note in scene.notes:  # what the model file says that the scene leaves out
+        print(f"{'note':<17}{note}")
+
+
 def _solve(args: argparse.Namespace) -> int:
     scene, q0 = _load_scene(args)
     with _progress_line(args) as progress:
@@ -262,10 +268,7 @@ def _solve(args: argparse.Namespace) -> int:
         out = {"scene": str(scene.path), "notes": scene.notes, **result.to_dict()}
         print(json.dumps(out))
     else:
-        title = f"{scene.name}: {scene.description}" if scene.description else scene.name
-        print(title)
-        for note in scene.notes:  # what the model file says that the scene leaves out
-            print(f"{'note':<17}{note}")
+        _print_title(scene)
         print(result.summary())
     return 0 if result.converged else 1
 
@@ -299,48 +302,57 @@ def _serve(viz: Any) -> None:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _play_files(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
+    """The page of --html and the plot of --plot (by default with --html: next to the page),
+    their folders checked."""
+    html = None if args.html is None else Path(args.html)
+    plot = Path(args.plot) if args.plot else None
+    if html is not None and plot is None:
+        plot = html.with_name(html.stem + "_energy.png")
+    for name, path in (("--html", html), ("--plot", plot)):
+        if path is not None and not path.parent.is_dir():
+            raise FileNotFoundError(f"{name} {path}: no such folder: {path.parent}")
+    return html, plot
+
+
+def _show(viz: Any, html: Path | None, plot: Path | None, browse: bool) -> None:
+    """Say what plays and where; open the page (``browse``), or serve it live until Ctrl-C."""
+    timeline = viz.timeline
+    print(
+        f"playback: {timeline.sim_time:.4g} s simulated in {timeline.duration:.3g} s "
+        f"(speed x{timeline.speed:.3g}), then the final pose held"
+    )
+    for path in (html, plot):
+        if path is not None:
+            print(f"wrote {path}")
+    if html is not None:
+        if browse:
+            webbrowser.open(html.resolve().as_uri(), new=2)
+        return
+    print(f"meshcat: {viz.url} (Ctrl-C to stop)", flush=True)
+    if browse:
+        viz.open()
+    _serve(viz)
+
+
 def _play(args: argparse.Namespace) -> int:
     # Here, not at the top: the other commands never load the playback module.
     from pinsettle.play import TRACE_SETTINGS, play, require
 
     require()  # before solving: a missing extra is a one-line message, exit 2
     speed = None if args.speed is None else _speed(args.speed)
-    html = None if args.html is None else Path(args.html)
-    plot = Path(args.plot) if args.plot else None
-    if html is not None and plot is None:
-        plot = html.with_name(html.stem + "_energy.png")
-    for flag, path in (("--html", html), ("--plot", plot)):
-        if path is not None and not path.parent.is_dir():
-            raise FileNotFoundError(f"{flag} {path}: no such folder: {path.parent}")
+    html, plot = _play_files(args)
     scene, q0 = _load_scene(args)
     overrides = {**_setting_overrides(args), **TRACE_SETTINGS}
     with _progress_line(args) as progress:
         result = pinsettle.solve(scene, q0, limits=_limits(args), progress=progress, **overrides)
-    title = f"{scene.name}: {scene.description}" if scene.description else scene.name
-    print(title)
-    for note in scene.notes:
-        print(f"{'note':<17}{note}")
+    _print_title(scene)
     print(
         f"{result.status}: {result.steps} steps, {result.peaks} damping events, "
         f"{result.sim_time:.4g} s simulated"
     )
     with play(scene, result, speed=speed, html=html, plot=plot, live=html is None) as viz:
-        timeline = viz.timeline
-        print(
-            f"playback: {timeline.sim_time:.4g} s simulated in {timeline.duration:.3g} s "
-            f"(speed x{timeline.speed:.3g}), then the final pose held"
-        )
-        for path in (html, plot):
-            if path is not None:
-                print(f"wrote {path}")
-        if html is not None:
-            if not args.no_open:
-                webbrowser.open(html.resolve().as_uri(), new=2)
-        else:
-            print(f"meshcat: {viz.url} (Ctrl-C to stop)", flush=True)
-            if not args.no_open:
-                viz.open()
-            _serve(viz)
+        _show(viz, html, plot, not args.no_open)
     return 0 if result.converged else 1
 
 
@@ -364,69 +376,107 @@ def _cmake_dir(args: argparse.Namespace) -> int:
     return 0
 
 
+@dataclass(frozen=True)
+class _Command:
+    """A subcommand: its name, help, arguments (in the order of its help) and function; the
+    solver settings' flags last when it solves."""
+
+    name: str
+    help: str
+    func: Callable[[argparse.Namespace], int]
+    flags: tuple[Flag, ...] = ()
+    settings: bool = False
+    description: str | None = None
+
+    def add_to(self, sub: Any) -> None:
+        parser = sub.add_parser(self.name, help=self.help, description=self.description)
+        add_flags(parser, self.flags)
+        if self.settings:
+            _add_setting_flags(parser)
+        parser.set_defaults(func=self.func)
+
+
+#: The commands that solve one scene: their own arguments, then those of the model and start.
+_SOLVING = (
+    _Command(
+        "demo",
+        "settle a robot of example-robot-data from its neutral pose",
+        _demo,
+        (
+            flag("robot", nargs="?", default="ur5", help="robot name (see `pinsettle robots`)"),
+            JSON_FLAG,
+            _limits_flag("robot"),
+            QUIET_FLAG,
+        ),
+        settings=True,
+    ),
+    _Command(
+        "solve",
+        "settle a scene file (a path, or a scene name of `pinsettle scenes`)",
+        _solve,
+        (
+            SCENE_ARGUMENT,
+            JSON_FLAG,
+            _limits_flag("scene model"),
+            QUIET_FLAG,
+            *MODEL_FILE_FLAGS,
+            START_FLAG,
+        ),
+        settings=True,
+    ),
+    _Command(
+        "play",
+        "solve a scene and play how it settles in meshcat (needs pinsettle[viz])",
+        _play,
+        (
+            SCENE_ARGUMENT,
+            flag(
+                "--speed",
+                metavar="X",
+                help="simulated seconds per second of playback (default: real time, or faster "
+                "so that a long settle plays in about 6 s)",
+            ),
+            flag("--html", metavar="FILE", help="write a static HTML page (no server)"),
+            flag(
+                "--plot",
+                metavar="FILE",
+                help="energy plot (PNG; default with --html: FILE_energy.png)",
+            ),
+            flag("--no-open", action="store_true", help="do not open a browser"),
+            _limits_flag("scene model"),
+            QUIET_FLAG,
+            *MODEL_FILE_FLAGS,
+            START_FLAG,
+        ),
+        settings=True,
+        description="Solve a scene and play the settling motion in meshcat: live in the "
+        "browser (a server on 127.0.0.1 until Ctrl-C), or with --html as a self-contained "
+        "page plus the energy plot (PNG) next to it.",
+    ),
+)
+
+#: The commands that list what the package has.
+_LISTING = (
+    _Command("scenes", "list the scenes of the library with a description", _scenes),
+    _Command("robots", "list the robot names", _robots),
+    _Command("cmake-dir", "print the folder of pinsettleConfig.cmake", _cmake_dir),
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pinsettle",
         description="Static equilibrium of mechanisms by kinetic damping on Pinocchio.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="settle a robot of example-robot-data from its neutral pose")
-    demo.add_argument("robot", nargs="?", default="ur5", help="robot name (see `pinsettle robots`)")
-    demo.add_argument("--json", action="store_true", help="print one JSON object")
-    _add_limits_flag(demo, "robot")
-    _add_quiet_flag(demo)
-    _add_setting_flags(demo)
-    demo.set_defaults(func=_demo)
-    solve = sub.add_parser(
-        "solve", help="settle a scene file (a path, or a scene name of `pinsettle scenes`)"
-    )
-    solve.add_argument(
-        "scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"
-    )
-    solve.add_argument("--json", action="store_true", help="print one JSON object")
-    _add_limits_flag(solve, "scene model")
-    _add_quiet_flag(solve)
-    _add_model_file_flags(solve)
-    _add_start_flag(solve)
-    _add_setting_flags(solve)
-    solve.set_defaults(func=_solve)
-    play = sub.add_parser(
-        "play",
-        help="solve a scene and play how it settles in meshcat (needs pinsettle[viz])",
-        description="Solve a scene and play the settling motion in meshcat: live in the "
-        "browser (a server on 127.0.0.1 until Ctrl-C), or with --html as a self-contained "
-        "page plus the energy plot (PNG) next to it.",
-    )
-    play.add_argument(
-        "scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"
-    )
-    play.add_argument(
-        "--speed",
-        metavar="X",
-        help="simulated seconds per second of playback (default: real time, or faster so "
-        "that a long settle plays in about 6 s)",
-    )
-    play.add_argument("--html", metavar="FILE", help="write a static HTML page (no server)")
-    play.add_argument(
-        "--plot", metavar="FILE", help="energy plot (PNG; default with --html: FILE_energy.png)"
-    )
-    play.add_argument("--no-open", action="store_true", help="do not open a browser")
-    _add_limits_flag(play, "scene model")
-    _add_quiet_flag(play)
-    _add_model_file_flags(play)
-    _add_start_flag(play)
-    _add_setting_flags(play)
-    play.set_defaults(func=_play)
+    for command in _SOLVING:
+        command.add_to(sub)
     # The sweep command lives with the sweep (pandas is imported only when it runs).
     from pinsettle import _sweep_cli
 
     _sweep_cli.add_parser(sub, _add_setting_flags, _add_limits_flag, _setting_overrides)
-    scenes = sub.add_parser("scenes", help="list the scenes of the library with a description")
-    scenes.set_defaults(func=_scenes)
-    robots = sub.add_parser("robots", help="list the robot names")
-    robots.set_defaults(func=_robots)
-    cmake = sub.add_parser("cmake-dir", help="print the folder of pinsettleConfig.cmake")
-    cmake.set_defaults(func=_cmake_dir)
+    for command in _LISTING:
+        command.add_to(sub)
     return parser
 
 

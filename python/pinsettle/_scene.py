@@ -3,15 +3,18 @@
 A scene is built in code (``Scene(model)``, ``add_joint_spring``, ``add_spring``, ``add_load``,
 ``lock``, ``set_limit``) or read from a TOML file (``load_scene``). Names are resolved and every
 value is checked when it is added, so that a mistake is reported where it is made.
+
+A scene file is read in two steps: ``_scene_schema`` checks its tables against their declared
+keys and kinds, then ``_build_scene`` builds the scene through the same methods as code does.
+``_Compiled`` is what the solver sees: the locked joints removed, names resolved to indices.
 """
 
 from __future__ import annotations
 
-import difflib
 import math
 import sys
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,12 +23,59 @@ import pinocchio
 
 from . import _core
 from ._checks import as_flag, as_vector, unknown_key_message
-from ._mjcf import MjcfError, load_mjcf
+from ._mjcf import MjcfError, MjcfModel, load_mjcf
 from ._model_files import file_kind, load_srdf_poses, robot_srdf
-from ._settings import SETTING_TYPES, Settings, make_settings, set_setting
+from ._scene_schema import ModelTable, SceneFile, read_scene_file
+from ._scene_values import (
+    _INF,
+    _LAYOUTS,
+    LOOP_KINDS,
+    UNIT_NORM_SLACK,
+    Coupling,
+    JointLimit,
+    JointLoad,
+    JointSpring,
+    Loop,
+    PointLoad,
+    SceneError,
+    Spring,
+    _bound,
+    _close,
+    _effective_stop,
+    _is_angle_pair,
+    _joint_kind,
+    _number,
+    _show,
+    _unit_parts,
+    _vector,
+    has_mimic_joints,
+    joint_values,
+    model_stops,
+    named_value,
+)
+from ._settings import Settings, make_settings
 from ._urdf_mimic import urdf_mimic_tags
 from .robots import build_robot_model, build_urdf_model, robot_urdf
 from .scenes import scene_path
+
+__all__ = [
+    "LOOP_KINDS",
+    "UNIT_NORM_SLACK",
+    "Coupling",
+    "JointLimit",
+    "JointLoad",
+    "JointSpring",
+    "Loop",
+    "PointLoad",
+    "Scene",
+    "SceneError",
+    "Spring",
+    "has_mimic_joints",
+    "joint_values",
+    "load_scene",
+    "model_stops",
+    "named_value",
+]
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -33,264 +83,17 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
-class SceneError(ValueError):
-    """A scene that cannot be built: the message names the file, the key and what was wrong."""
-
-
-# --- force elements, by name (resolved against the model when a scene is solved) -----------
-
-
-@dataclass(frozen=True)
-class JointSpring:
-    """tau = -stiffness (q - rest) - damping qdot on a 1-DoF joint."""
-
-    joint: str
-    stiffness: float
-    rest: float = 0.0
-    damping: float = 0.0
-
-
-@dataclass(frozen=True)
-class Spring:
-    """A straight spring-damper from ``a_point`` of ``a_frame`` to ``b_point`` of ``b_frame``."""
-
-    a_frame: str
-    a_point: tuple[float, float, float]
-    b_frame: str
-    b_point: tuple[float, float, float]
-    stiffness: float
-    rest_length: float = 0.0
-    damping: float = 0.0
-
-
-@dataclass(frozen=True)
-class JointLoad:
-    """A constant effort on a joint (N m or N; one entry per degree of freedom)."""
-
-    joint: str
-    effort: tuple[float, ...]
-
-
-@dataclass(frozen=True)
-class PointLoad:
-    """A constant world-aligned force (N) and torque (N m) at a point (m) of a frame."""
-
-    frame: str
-    point: tuple[float, float, float]
-    force: tuple[float, float, float]
-    torque: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
-class Loop:
-    """A loop closure: ``a_point`` of ``a_frame`` and ``b_point`` of ``b_frame`` coincide
-    (``kind`` 'point': a spherical joint, a pin joint in a plane) or the two frames, moved to
-    those points, coincide (``kind`` 'frame': a weld)."""
-
-    a_frame: str
-    a_point: tuple[float, float, float]
-    b_frame: str
-    b_point: tuple[float, float, float]
-    kind: str = "point"
-
-
-LOOP_KINDS = ("point", "frame")
-
-
-@dataclass(frozen=True)
-class Coupling:
-    """A joint coupling (a URDF ``<mimic>`` tag, a mimic joint): q[follower] = multiplier *
-    q[leader] + offset, two 1-DoF joints (rad or m)."""
-
-    follower: str
-    leader: str
-    multiplier: float = 1.0
-    offset: float = 0.0
-
-    def text(self) -> str:
-        return f"'{self.follower}' = {self.multiplier:g} * '{self.leader}' + {self.offset:g}"
-
-
-def has_mimic_joints(model: pinocchio.Model) -> bool:
-    """Whether a model holds mimic joints (``pinocchio.buildModelFromUrdf(path, mimic=True)``):
-    a follower has no velocity of its own but one in the extended space (a test of 0.5 us where
-    a look at every joint's type took 8 us on the UR5, 0.6% of its solve)."""
-    return bool(model.nv != model.nvExtended or len(model.mimicking_joints) > 0)
-
-
-@dataclass(frozen=True)
-class JointLimit:
-    """Stops of a 1-DoF joint set by ``Scene.set_limit`` (``[[limit]]``), rad or m. A side left
-    None is the model's own limit on that side while the scene's ``limits`` is on (none when it
-    is off, or when the model has no usable limit there); -inf / +inf: no stop on that side."""
-
-    joint: str
-    lower: float | None = None
-    upper: float | None = None
-
-
-_INF = math.inf
-
-
-# --- value checks with messages that name the parameter --------------------------------------
-
-
-def _number(value: Any, name: str, *, nonnegative: bool = False) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
-        raise SceneError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-    try:
-        x = float(value)
-    except OverflowError:
-        raise SceneError(f"{name} is too large for a float: {value}") from None
-    if not math.isfinite(x):
-        raise SceneError(f"{name} must be finite, got {x}")
-    if nonnegative and x < 0:
-        raise SceneError(f"{name} must be >= 0, got {x}")
-    return x
-
-
-def _vector(value: Any, name: str, size: int) -> tuple[float, ...]:
-    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (Sequence, np.ndarray)):
-        raise SceneError(
-            f"{name} must be a list of {size} numbers, got {type(value).__name__} {value!r}"
-        )
-    if len(value) != size:
-        raise SceneError(f"{name} must have {size} entries, got {len(value)}: {list(value)!r}")
-    return tuple(_number(x, f"{name}[{k}]") for k, x in enumerate(value))
-
-
-def _close(name: str, known: Sequence[str], kind: str) -> str:
-    close = difflib.get_close_matches(name, known, n=1)
-    hint = f" (did you mean '{close[0]}'?)" if close else ""
-    # A hand or a humanoid has 30 to 90 joints and more frames: the first few, then a count.
-    shown = ", ".join(known[:8]) + (f" and {len(known) - 8} more" if len(known) > 8 else "")
-    return f"unknown {kind} '{name}'{hint}; {kind}s: {shown}"
-
-
-def _joint_kind(model: pinocchio.Model, j: int) -> str:
-    return str(model.joints[j].shortname())
-
-
-# --- per-joint values by name ------------------------------------------------------------------
-#
-# Everywhere a joint's value is given or shown by name (set_start, [start], --start, set_pose,
-# Result.joints, the JSON's "joints") a quaternion is written w first, (w, x, y, z), as MuJoCo's
-# qpos: a free-flyer is (x, y, z, qw, qx, qy, qz), a spherical (ball) joint (qw, qx, qy, qz).
-# Pinocchio's configuration q (Result.q, q0) keeps its own order, (x, y, z, w).
-
-#: A quaternion given by name may be off unit norm by this much (values typed to 4 digits,
-#: 0.7071 for cos 45 degrees): it is normalised. Further off it is an error.
-UNIT_NORM_SLACK = 1e-3
-
-#: What the value of a joint given as a list holds, for messages.
-_LAYOUTS = {
-    "JointModelFreeFlyer": "a free joint's value is x, y, z, qw, qx, qy, qz (m, then a unit "
-    "quaternion w first)",
-    "JointModelSpherical": "a ball joint's value is qw, qx, qy, qz (a unit quaternion, w first)",
-    "JointModelPlanar": "a planar joint's value is x, y, cos, sin (m, then a unit cos/sin pair)",
-}
-
-
-def _unit_parts(model: pinocchio.Model, j: int) -> list[tuple[int, int]]:
-    """(offset, size) in joint j's configuration segment of each part that has unit norm: a
-    quaternion (4 entries, Pinocchio's x, y, z, w) or a cos/sin pair (2)."""
-    base = int(model.idx_qs[j])
-
-    def parts(joint: Any) -> list[tuple[int, int]]:
-        kind = str(joint.shortname())
-        at = int(joint.idx_q) - base
-        if kind == "JointModelFreeFlyer":
-            return [(at + 3, 4)]
-        if kind == "JointModelSpherical":
-            return [(at, 4)]
-        if kind == "JointModelPlanar":
-            return [(at + 2, 2)]
-        if kind == "JointModelComposite":
-            return [p for part in joint.extract().joints for p in parts(part)]
-        if joint.nq == 2 and joint.nv == 1:  # a continuous joint's (cos, sin)
-            return [(at, 2)]
-        return []
-
-    return parts(model.joints[j])
-
-
-def named_value(model: pinocchio.Model, j: int, segment: Any) -> float | list[float]:
-    """Joint j's value by name from its configuration segment (Pinocchio's order): a number
-    (rad or m) for a 1-DoF joint (the angle of a continuous one), else a list with each
-    quaternion w first."""
-    x = [float(v) for v in segment]
-    if model.nvs[j] == 1 and len(x) == 2:
-        return math.atan2(x[1], x[0])
-    if len(x) == 1:
-        return x[0]
-    for at, size in _unit_parts(model, j):
-        if size == 4:
-            x[at : at + 4] = [x[at + 3], *x[at : at + 3]]
-    return x
-
-
-def _show(values: Any) -> str:
-    return ", ".join(f"{v:g}" for v in values)
-
-
-def _is_angle_pair(model: pinocchio.Model, j: int) -> bool:
-    """A continuous (unbounded revolute) joint: one DoF stored as (cos, sin)."""
-    return bool(model.nvs[j] == 1 and model.nqs[j] == 2)
-
-
-def _bound(value: Any, name: str, none: float) -> float:
-    """A stop position (rad or m): a number, or ``none`` (-inf for a lower stop, +inf for an
-    upper one) for no stop on that side."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
-        raise SceneError(
-            f"{name} must be a number (rad or m), got {type(value).__name__} {value!r}"
-        )
-    try:
-        x = float(value)
-    except OverflowError:
-        raise SceneError(f"{name} is too large for a float: {value}") from None
-    if math.isnan(x):
-        raise SceneError(f"{name} must be a number (rad or m), got nan")
-    if math.isinf(x) and x != none:
-        raise SceneError(f"{name} must be finite, or {none} for no stop on that side, got {x}")
-    return x
-
-
-def model_stops(model: pinocchio.Model) -> dict[str, tuple[float, float]]:
-    """The stops a model's own position limits make, by joint name: (lower, upper), rad or m,
-    -inf / +inf where a side has none (the rules of ``pinsettle::JointStops``: 1-DoF joints with
-    one coordinate; equal limits, non-finite or huge ones are no stop)."""
-    return {
-        name: (lower, upper)
-        for name, _, _, lower, upper in _core.joint_stops(model, (True, []))["stops"]
-    }
-
-
-def _effective_stop(
-    limit: JointLimit, own: Mapping[str, tuple[float, float]]
-) -> tuple[float, float]:
-    """The (lower, upper) stops of a ``set_limit`` entry: a side left None takes the model's
-    own stop from ``own`` (empty when the scene's limits are off), else none (-inf / +inf).
-
-    Raises:
-        SceneError: lower > upper, saying which side is the model's.
-    """
-    model_lower, model_upper = own.get(limit.joint, (-_INF, _INF))
-    lower = model_lower if limit.lower is None else limit.lower
-    upper = model_upper if limit.upper is None else limit.upper
-    if lower > upper:
-
-        def origin(side: str, given: float | None) -> str:
-            return "" if given is not None else f" (the model's own {side} limit)"
-
-        raise SceneError(
-            f"joint '{limit.joint}': lower {lower:g}{origin('lower', limit.lower)} > upper "
-            f"{upper:g}{origin('upper', limit.upper)}"
-        )
-    return lower, upper
-
-
 # --- the scene --------------------------------------------------------------------------------
+
+
+def _release_mimic(model: pinocchio.Model) -> tuple[pinocchio.Model, list[Coupling]]:
+    """A model with mimic joints as one without (each follower an ordinary joint of its own
+    type and axis, without position limits) and the couplings that hold the followers."""
+    released, couplings = _core.release_mimic(model)
+    return released, [
+        Coupling(str(released.names[follower]), str(released.names[leader]), float(m), float(o))
+        for follower, leader, m, o in couplings
+    ]
 
 
 class Scene:
@@ -325,23 +128,14 @@ class Scene:
         #: joint (of its own type and axis, without position limits) and coupled back in
         #: ``couplings``. None otherwise.
         self.mimic_model: pinocchio.Model | None = None
-        notes = []
         if has_mimic_joints(model):
-            released, couplings = _core.release_mimic(model)
             self.mimic_model = pinocchio.Model(model)
-            model = released
-            for follower, leader, multiplier, offset in couplings:
-                self.couplings.append(
-                    Coupling(
-                        str(model.names[follower]),
-                        str(model.names[leader]),
-                        float(multiplier),
-                        float(offset),
-                    )
-                )
-            notes.append(
-                "mimic joints honoured as couplings: " + "; ".join(c.text() for c in self.couplings)
-            )
+            model, self.couplings = _release_mimic(model)
+        notes = (
+            ["mimic joints honoured as couplings: " + "; ".join(c.text() for c in self.couplings)]
+            if self.couplings
+            else []
+        )
         self.model = pinocchio.Model(model)
         self.name = name
         self.description = description
@@ -475,23 +269,29 @@ class Scene:
             raise SceneError(str(error)) from None
         scene = cls(mjcf.model, **kwargs)
         scene.mjcf = Path(path)
-        scene.notes = list(mjcf.notes)
+        scene._take_mjcf(mjcf)
+        return scene
+
+    def _take_mjcf(self, mjcf: MjcfModel) -> None:
+        """What an MJCF file says beside its model: notes, joint and actuator springs, loops
+        (its equalities) and the start (its qpos0)."""
+        self.notes = list(mjcf.notes)
         for joint, stiffness, rest in mjcf.joint_springs:
-            scene.add_joint_spring(joint, stiffness, rest)
-        first = len(scene.joint_springs)
+            self.add_joint_spring(joint, stiffness, rest)
+        first = len(self.joint_springs)
         for joint, stiffness, rest in mjcf.actuator_springs:
-            scene.add_joint_spring(joint, stiffness, rest)
+            self.add_joint_spring(joint, stiffness, rest)
         # A pose moves the actuator springs' rests to its keyframe's ctrl (set_pose).
-        scene._pose_springs = {
+        self._pose_springs = {
             pose: [(first + k, rest) for k, rest in enumerate(rests)]
             for pose, rests in mjcf.actuator_rests.items()
         }
         for frame_a, point_a, frame_b, point_b, kind in mjcf.loops:
-            scene.add_loop((frame_a, point_a), (frame_b, point_b), kind)
+            self.add_loop((frame_a, point_a), (frame_b, point_b), kind)
         # The reader gives a multi-DoF joint's start as its configuration entries in
         # Pinocchio's order (a quaternion w last): set_start takes the by-name order.
-        model = scene.model
-        scene.set_start(
+        model = self.model
+        self.set_start(
             {
                 joint: named_value(model, model.getJointId(joint), value)
                 if isinstance(value, list)
@@ -499,7 +299,6 @@ class Scene:
                 for joint, value in mjcf.start.items()
             }
         )
-        return scene
 
     @property
     def poses(self) -> list[str]:
@@ -643,43 +442,51 @@ class Scene:
         nq = model.nqs[j]
         kind = _joint_kind(model, j)
         layout = _LAYOUTS.get(kind)
+        is_list = isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str)
         if model.nvs[j] == 1:
-            if isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str):
+            if is_list:
                 raise SceneError(
                     f"{name}: joint '{model.names[j]}' ({kind}) has one degree of freedom: give "
                     f"one number (rad or m), got {value!r}"
                 )
             x = _number(value, name)
             return np.array([math.cos(x), math.sin(x)]) if nq == 2 else np.array([x])
-        if not isinstance(value, (Sequence, np.ndarray)) or isinstance(value, str):
+        if not is_list:
             raise SceneError(
                 f"{name}: joint '{model.names[j]}' ({kind}) has {nq} configuration entries: "
                 f"give a list of {nq} numbers, got {value!r}" + (f"; {layout}" if layout else "")
             )
-        if layout and not isinstance(value, (str, bytes, Mapping)) and len(value) != nq:
+        if layout and not isinstance(value, (bytes, Mapping)) and len(value) != nq:
             raise SceneError(
                 f"{name}: joint '{model.names[j]}' must have {nq} entries, got {len(value)}: "
                 f"{list(value)!r}; {layout}"
             )
         segment = np.array(_vector(value, name, nq))
         for at, size in _unit_parts(model, j):
-            part = segment[at : at + size]
-            norm = float(np.linalg.norm(part))
-            if abs(norm - 1.0) > UNIT_NORM_SLACK:
-                if size == 4:
-                    raise SceneError(
-                        f"{name}: the quaternion (qw, qx, qy, qz) = ({_show(part)}) has norm "
-                        f"{norm:.6g}; give a unit quaternion, w first (1, 0, 0, 0: no rotation)"
-                    )
-                raise SceneError(
-                    f"{name}: the cos/sin pair ({_show(part)}) of joint '{model.names[j]}' has "
-                    f"norm {norm:.6g}; give a unit pair (1, 0: angle 0)"
-                    + (f"; {layout}" if layout else "")
-                )
-            segment[at : at + size] = part / norm
-            if size == 4:  # w first by name, last in Pinocchio's q
-                segment[at : at + 4] = segment[[at + 1, at + 2, at + 3, at]]
+            segment[at : at + size] = self._unit_part(j, segment[at : at + size], name, layout)
         return segment
+
+    def _unit_part(self, j: int, part: np.ndarray, name: str, layout: str | None) -> np.ndarray:
+        """A quaternion (w first, as given; returned w last, as in Pinocchio's q) or a cos/sin
+        pair of joint j, normalised.
+
+        Raises:
+            SceneError: off unit norm by more than ``UNIT_NORM_SLACK``.
+        """
+        norm = float(np.linalg.norm(part))
+        if abs(norm - 1.0) > UNIT_NORM_SLACK:
+            if part.size == 4:
+                raise SceneError(
+                    f"{name}: the quaternion (qw, qx, qy, qz) = ({_show(part)}) has norm "
+                    f"{norm:.6g}; give a unit quaternion, w first (1, 0, 0, 0: no rotation)"
+                )
+            raise SceneError(
+                f"{name}: the cos/sin pair ({_show(part)}) of joint '{self.model.names[j]}' has "
+                f"norm {norm:.6g}; give a unit pair (1, 0: angle 0)"
+                + (f"; {layout}" if layout else "")
+            )
+        unit = part / norm
+        return unit[[1, 2, 3, 0]] if part.size == 4 else unit
 
     def lock(self, *joints: str) -> Scene:
         """Hold joints at their start value and leave them out of the solve."""
@@ -1087,146 +894,72 @@ class Scene:
         return f"Scene({', '.join(parts)})"
 
 
+def _check_not_locked(scene: Scene) -> None:
+    """A joint spring, load or stop on a locked joint would do nothing: an error."""
+    for kind, items in (
+        ("joint_spring", scene.joint_springs),
+        ("load", scene.loads),
+        ("limit", scene.joint_limits),
+    ):
+        for k, item in enumerate(items, start=1):
+            joint = getattr(item, "joint", None)
+            if joint in scene.locked:
+                raise SceneError(
+                    f"[[{kind}]] #{k} on joint '{joint}': the joint is locked, so "
+                    + ("its stops would" if kind == "limit" else "it would")
+                    + " do nothing"
+                )
+
+
+def _reduced_model(full: pinocchio.Model, locked_ids: list[int], q_ref: np.ndarray) -> Any:
+    """The model without its locked joints (held at their value in q_ref).
+
+    Raises:
+        SceneError: no joint is left to move.
+    """
+    model = pinocchio.buildReducedModel(full, sorted(locked_ids), q_ref) if locked_ids else full
+    if model.nv == 0:
+        raise SceneError(
+            "every joint is locked: nothing to settle"
+            if locked_ids
+            else "no joint moves (the model's joints are all fixed): nothing to settle; "
+            "a free-flyer on the root (--floating, [model] floating = true) lets it fall"
+        )
+    return model
+
+
+def _segments(starts: Any, sizes: Any, joints: list[int]) -> np.ndarray:
+    """The indices of the joints' segments (of q or v), in order."""
+    return np.concatenate([np.arange(starts[j], starts[j] + sizes[j]) for j in joints]).astype(int)
+
+
 class _Compiled:
     """A scene as the solver sees it: the reduced model and index-resolved elements."""
 
     def __init__(self, scene: Scene, q_ref: np.ndarray) -> None:
         full = scene.model
+        _check_not_locked(scene)
         locked_ids = [full.getJointId(name) for name in scene.locked]
-        for kind, items in (
-            ("joint_spring", scene.joint_springs),
-            ("load", scene.loads),
-            ("limit", scene.joint_limits),
-        ):
-            for k, item in enumerate(items, start=1):
-                joint = getattr(item, "joint", None)
-                if joint in scene.locked:
-                    raise SceneError(
-                        f"[[{kind}]] #{k} on joint '{joint}': the joint is locked, so "
-                        + ("its stops would" if kind == "limit" else "it would")
-                        + " do nothing"
-                    )
-        if locked_ids:
-            model = pinocchio.buildReducedModel(full, sorted(locked_ids), q_ref)
-        else:
-            model = full
-        if model.nv == 0:
-            raise SceneError(
-                "every joint is locked: nothing to settle"
-                if locked_ids
-                else "no joint moves (the model's joints are all fixed): nothing to settle; "
-                "a free-flyer on the root (--floating, [model] floating = true) lets it fall"
-            )
+        model = _reduced_model(full, locked_ids, q_ref)
         self.model = model
         kept = [j for j in range(1, full.njoints) if j not in locked_ids]
         # Reduced coordinates are the kept joints' segments, in the same order.
-        self.q_index = np.concatenate(
-            [np.arange(full.idx_qs[j], full.idx_qs[j] + full.nqs[j]) for j in kept]
-        ).astype(int)
-        self.v_index = np.concatenate(
-            [np.arange(full.idx_vs[j], full.idx_vs[j] + full.nvs[j]) for j in kept]
-        ).astype(int)
+        self.q_index = _segments(full.idx_qs, full.nqs, kept)
+        self.v_index = _segments(full.idx_vs, full.nvs, kept)
         assert self.q_index.size == model.nq and self.v_index.size == model.nv
         self.q_ref = np.array(q_ref, dtype=float)
-
-        def frame(name: str) -> int:
-            for kind in (pinocchio.FrameType.BODY, None):
-                for i, f in enumerate(model.frames):
-                    if f.name == name and (kind is None or f.type == kind):
-                        return i
-            raise SceneError(f"frame '{name}' is missing from the reduced model")
-
+        once_locked = ", once the locked joints are removed" if locked_ids else ""
         for k, s in enumerate(scene.springs, start=1):
-            ja = model.frames[frame(s.a_frame)].parentJoint
-            jb = model.frames[frame(s.b_frame)].parentJoint
-            if ja == jb:
-                body = "the world" if ja == 0 else f"the body of joint '{model.names[ja]}'"
-                raise SceneError(
-                    f"[[spring]] #{k}: both ends ('{s.a_frame}' and '{s.b_frame}') are on the "
-                    f"same rigid body ({body}"
-                    + (", once the locked joints are removed" if locked_ids else "")
-                    + "); such a spring exerts no net effort"
-                )
-
-        spec: dict[str, list[tuple[Any, ...]]] = {
-            "joint_springs": [
-                (model.getJointId(s.joint), s.stiffness, s.rest, s.damping)
-                for s in scene.joint_springs
-            ],
-            "springs": [
-                (
-                    frame(s.a_frame),
-                    np.array(s.a_point),
-                    frame(s.b_frame),
-                    np.array(s.b_point),
-                    s.stiffness,
-                    s.rest_length,
-                    s.damping,
-                )
-                for s in scene.springs
-            ],
-            "joint_loads": [
-                (model.getJointId(load.joint), np.array(load.effort))
-                for load in scene.loads
-                if isinstance(load, JointLoad)
-            ],
-            "point_loads": [
-                (
-                    frame(load.frame),
-                    np.array(load.point),
-                    np.array(load.force),
-                    np.array(load.torque),
-                )
-                for load in scene.loads
-                if isinstance(load, PointLoad)
-            ],
-        }
+            self._check_two_bodies(f"[[spring]] #{k}", s, once_locked, "exerts no net effort")
         # No elements: the solver runs the bare core.
-        self.elements = spec if any(spec.values()) else None
+        self.elements = self._elements(scene)
         for k, loop in enumerate(scene.loops, start=1):
-            ja = model.frames[frame(loop.a_frame)].parentJoint
-            jb = model.frames[frame(loop.b_frame)].parentJoint
-            if ja == jb:
-                body = "the world" if ja == 0 else f"the body of joint '{model.names[ja]}'"
-                raise SceneError(
-                    f"[[loop]] #{k}: both ends ('{loop.a_frame}' and '{loop.b_frame}') are on the "
-                    f"same rigid body ({body}"
-                    + (", once the locked joints are removed" if locked_ids else "")
-                    + "); such a loop holds nothing"
-                )
-        couplings: list[tuple[Any, ...]] = []
-        for c in scene.couplings:
-            locked = [joint for joint in (c.follower, c.leader) if joint in scene.locked]
-            if len(locked) == 2:  # both held at their start values
-                continue
-            if locked:
-                raise SceneError(
-                    f"coupling {c.text()}: joint '{locked[0]}' is locked and the other is not; "
-                    "lock both or neither"
-                )
-            couplings.append(
-                (
-                    "coupling",
-                    model.getJointId(c.follower),
-                    model.getJointId(c.leader),
-                    c.multiplier,
-                    c.offset,
-                    f"coupling {c.text()}",
-                )
-            )
+            self._check_two_bodies(f"[[loop]] #{k}", loop, once_locked, "holds nothing")
         #: Loop closures and joint couplings as the C++ core takes them; None for a tree
         #: (plain ABA).
-        self.loops: list[tuple[Any, ...]] | None = [
-            (
-                frame(loop.a_frame),
-                np.array(loop.a_point),
-                frame(loop.b_frame),
-                np.array(loop.b_point),
-                loop.kind,
-                f"[[loop]] #{k} ('{loop.a_frame}' to '{loop.b_frame}')",
-            )
-            for k, loop in enumerate(scene.loops, start=1)
-        ] + couplings or None
+        self.loops: list[tuple[Any, ...]] | None = (
+            self._loops(scene) + self._couplings(scene) or None
+        )
         # Joint stops: the model's own (the reduced model keeps the position limits of the
         # joints it keeps) and those set by name, resolved when the limits setting is known.
         self._own_stops = model_stops(model)
@@ -1237,6 +970,80 @@ class _Compiled:
             _core.static_force(model, pinocchio.neutral(model), self.elements)
         except ValueError as error:  # anything the C++ checks catch that the above did not
             raise SceneError(str(error)) from None
+
+    def _frame(self, name: str) -> int:
+        """A frame of the reduced model by name, a body's first."""
+        for kind in (pinocchio.FrameType.BODY, None):
+            for i, f in enumerate(self.model.frames):
+                if f.name == name and (kind is None or f.type == kind):
+                    return i
+        raise SceneError(f"frame '{name}' is missing from the reduced model")
+
+    def _check_two_bodies(self, where: str, ends: Spring | Loop, once: str, why: str) -> None:
+        """A spring or loop with both ends on one rigid body is an error of the scene."""
+        frames = self.model.frames
+        ja = frames[self._frame(ends.a_frame)].parentJoint
+        jb = frames[self._frame(ends.b_frame)].parentJoint
+        if ja == jb:
+            body = "the world" if ja == 0 else f"the body of joint '{self.model.names[ja]}'"
+            kind = "spring" if isinstance(ends, Spring) else "loop"
+            raise SceneError(
+                f"{where}: both ends ('{ends.a_frame}' and '{ends.b_frame}') are on the "
+                f"same rigid body ({body}{once}); such a {kind} {why}"
+            )
+
+    def _elements(self, scene: Scene) -> dict[str, list[tuple[Any, ...]]] | None:
+        """The force elements as the C++ core takes them (None: there is none)."""
+        model, frame = self.model, self._frame
+        spec: dict[str, list[tuple[Any, ...]]] = {
+            "joint_springs": [
+                (model.getJointId(s.joint), s.stiffness, s.rest, s.damping)
+                for s in scene.joint_springs
+            ],
+            "springs": [
+                (frame(s.a_frame), np.array(s.a_point), frame(s.b_frame), np.array(s.b_point))
+                + (s.stiffness, s.rest_length, s.damping)
+                for s in scene.springs
+            ],
+            "joint_loads": [
+                (model.getJointId(load.joint), np.array(load.effort))
+                for load in scene.loads
+                if isinstance(load, JointLoad)
+            ],
+            "point_loads": [
+                (frame(load.frame), np.array(load.point), np.array(load.force))
+                + (np.array(load.torque),)
+                for load in scene.loads
+                if isinstance(load, PointLoad)
+            ],
+        }
+        return spec if any(spec.values()) else None
+
+    def _loops(self, scene: Scene) -> list[tuple[Any, ...]]:
+        frame = self._frame
+        return [
+            (frame(loop.a_frame), np.array(loop.a_point), frame(loop.b_frame))
+            + (np.array(loop.b_point), loop.kind)
+            + (f"[[loop]] #{k} ('{loop.a_frame}' to '{loop.b_frame}')",)
+            for k, loop in enumerate(scene.loops, start=1)
+        ]
+
+    def _couplings(self, scene: Scene) -> list[tuple[Any, ...]]:
+        """The couplings as the core takes them; one of two locked joints is an error, both
+        locked are held at their start values (nothing to couple)."""
+        out: list[tuple[Any, ...]] = []
+        for c in scene.couplings:
+            locked = [joint for joint in (c.follower, c.leader) if joint in scene.locked]
+            if len(locked) == 2:
+                continue
+            if locked:
+                raise SceneError(
+                    f"coupling {c.text()}: joint '{locked[0]}' is locked and the other is not; "
+                    "lock both or neither"
+                )
+            ids = (self.model.getJointId(c.follower), self.model.getJointId(c.leader))
+            out.append(("coupling", *ids, c.multiplier, c.offset, f"coupling {c.text()}"))
+        return out
 
     def stops_for(self, limits: bool) -> tuple[bool, list[tuple[int, float, float]]] | None:
         """The joint stops for ``_core``: (take the model's limits, [(joint index in the reduced
@@ -1275,51 +1082,7 @@ class _Compiled:
         return out
 
 
-def joint_values(model: pinocchio.Model, q: np.ndarray) -> dict[str, float | list[float]]:
-    """Joint values by name (``named_value``): a number for a 1-DoF joint (the angle of a
-    continuous joint), a list for a multi-DoF joint, each quaternion w first."""
-    return {
-        model.names[j]: named_value(model, j, q[model.idx_qs[j] : model.idx_qs[j] + model.nqs[j]])
-        for j in range(1, model.njoints)
-    }
-
-
 # --- the scene file ----------------------------------------------------------------------------
-
-_TOP_KEYS = ["model", "start", "joint_spring", "spring", "load", "loop", "limit", "solver"]
-_MODEL_KEYS = ["urdf", "robot", "mjcf", "srdf", "floating", "locked", "gravity", "limits", "mimic"]
-_MODEL_KEYS += ["free_objects", "actuator_springs"]
-_JOINT_SPRING_KEYS = ["joint", "stiffness", "rest", "damping"]
-_SPRING_KEYS = ["a", "b", "stiffness", "rest_length", "damping"]
-_LOAD_KEYS = ["joint", "effort", "frame", "point", "force", "torque"]
-_LOOP_KEYS = ["a", "b", "kind"]
-_LIMIT_KEYS = ["joint", "lower", "upper"]
-
-
-def _check_keys(table: Mapping[str, Any], known: list[str], where: str) -> None:
-    for key in table:
-        if key not in known:
-            raise SceneError(f"{where}: " + unknown_key_message("key", key, known))
-
-
-def _table(data: Mapping[str, Any], key: str, where: str) -> dict[str, Any]:
-    value = data.get(key, {})
-    if not isinstance(value, dict):
-        raise SceneError(f"{where} must be a table ([{key}]), got {type(value).__name__}")
-    return value
-
-
-def _tables(data: Mapping[str, Any], key: str) -> list[dict[str, Any]]:
-    value = data.get(key, [])
-    if not isinstance(value, list) or not all(isinstance(x, dict) for x in value):
-        raise SceneError(f"'{key}' must be an array of tables ([[{key}]]), got {value!r}")
-    return value
-
-
-def _required(table: Mapping[str, Any], key: str, where: str) -> Any:
-    if key not in table:
-        raise SceneError(f"{where}: missing key '{key}'")
-    return table[key]
 
 
 def load_scene(
@@ -1440,231 +1203,139 @@ def _description(path: Path) -> str:
 
 
 def _scene_from_dict(data: Mapping[str, Any], path: Path) -> Scene:
-    _check_keys(data, _TOP_KEYS, "top level")
-    if "model" not in data:
-        raise SceneError("missing table [model] (with 'urdf' or 'robot')")
-    m = _table(data, "model", "[model]")
-    _check_keys(m, _MODEL_KEYS, "[model]")
-    floating = m.get("floating", False)
-    if not isinstance(floating, bool):
-        raise SceneError(f"[model] floating must be true or false, got {floating!r}")
-    limits = m.get("limits", True)
-    if not isinstance(limits, bool):
-        raise SceneError(f"[model] limits must be true or false, got {limits!r}")
-    mimic = m.get("mimic")
-    if mimic is not None and not isinstance(mimic, bool):
-        raise SceneError(f"[model] mimic must be true or false, got {mimic!r}")
-    if mimic is not None and "mjcf" in m:
-        raise SceneError(
-            "[model] mimic is for a URDF's <mimic> tags ('urdf' or 'robot'); an MJCF file "
-            "couples joints with <equality><joint>"
-        )
-    free_objects = m.get("free_objects", "keep")
-    if free_objects not in ("keep", "lock"):
-        raise SceneError(
-            f"[model] free_objects must be 'keep' (free objects fall) or 'lock' (fixed where "
-            f"the file places them), got {free_objects!r}"
-        )
-    if "free_objects" in m and "mjcf" not in m:
-        raise SceneError("[model] free_objects is for an MJCF file's free objects ('mjcf')")
-    actuator_springs = m.get("actuator_springs", False)
-    if not isinstance(actuator_springs, bool):
-        raise SceneError(
-            f"[model] actuator_springs must be true or false, got {actuator_springs!r}"
-        )
-    if "actuator_springs" in m and "mjcf" not in m:
-        raise SceneError("[model] actuator_springs is for an MJCF file's actuators ('mjcf')")
-    sources = [key for key in ("urdf", "robot", "mjcf") if key in m]
-    if len(sources) != 1:
-        raise SceneError(
-            "[model] needs exactly one of 'urdf' (a file), 'robot' (an example-robot-data "
-            "name) or 'mjcf' (a MuJoCo MJCF file), got "
-            + ("neither" if not sources else "all three" if len(sources) == 3 else "both")
-            + (f" ({' and '.join(sources)})" if sources else "")
-        )
-    urdf_path: Path | None = None
-    mjcf_scene: Scene | None = None
-    if "urdf" in m:
-        urdf = m["urdf"]
-        if not isinstance(urdf, str):
-            raise SceneError(f"[model] urdf must be a path (str), got {urdf!r}")
-        urdf_path = path.parent / urdf
-        try:
-            model = build_urdf_model(urdf_path, floating=floating)
-        except (FileNotFoundError, ValueError) as error:
-            raise SceneError(f"[model] urdf: {error}") from None
-    elif "mjcf" in m:
-        mjcf = m["mjcf"]
-        if not isinstance(mjcf, str):
-            raise SceneError(f"[model] mjcf must be a path (str), got {mjcf!r}")
-        try:
-            mjcf_scene = Scene.from_mjcf(
-                path.parent / mjcf,
-                floating=floating,
-                free_objects=free_objects,
-                actuator_springs=actuator_springs,
-            )
-        except (FileNotFoundError, SceneError) as error:
-            raise SceneError(f"[model] mjcf: {error}") from None
-        model = mjcf_scene.model
-    else:
-        robot = m["robot"]
-        if not isinstance(robot, str):
-            raise SceneError(f"[model] robot must be a name (str), got {robot!r}")
-        try:
-            model = build_robot_model(robot, floating=floating)
-            urdf_path = robot_urdf(robot)
-        except (KeyError, ValueError, FileNotFoundError) as error:
-            message = error.args[0] if error.args else str(error)
-            raise SceneError(f"[model] robot: {message}") from None
+    """The scene of a parsed scene file: checked against the schema first, then built."""
+    return _build_scene(read_scene_file(data), path)
 
-    if mjcf_scene is not None:
-        scene = mjcf_scene
-        scene.name, scene.description = path.stem, _description(path)
-        scene.limits = limits
-    else:
-        scene = Scene(model, name=path.stem, description=_description(path), limits=limits)
+
+def _build_scene(file: SceneFile, path: Path) -> Scene:
+    """The scene of a checked scene file; errors name the table (the caller adds the file)."""
+    scene = _model_scene(file.model, path)
+    _apply_model_options(scene, file.model, path)
+    _apply_start(scene, file.model, file.start)
+    _add_elements(scene, file)
+    scene.settings = file.settings
+    _check_loops(scene, "[[loop]]")
+    return scene
+
+
+def _at(where: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """``fn(*args, **kwargs)``, its SceneError prefixed with ``where`` (the file's table)."""
+    try:
+        return fn(*args, **kwargs)
+    except SceneError as error:
+        raise SceneError(f"{where}: {error}") from None
+
+
+def _urdf_scene(m: ModelTable, path: Path) -> tuple[Scene, Path | None]:
+    assert m.urdf is not None
+    urdf_path = path.parent / m.urdf
+    try:
+        model = build_urdf_model(urdf_path, floating=m.floating)
+    except (FileNotFoundError, ValueError) as error:
+        raise SceneError(f"[model] urdf: {error}") from None
+    return Scene(model), urdf_path
+
+
+def _mjcf_scene(m: ModelTable, path: Path) -> tuple[Scene, Path | None]:
+    assert m.mjcf is not None
+    try:
+        scene = Scene.from_mjcf(
+            path.parent / m.mjcf,
+            floating=m.floating,
+            free_objects=m.free_objects,
+            actuator_springs=m.actuator_springs,
+        )
+    except (FileNotFoundError, SceneError) as error:
+        raise SceneError(f"[model] mjcf: {error}") from None
+    return scene, None
+
+
+def _robot_scene(m: ModelTable, path: Path) -> tuple[Scene, Path | None]:
+    assert m.robot is not None
+    try:
+        model = build_robot_model(m.robot, floating=m.floating)
+        urdf_path = robot_urdf(m.robot)
+    except (KeyError, ValueError, FileNotFoundError) as error:
+        message = error.args[0] if error.args else str(error)
+        raise SceneError(f"[model] robot: {message}") from None
+    return Scene(model), urdf_path
+
+
+#: How each source of [model] makes the scene (and which URDF it has, for <mimic> and playback).
+_SOURCES: dict[str, Callable[[ModelTable, Path], tuple[Scene, Path | None]]] = {
+    "urdf": _urdf_scene,
+    "robot": _robot_scene,
+    "mjcf": _mjcf_scene,
+}
+
+
+def _model_scene(m: ModelTable, path: Path) -> Scene:
+    """The scene of [model]'s one source, named after the file."""
+    source = next(name for name in ModelTable.SOURCES if getattr(m, name) is not None)
+    scene, urdf_path = _SOURCES[source](m, path)
+    scene.name, scene.description = path.stem, _description(path)
+    scene.limits = m.limits
     scene.path = path
     scene.urdf = urdf_path
-    if urdf_path is not None:
+    return scene
+
+
+def _apply_model_options(scene: Scene, m: ModelTable, path: Path) -> None:
+    """[model]'s mimic, srdf, gravity and locked, in that order."""
+    if scene.urdf is not None:
+        _at("[model] mimic", scene.apply_urdf_mimic, scene.urdf, m.mimic)
+    if m.srdf is not None:
         try:
-            scene.apply_urdf_mimic(urdf_path, mimic)
-        except SceneError as error:
-            raise SceneError(f"[model] mimic: {error}") from None
-    srdf = m.get("srdf")
-    if srdf is not None:
-        if not isinstance(srdf, str):
-            raise SceneError(f"[model] srdf must be a path (str), got {srdf!r}")
-        try:
-            scene.load_srdf(path.parent / srdf)
+            scene.load_srdf(path.parent / m.srdf)
         except (FileNotFoundError, SceneError) as error:
             raise SceneError(f"[model] srdf: {error}") from None
+    if m.gravity is not None:
+        _at("[model]", setattr, scene, "gravity", m.gravity)
+    _at("[model] locked", scene.lock, *m.locked)
 
-    def at(where: str, fn: Any, *args: Any, **kwargs: Any) -> None:
-        try:
-            fn(*args, **kwargs)
-        except SceneError as error:
-            raise SceneError(f"{where}: {error}") from None
 
-    if "gravity" in m:
-        at("[model]", setattr, scene, "gravity", m["gravity"])
-    locked = m.get("locked", [])
-    if not isinstance(locked, list):
-        raise SceneError(f"[model] locked must be a list of joint names, got {locked!r}")
-    at("[model] locked", scene.lock, *locked)
-
-    start = _table(data, "start", "[start]")
+def _apply_start(scene: Scene, m: ModelTable, start: Mapping[str, Any]) -> None:
+    """[start]: a named pose (``pose``, unless the model has a joint of that name; a robot's
+    own SRDF is read for it when the file names none), then joint values by name."""
     if "pose" in start and not scene.model.existJointName("pose"):
         pose = start["pose"]
-        if srdf is None and isinstance(m.get("robot"), str):
-            own = robot_srdf(m["robot"])
+        if m.srdf is None and m.robot is not None:
+            own = robot_srdf(m.robot)
             if own is not None and isinstance(pose, str) and pose not in scene.poses:
-                at("[model] robot's SRDF", scene.load_srdf, own)
-        at("[start] pose", scene.set_pose, pose)
+                _at("[model] robot's SRDF", scene.load_srdf, own)
+        _at("[start] pose", scene.set_pose, pose)
         start = {joint: value for joint, value in start.items() if joint != "pose"}
     for joint, value in start.items():
-        at("[start]", scene.set_start, {joint: value})
+        _at("[start]", scene.set_start, {joint: value})
 
-    for k, s in enumerate(_tables(data, "joint_spring"), start=1):
-        where = f"[[joint_spring]] #{k}"
-        _check_keys(s, _JOINT_SPRING_KEYS, where)
-        at(
-            where,
+
+def _add_elements(scene: Scene, file: SceneFile) -> None:
+    """The arrays of tables, each entry through the Scene method it stands for."""
+    for k, s in enumerate(file.joint_springs, start=1):
+        _at(
+            f"[[joint_spring]] #{k}",
             scene.add_joint_spring,
-            _required(s, "joint", where),
-            _required(s, "stiffness", where),
-            s.get("rest", 0.0),
-            s.get("damping", 0.0),
+            s.joint,
+            s.stiffness,
+            s.rest,
+            s.damping,
         )
-    for k, s in enumerate(_tables(data, "spring"), start=1):
+    for k, sp in enumerate(file.springs, start=1):
         where = f"[[spring]] #{k}"
-        _check_keys(s, _SPRING_KEYS, where)
-        for end in ("a", "b"):
-            if not isinstance(_required(s, end, where), dict):
-                raise SceneError(
-                    f"{where}: {end} must be an inline table {{ frame = ..., point = [x, y, z] }}"
-                    f", got {s[end]!r}"
-                )
-        at(
-            where,
-            scene.add_spring,
-            s["a"],
-            s["b"],
-            _required(s, "stiffness", where),
-            s.get("rest_length", 0.0),
-            s.get("damping", 0.0),
-        )
-    for k, s in enumerate(_tables(data, "load"), start=1):
-        where = f"[[load]] #{k}"
-        _check_keys(s, _LOAD_KEYS, where)
-        if "joint" in s:
-            extra = [key for key in ("frame", "point", "force", "torque") if key in s]
-            if extra:
-                raise SceneError(
-                    f"{where}: a joint load takes 'joint' and 'effort' only, got also '{extra[0]}'"
-                )
-            at(where, scene.add_load, s["joint"], _required(s, "effort", where))
-        elif "frame" in s:
-            if "effort" in s:
-                raise SceneError(f"{where}: 'effort' belongs to a joint load, not a frame load")
-            at(
-                where,
-                scene.add_load,
-                frame=s["frame"],
-                point=s.get("point", (0.0, 0.0, 0.0)),
-                force=_required(s, "force", where),
-                torque=s.get("torque", (0.0, 0.0, 0.0)),
-            )
+        _at(where, scene.add_spring, sp.a, sp.b, sp.stiffness, sp.rest_length, sp.damping)
+    for k, load in enumerate(file.loads, start=1):
+        if load.joint is not None:
+            _at(f"[[load]] #{k}", scene.add_load, load.joint, load.effort)
         else:
-            raise SceneError(f"{where}: needs 'joint' (with 'effort') or 'frame' (with 'force')")
-
-    for k, s in enumerate(_tables(data, "loop"), start=1):
-        where = f"[[loop]] #{k}"
-        _check_keys(s, _LOOP_KEYS, where)
-        for end in ("a", "b"):
-            if not isinstance(_required(s, end, where), dict):
-                raise SceneError(
-                    f"{where}: {end} must be an inline table {{ frame = ..., point = [x, y, z] }}"
-                    f", got {s[end]!r}"
-                )
-        at(where, scene.add_loop, s["a"], s["b"], s.get("kind", "point"))
-
-    first: dict[str, int] = {}
-    for k, s in enumerate(_tables(data, "limit"), start=1):
-        where = f"[[limit]] #{k}"
-        _check_keys(s, _LIMIT_KEYS, where)
-        joint = _required(s, "joint", where)
-        if "lower" not in s and "upper" not in s:
-            raise SceneError(f"{where}: give 'lower', 'upper' or both (rad or m), got neither")
-        if isinstance(joint, str) and joint in first:
-            raise SceneError(
-                f"{where}: joint '{joint}' has its stops in [[limit]] #{first[joint]} already "
-                "(one [[limit]] per joint)"
+            _at(
+                f"[[load]] #{k}",
+                scene.add_load,
+                frame=load.frame,
+                point=load.point,
+                force=load.force,
+                torque=load.torque,
             )
-        at(where, scene.set_limit, joint, s.get("lower"), s.get("upper"))
-        first[joint] = k
-
-    solver = _table(data, "solver", "[solver]")
-    for key, value in solver.items():
-        if key not in SETTING_TYPES:
-            raise SceneError("[solver]: " + unknown_key_message("key", key, list(SETTING_TYPES)))
-        try:
-            set_setting(scene.settings, key, value)
-        except (TypeError, ValueError) as error:
-            raise SceneError(f"[solver]: {error}") from None
-    try:
-        scene.settings.check()
-    except ValueError as error:
-        raise SceneError(f"[solver]: {error}") from None
-
-    scene.compile()  # locked joints and elements resolve now, not at the first solve
-    if scene.loops:
-        # A start the loops cannot be closed from, or loops that lock everything, are errors of
-        # the file.
-        q = scene.assemble()[0]
-        if scene.mobility(q) == 0:
-            raise SceneError(
-                "[[loop]]: the loops leave the mechanism no degree of freedom (every joint "
-                "motion would open a loop): it is a structure, with nothing to settle"
-            )
-    return scene
+    for k, loop in enumerate(file.loops, start=1):
+        _at(f"[[loop]] #{k}", scene.add_loop, loop.a, loop.b, loop.kind)
+    for k, limit in enumerate(file.limits, start=1):
+        _at(f"[[limit]] #{k}", scene.set_limit, limit.joint, limit.lower, limit.upper)

@@ -210,6 +210,106 @@ def _reason(error: BaseException) -> str:
     return f"the cluster could not run this case: {type(error).__name__}: {error}"
 
 
+class _Sent:
+    """The tasks of one sweep on the cluster: sent (again when the cluster drops one), each
+    task's rows taken once."""
+
+    def __init__(self, client: Any, runner: Runner, tasks: Sequence[Task]) -> None:
+        self.client = client
+        self.runner = runner
+        self.tasks = tasks
+        self.blob = _blob(runner)
+        self.token = hashlib.sha256(self.blob).hexdigest()[:12]
+        # The scene as the result of a task, not scattered data: if every worker holding it
+        # dies, the scheduler computes it again (scattered data would be lost, and the tasks
+        # with it).
+        self.shared = client.submit(
+            _scene, self.blob, pure=False, key=f"pinsettle-scene-{self.token}"
+        )
+        self.tries = [0] * len(tasks)
+        #: The futures of the tasks not yet taken, and their tasks' indices.
+        self.pending: dict[Any, int] = {}
+
+    def submit(self, k: int) -> None:
+        """Send task ``k`` (again, after a try that the cluster dropped)."""
+        tries, token = self.tries[k], self.token
+        if self.shared.status == "cancelled":  # the scene itself was dropped: send it again
+            self.shared = self.client.submit(
+                _scene, self.blob, pure=False, key=f"pinsettle-scene-{token}-{tries}-{k}"
+            )
+        key = f"pinsettle-sweep-{token}-{k}" + (f"-try{tries}" if tries else "")
+        future = self.client.submit(remote_run, self.shared, self.tasks[k], pure=False, key=key)
+        self.pending[future] = k
+
+    def take_done(self, collect: Collect) -> None:
+        """Give the rows of each task that ended to ``collect``."""
+        for future in list(self.pending):
+            # One reading of the status: it changes under us as the cluster reports.
+            # 'lost' (its worker died with the result) is not an end: Dask runs it again.
+            status = future.status
+            if status not in ("finished", "error", "cancelled") or not future.done():
+                continue
+            k = self.pending.pop(future)
+            rows = self._rows(future, status, k)
+            if rows is not None:
+                collect(rows)
+
+    def _rows(self, future: Any, status: str, k: int) -> list[tuple[int, dict[str, Any]]] | None:
+        """The rows of task ``k`` that ended with ``status``, or None: it runs again."""
+        try:
+            if status == "finished":
+                rows: list[tuple[int, dict[str, Any]]] = future.result(timeout=GATHER_TIMEOUT)
+                return rows
+            if status == "error":
+                reason = _reason(future.exception(timeout=GATHER_TIMEOUT))
+                return _failed(self.runner, self.tasks[k], reason)
+            raise CancelledError
+        except TimeoutError:  # its worker left with the result: Dask runs it again
+            self.pending[future] = k
+            return None
+        except (CancelledError, asyncio.CancelledError):
+            # Dropped by the cluster (a worker died around it), not by us: again.
+            if self.tries[k] < RESUBMITS:
+                self.tries[k] += 1
+                self.submit(k)
+                return None
+            reason = f"the cluster dropped this case ({self.tries[k] + 1} times, cancelled)"
+            return _failed(self.runner, self.tasks[k], reason)
+
+    def fail_pending(self, collect: Collect, reason: str) -> None:
+        """Give up on the tasks not taken: their cases' rows say ``reason``."""
+        for k in self.pending.values():
+            collect(_failed(self.runner, self.tasks[k], reason))
+        self.pending.clear()
+
+    def cancel(self) -> None:
+        """Cancel the tasks not taken, and the scene's."""
+        if self.pending:
+            self.client.cancel(list(self.pending))
+        self.client.cancel([self.shared])
+
+
+class _NoWorker:
+    """Whether the cluster has had no worker for over ``NO_WORKER_TIMEOUT``, looked at once a
+    second at most."""
+
+    def __init__(self, client: Any) -> None:
+        self.client = client
+        self.since: float | None = None
+        self.checked = time.monotonic()
+
+    def too_long(self) -> bool:
+        now = time.monotonic()
+        if now - self.checked < 1.0:
+            return False
+        self.checked = now
+        if self.client.nthreads():
+            self.since = None
+        elif self.since is None:
+            self.since = now
+        return self.since is not None and now - self.since > NO_WORKER_TIMEOUT
+
+
 def run(
     client: Any, runner: Runner, tasks: Sequence[Task], collect: Collect, stop: Interrupts
 ) -> None:
@@ -217,70 +317,17 @@ def run(
     (``stop.count``) cancels the tasks not finished; their cases are left out."""
     if not tasks:
         return
-    blob = _blob(runner)
-    token = hashlib.sha256(blob).hexdigest()[:12]
-    # The scene as the result of a task, not scattered data: if every worker holding it dies,
-    # the scheduler computes it again (scattered data would be lost, and the tasks with it).
-    shared = client.submit(_scene, blob, pure=False, key=f"pinsettle-scene-{token}")
-    tries = [0] * len(tasks)
-
-    def submit(k: int) -> Any:
-        nonlocal shared
-        if shared.status == "cancelled":  # the scene itself was dropped: send it again
-            shared = client.submit(
-                _scene, blob, pure=False, key=f"pinsettle-scene-{token}-{tries[k]}-{k}"
-            )
-        key = f"pinsettle-sweep-{token}-{k}" + (f"-try{tries[k]}" if tries[k] else "")
-        return client.submit(remote_run, shared, tasks[k], pure=False, key=key)
-
-    pending = {submit(k): k for k in range(len(tasks))}
-    no_worker_since: float | None = None
-    checked = time.monotonic()
+    sent = _Sent(client, runner, tasks)
+    for k in range(len(tasks)):
+        sent.submit(k)
+    no_worker = _NoWorker(client)
     try:
-        while pending:
+        while sent.pending:
             if stop.count:
                 return
-            for future in list(pending):
-                # One reading of the status: it changes under us as the cluster reports.
-                # 'lost' (its worker died with the result) is not an end: Dask runs it again.
-                status = future.status
-                if status not in ("finished", "error", "cancelled") or not future.done():
-                    continue
-                k = pending.pop(future)
-                try:
-                    if status == "finished":
-                        rows = future.result(timeout=GATHER_TIMEOUT)
-                    elif status == "error":
-                        rows = _failed(
-                            runner, tasks[k], _reason(future.exception(timeout=GATHER_TIMEOUT))
-                        )
-                    else:
-                        raise CancelledError
-                except TimeoutError:  # its worker left with the result: Dask runs it again
-                    pending[future] = k
-                    continue
-                except (CancelledError, asyncio.CancelledError):
-                    # Dropped by the cluster (a worker died around it), not by us: again.
-                    if tries[k] < RESUBMITS:
-                        tries[k] += 1
-                        pending[submit(k)] = k
-                        continue
-                    reason = f"the cluster dropped this case ({tries[k] + 1} times, cancelled)"
-                    rows = _failed(runner, tasks[k], reason)
-                collect(rows)
+            sent.take_done(collect)
             time.sleep(0.02)
-            if time.monotonic() - checked < 1.0:
-                continue
-            checked = time.monotonic()
-            if client.nthreads():
-                no_worker_since = None
-            elif no_worker_since is None:
-                no_worker_since = checked
-            elif checked - no_worker_since > NO_WORKER_TIMEOUT:
-                for k in pending.values():
-                    collect(_failed(runner, tasks[k], "no worker left on the cluster"))
-                pending.clear()
+            if no_worker.too_long():
+                sent.fail_pending(collect, "no worker left on the cluster")
     finally:
-        if pending:
-            client.cancel(list(pending))
-        client.cancel([shared])
+        sent.cancel()

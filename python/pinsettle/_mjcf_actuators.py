@@ -87,6 +87,25 @@ class _Actuator:
         attrs = self.element.attrib
         return attrs.get("joint") or attrs.get("jointinparent")
 
+    def spring_like(self) -> bool:
+        """An affine force falling with the length and no dynamics that changes it at rest:
+        kp (ctrl - gear q) at rest, a position actuator."""
+        return (
+            self.gaintype == "fixed"
+            and self.biastype == "affine"
+            and self.bias[1] != 0
+            and self.dyntype in ("none", "filter", "filterexact")
+        )
+
+    def force_limited(self, autolimits: bool) -> bool:
+        return self.forcelimited == "true" or (
+            self.forcelimited == "auto" and autolimits and self.forcerange is not None
+        )
+
+    def stiffness(self) -> float:
+        """The joint spring's stiffness: gear^2 kp."""
+        return -(self.gear**2) * self.bias[1]
+
 
 @dataclass
 class _ActuatorSprings:
@@ -106,7 +125,6 @@ def _actuators(reader: _Reader, flags: Mapping[str, bool], as_springs: bool) -> 
     elements = [el for section in reader.root.findall("actuator") for el in section]
     if not elements:
         return out
-    path = reader.path
     if not flags["actuation"]:
         reader.notes.append(
             f"ignored: {len(elements)} actuator{'s' if len(elements) > 1 else ''} "
@@ -114,135 +132,183 @@ def _actuators(reader: _Reader, flags: Mapping[str, bool], as_springs: bool) -> 
             'disabled (<option><flag actuation="disable">)'
         )
         return out
-    kinds = {j.name: j for body in reader.all_bodies() for j in body.joints}
-    disabled_groups: set[int] = set()
-    for option in reader.root.findall("option"):
-        if "actuatorgroupdisable" in option.attrib:
-            where = f"{path}: <option> actuatorgroupdisable"
-            disabled_groups |= {
-                int(x) for x in _floats(option.attrib["actuatorgroupdisable"], where, range(0, 31))
-            }
-    mapped: list[tuple[int, _Actuator, _Joint]] = []
-    others: list[str] = []
-    position_like = 0
-    force_limited: list[str] = []
-    for k, el in enumerate(elements):
-        label = el.get("name") or f"actuator {k}"
-        where = f"{path}: {_describe(el)} in <actuator>"
-        if el.tag not in _ACTUATOR_TAGS:
-            reader.refuse(
-                _describe(el), "in <actuator> (an actuator pinsettle does not know)", "remove it"
-            )
-            continue
-        cls = el.get("class") or reader.main_class
-        if cls not in reader.actuator_defaults:
-            raise MjcfError(f"{where}: unknown default class '{cls}'")
-        actuator = _Actuator(label, el)
-        for tag, attrs in reader.actuator_defaults[cls]:
-            actuator.apply(tag, attrs, f'{path}: <default class="{cls}"> <{tag}>')
-        actuator.apply(el.tag, el.attrib, where)
-        spring_like = (
-            actuator.gaintype == "fixed"
-            and actuator.biastype == "affine"
-            and actuator.bias[1] != 0
-            and actuator.dyntype in ("none", "filter", "filterexact")
-        )
-        if not as_springs or not spring_like or actuator.group in disabled_groups:
-            others.append(label)
-            position_like += spring_like and actuator.group not in disabled_groups
-            continue
-        name = actuator.target()
-        joint = kinds.get(name or "")
-        if joint is None or joint.kind not in ("hinge", "slide"):
-            on = (
-                f"on {joint.kind} joint '{name}'"
-                if joint is not None
-                else "on a "
-                + next(
-                    (t for t in ("tendon", "site", "body", "cranksite") if t in el.attrib),
-                    "missing joint",
-                )
-            )
-            reader.refuse(
-                f"{_describe(el)} in <actuator>",
-                f"(a position actuator {on}; actuator springs are on hinge and slide joints only)",
-                "leave actuator_springs off",
-            )
-            continue
-        if actuator.bias[1] > 0:
-            reader.refuse(
-                f"{_describe(el)} in <actuator>",
-                "(its force grows with the joint's position, biasprm[1] > 0: no spring)",
-                "leave actuator_springs off",
-            )
-            continue
-        limited = actuator.forcelimited == "true" or (
-            actuator.forcelimited == "auto"
-            and reader.compiler.autolimits
-            and actuator.forcerange is not None
-        )
-        if limited:
-            force_limited.append(label)
-        mapped.append((k, actuator, joint))
-    if others:
-        hint = (
-            " (not position actuators: no spring at a constant control)"
-            if as_springs
-            else "; [model] actuator_springs = true (--actuator-springs) holds the position "
-            "actuators as joint springs"
-            if position_like
-            else ", no control"
-        )
-        reader.notes.append(
-            f"ignored: {len(others)} actuator{'s' if len(others) > 1 else ''} "
-            f"({_names(others)}): statics with constant loads only{hint}"
-        )
-    if not mapped:
+    sorted_out = _sort(reader, elements, as_springs)
+    if sorted_out.others:
+        reader.notes.append(sorted_out.others_note(as_springs))
+    if not sorted_out.mapped:
         return out
-    keys = [
-        (key.get("name") or f"key{k}", key)
-        for section in reader.root.findall("keyframe")
-        for k, key in enumerate(section.findall("key"))
-    ]
-    controls: dict[str, np.ndarray] = {"qpos0": np.zeros(len(elements))}
-    for name, key in keys:
-        where = f'{path}: <key name="{name}"> ctrl'
-        given = key.get("ctrl")
-        controls[name] = (
-            _floats(given, where, (len(elements),)) if given else np.zeros(len(elements))
-        )
-    for k, actuator, joint in mapped:
-        ctrlrange = actuator.ctrlrange
-        if actuator.inheritrange > 0 and "range" in joint.attrs:
-            scale = reader.compiler.angle if joint.kind == "hinge" else 1.0
-            low, high = _floats(joint.attrs["range"], f"{path}: joint '{joint.name}' range", (2,))
-            middle, half = (low + high) / 2 * scale, (high - low) / 2 * scale
-            ctrlrange = (
-                middle - actuator.inheritrange * half,
-                middle + actuator.inheritrange * half,
-            )
-        clamped = ctrlrange is not None and (
-            actuator.ctrllimited == "true"
-            or (actuator.ctrllimited == "auto" and reader.compiler.autolimits)
-        )
-        stiffness = -(actuator.gear**2) * actuator.bias[1]
+    controls = _controls(reader, len(elements))
+    for k, actuator, joint in sorted_out.mapped:
+        ctrlrange = _ctrl_range(reader, actuator, joint)
+        stiffness = actuator.stiffness()
         rests: dict[str, float] = {}
         for pose, ctrl in controls.items():
             c = float(ctrl[k])
-            if clamped and flags["clampctrl"] and ctrlrange is not None:
+            if ctrlrange is not None and flags["clampctrl"]:
                 c = min(max(c, ctrlrange[0]), ctrlrange[1])
             rests[pose] = actuator.gear * (actuator.gain * c + actuator.bias[0]) / stiffness
         out.springs.append((joint.name, stiffness, rests["qpos0"]))
         for pose, rest in rests.items():
             out.rests.setdefault(pose, []).append(rest)
-    described = [f"{a.label} on {j.name} ({-(a.gear**2) * a.bias[1]:g})" for _, a, j in mapped]
-    reader.notes.append(
-        f"position actuators as joint springs (actuator_springs = true): {_names(described)}, "
-        "towards ctrl 0, or the ctrl of the keyframe [start] pose names"
-    )
-    if force_limited:
-        reader.notes.append(
-            f"forcerange of actuators {_names(force_limited)} not applied: their springs are "
-            "linear (check that their force at the rest stays in range)"
-        )
+    reader.notes.extend(sorted_out.springs_notes())
     return out
+
+
+@dataclass
+class _Sorted:
+    """The actuators sorted: those held as joint springs (index, actuator, joint), and the
+    labels of the others, for the notes."""
+
+    mapped: list[tuple[int, _Actuator, _Joint]] = field(default_factory=list)
+    others: list[str] = field(default_factory=list)
+    #: Position actuators among the others (enabled, but actuator_springs is off).
+    position_like: int = 0
+    force_limited: list[str] = field(default_factory=list)
+
+    def others_note(self, as_springs: bool) -> str:
+        hint = (
+            " (not position actuators: no spring at a constant control)"
+            if as_springs
+            else "; [model] actuator_springs = true (--actuator-springs) holds the position "
+            "actuators as joint springs"
+            if self.position_like
+            else ", no control"
+        )
+        return (
+            f"ignored: {len(self.others)} actuator{'s' if len(self.others) > 1 else ''} "
+            f"({_names(self.others)}): statics with constant loads only{hint}"
+        )
+
+    def springs_notes(self) -> list[str]:
+        described = [f"{a.label} on {j.name} ({a.stiffness():g})" for _, a, j in self.mapped]
+        notes = [
+            f"position actuators as joint springs (actuator_springs = true): "
+            f"{_names(described)}, towards ctrl 0, or the ctrl of the keyframe [start] pose names"
+        ]
+        if self.force_limited:
+            notes.append(
+                f"forcerange of actuators {_names(self.force_limited)} not applied: their "
+                "springs are linear (check that their force at the rest stays in range)"
+            )
+        return notes
+
+
+def _sort(reader: _Reader, elements: list[ET.Element], as_springs: bool) -> _Sorted:
+    """Which actuators become joint springs (``as_springs``: enabled position actuators on
+    hinge and slide joints; refused on other transmissions) and which are noted."""
+    joints = {j.name: j for body in reader.all_bodies() for j in body.joints}
+    disabled_groups = _disabled_groups(reader)
+    out = _Sorted()
+    for k, el in enumerate(elements):
+        actuator = _compiled(reader, k, el)
+        if actuator is None:
+            continue
+        spring_like = actuator.spring_like()
+        enabled = actuator.group not in disabled_groups
+        if not as_springs or not spring_like or not enabled:
+            out.others.append(actuator.label)
+            out.position_like += spring_like and enabled
+            continue
+        joint = _spring_joint(reader, actuator, joints)
+        if joint is None:
+            continue
+        if actuator.force_limited(reader.compiler.autolimits):
+            out.force_limited.append(actuator.label)
+        out.mapped.append((k, actuator, joint))
+    return out
+
+
+def _disabled_groups(reader: _Reader) -> set[int]:
+    """The actuator groups <option actuatorgroupdisable> turns off."""
+    disabled_groups: set[int] = set()
+    for option in reader.root.findall("option"):
+        if "actuatorgroupdisable" in option.attrib:
+            where = f"{reader.path}: <option> actuatorgroupdisable"
+            disabled_groups |= {
+                int(x) for x in _floats(option.attrib["actuatorgroupdisable"], where, range(0, 31))
+            }
+    return disabled_groups
+
+
+def _compiled(reader: _Reader, k: int, el: ET.Element) -> _Actuator | None:
+    """The ``k``-th actuator with its class's defaults applied (None: refused, unknown)."""
+    path = reader.path
+    where = f"{path}: {_describe(el)} in <actuator>"
+    if el.tag not in _ACTUATOR_TAGS:
+        reader.refuse(
+            _describe(el), "in <actuator> (an actuator pinsettle does not know)", "remove it"
+        )
+        return None
+    cls = el.get("class") or reader.main_class
+    if cls not in reader.actuator_defaults:
+        raise MjcfError(f"{where}: unknown default class '{cls}'")
+    actuator = _Actuator(el.get("name") or f"actuator {k}", el)
+    for tag, attrs in reader.actuator_defaults[cls]:
+        actuator.apply(tag, attrs, f'{path}: <default class="{cls}"> <{tag}>')
+    actuator.apply(el.tag, el.attrib, where)
+    return actuator
+
+
+def _spring_joint(
+    reader: _Reader, actuator: _Actuator, joints: Mapping[str, _Joint]
+) -> _Joint | None:
+    """The hinge or slide joint a position actuator holds as a spring; None (refused) for
+    another transmission or a force that grows with the position."""
+    el = actuator.element
+    name = actuator.target()
+    joint = joints.get(name or "")
+    if joint is None or joint.kind not in ("hinge", "slide"):
+        on = (
+            f"on {joint.kind} joint '{name}'"
+            if joint is not None
+            else "on a "
+            + next(
+                (t for t in ("tendon", "site", "body", "cranksite") if t in el.attrib),
+                "missing joint",
+            )
+        )
+        reader.refuse(
+            f"{_describe(el)} in <actuator>",
+            f"(a position actuator {on}; actuator springs are on hinge and slide joints only)",
+            "leave actuator_springs off",
+        )
+        return None
+    if actuator.bias[1] > 0:
+        reader.refuse(
+            f"{_describe(el)} in <actuator>",
+            "(its force grows with the joint's position, biasprm[1] > 0: no spring)",
+            "leave actuator_springs off",
+        )
+        return None
+    return joint
+
+
+def _controls(reader: _Reader, count: int) -> dict[str, np.ndarray]:
+    """The controls of each pose: 0 at qpos0, each keyframe's ctrl (0 where it has none)."""
+    controls: dict[str, np.ndarray] = {"qpos0": np.zeros(count)}
+    for section in reader.root.findall("keyframe"):
+        for k, key in enumerate(section.findall("key")):
+            name = key.get("name") or f"key{k}"
+            where = f'{reader.path}: <key name="{name}"> ctrl'
+            given = key.get("ctrl")
+            controls[name] = _floats(given, where, (count,)) if given else np.zeros(count)
+    return controls
+
+
+def _ctrl_range(reader: _Reader, actuator: _Actuator, joint: _Joint) -> tuple[float, float] | None:
+    """The range MuJoCo clamps the control to (its own, or inheritrange of the joint's
+    range), None where it is not clamped."""
+    ctrlrange = actuator.ctrlrange
+    if actuator.inheritrange > 0 and "range" in joint.attrs:
+        scale = reader.compiler.angle if joint.kind == "hinge" else 1.0
+        where = f"{reader.path}: joint '{joint.name}' range"
+        low, high = _floats(joint.attrs["range"], where, (2,))
+        middle, half = (low + high) / 2 * scale, (high - low) / 2 * scale
+        ctrlrange = (
+            middle - actuator.inheritrange * half,
+            middle + actuator.inheritrange * half,
+        )
+    clamped = actuator.ctrllimited == "true" or (
+        actuator.ctrllimited == "auto" and reader.compiler.autolimits
+    )
+    return ctrlrange if clamped else None

@@ -224,6 +224,15 @@ def _starts(scene: Scene, starts: Any, limits: bool | None) -> list[np.ndarray] 
     return _given_starts(starts, scene.model.nq)
 
 
+def _vary(scene: Scene, vary: Mapping[str, Any] | None) -> tuple[list[Key], list[list[Any]]]:
+    """The keys of ``vary`` and the values each takes, checked."""
+    if vary is not None and not isinstance(vary, Mapping):
+        raise TypeError(f"vary must be a dict of key -> values, got {type(vary).__name__}")
+    vary = dict(vary or {})
+    keys = [parse_key(text, scene) for text in vary]
+    return keys, [key_values(key, vary[key.text]) for key in keys]
+
+
 def _combos(keys: list[Key], values: list[list[Any]], pair: bool) -> list[tuple[Any, ...]]:
     """The values of the keys in each case: the full grid, or paired (``zip=True``)."""
     if not pair:
@@ -251,7 +260,7 @@ def _continuation(
             f"it: remove {', '.join(start_keys)} or pass continuation=False"
         )
     if continuation is None:
-        return len(combos) > 1 and (len(keys) == 1 or pair) and not start_keys
+        return bool(len(combos) > 1 and (len(keys) == 1 or pair) and not start_keys)
     return bool(continuation)
 
 
@@ -264,21 +273,14 @@ def _start_columns(scene: Scene, keys: list[Key], given: list[np.ndarray]) -> li
     return [dict(zip(names, joint_row(scene.model, joints, q), strict=True)) for q in given]
 
 
-def _case_q0(model: pinocchio.Model, keys: list[Key], combo: tuple[Any, ...], q: np.ndarray) -> Any:
+def _case_q0(
+    model: pinocchio.Model, keys: list[Key], combo: tuple[Any, ...], q: np.ndarray
+) -> np.ndarray:
     """The start ``q`` with the values of the case's start keys."""
     for key, value in zip(keys, combo, strict=True):
         if key.kind == "start":
             q = start_q(model, q, key, value)
     return q
-
-
-def _vary(scene: Scene, vary: Mapping[str, Any] | None) -> tuple[list[Key], list[list[Any]]]:
-    """The keys of ``vary`` and the values each takes, checked."""
-    if vary is not None and not isinstance(vary, Mapping):
-        raise TypeError(f"vary must be a dict of key -> values, got {type(vary).__name__}")
-    vary = dict(vary or {})
-    keys = [parse_key(text, scene) for text in vary]
-    return keys, [key_values(key, vary[key.text]) for key in keys]
 
 
 def _case_columns(

@@ -10,6 +10,7 @@ import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinsettle
@@ -18,6 +19,10 @@ from scene_statics import Statics
 
 #: The report's sections (``report.py --sections``), in the report's order.
 SECTIONS = ("scenes", "cost", "overhead", "scaling", "gallery")
+
+#: A record as the C++ programs print it (JSON) or a measurement gathers it: settings, a
+#: profile, a gallery row.
+Record = dict[str, Any]
 #: Residual levels of the summary, relative to the scene's force scale.
 RESIDUAL_LEVELS = (1e-6, 1e-10)
 #: Distance levels (rad or m) of the energy-measure comparison.
@@ -186,7 +191,7 @@ class Run:
     scene: str
     method: str  # "kd", "viscous", "fire", "newton"
     label: str
-    settings: dict
+    settings: Record
     status: str
     steps: int
     seconds: list[float]  # wall time of each timed repeat (s)
@@ -196,7 +201,7 @@ class Run:
     landing: Landing
     peaks: int = 0
     curve: Curve | None = None
-    extra: dict = field(default_factory=dict)
+    extra: Record = field(default_factory=dict)
     #: Set-up (s, median) before the first step, part of ``seconds``: charged in full to the
     #: time to a level (0: unknown, spread over the steps).
     setup: float = 0.0
@@ -227,7 +232,7 @@ class Run:
 class SweepPoint:
     """One baseline run of a sweep, stopped at the residual LEVEL (or its budget)."""
 
-    settings: dict
+    settings: Record
     status: str
     steps: int
     seconds: float  # set-up and loop, median of the repeats (s)
@@ -242,7 +247,7 @@ class SweepPoint:
         return self.seconds if self.status == "converged" else None
 
 
-def setting_label(family: str, settings: dict) -> str:
+def setting_label(family: str, settings: Record) -> str:
     if family in ("fire", "fire2"):
         return f"dt_max {settings['dt_max']:g} x limit, {settings['metric']}"
     return f"safety {settings['dt_safety']:g}, {settings['damping_factor']:g} c"
@@ -275,7 +280,7 @@ class Config:
     mujoco_max_sim: float = MUJOCO_MAX_SIM
     gallery_repeats: int = 3
 
-    def sweep(self, family: str) -> list[dict]:
+    def sweep(self, family: str) -> list[Record]:
         """The settings a baseline is run with besides its rule (the rule included)."""
         if family in ("fire", "fire2"):
             return [
@@ -303,25 +308,26 @@ class SceneData:
     baseline_sweep: dict[str, list[SweepPoint]] = field(default_factory=dict)
     sweeps: dict[str, list[Run]] = field(default_factory=dict)
     # benchmarks/kd_profile on the scene (trees): the solver's set-up and overheads.
-    profile: dict | None = None
+    profile: Record | None = None
     apart: bool = False  # reported apart from the baselines' comparison (APART)
+    bench_name: str = ""  # its name in the report (set by the writer)
 
 
 @dataclass
 class Results:
     config: Config
     scenes: dict[str, SceneData] = field(default_factory=dict)
-    step_cost: dict[str, dict] = field(default_factory=dict)
+    step_cost: dict[str, Record] = field(default_factory=dict)
     # benchmarks/loop_step_cost per scene with loops.
-    loop_step_cost: dict[str, dict] = field(default_factory=dict)
-    scaling: list[dict] = field(default_factory=list)
+    loop_step_cost: dict[str, Record] = field(default_factory=dict)
+    scaling: list[Record] = field(default_factory=list)
     # benchmarks/kd_profile on the overhead scenes (goal 4 of issue 20).
-    overhead: dict[str, dict] = field(default_factory=dict)
+    overhead: dict[str, Record] = field(default_factory=dict)
     # The robot gallery: one record per robot, root fixed; and the floating-base robots.
-    gallery: list[dict] = field(default_factory=list)
-    floating: list[dict] = field(default_factory=list)
-    mujoco: dict = field(default_factory=dict)  # version, or why it is not there
-    machine: dict = field(default_factory=dict)
+    gallery: list[Record] = field(default_factory=list)
+    floating: list[Record] = field(default_factory=list)
+    mujoco: Record = field(default_factory=dict)  # version, or why it is not there
+    machine: Record = field(default_factory=dict)
     seconds: float = 0.0
     sections: Sequence[str] = ()  # the sections measured in this run
     section_seconds: dict[str, float] = field(default_factory=dict)

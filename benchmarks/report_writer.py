@@ -6,12 +6,14 @@ stated next to them.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import statistics
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinsettle
@@ -27,7 +29,7 @@ DEFAULTS = pinsettle.Settings()
 # --- formatting ---------------------------------------------------------------------------------
 
 
-def fmt_time(seconds: float) -> str:
+def fmt_time(seconds: float | None) -> str:
     if seconds is None or not math.isfinite(seconds):
         return "-"
     if seconds >= 1.0:
@@ -56,7 +58,7 @@ def plural(n: int, word: str) -> str:
     return f"{n:,} {word}" + ("" if n == 1 else "s")
 
 
-def fmt_e(x: float) -> str:
+def fmt_e(x: float | None) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.1e}"
 
 
@@ -152,7 +154,8 @@ def worst_constraint_error(d: D.SceneData) -> float:
     """Largest final loop error (m) over every KD run on the scene, as measured by the report
     and as reported by the solver."""
     return max(
-        max(r.extra["constraint_error"], r.extra["solver_constraint_error"]) for r in kd_runs(d)
+        float(max(r.extra["constraint_error"], r.extra["solver_constraint_error"]))
+        for r in kd_runs(d)
     )
 
 
@@ -163,12 +166,12 @@ def loop_cost_ratio(results: D.Results, name: str, key: str = "exact") -> float:
     if cost is None:
         return math.nan
     c = cost["ns_per_step"]
-    return statistics.median(c[key]) / statistics.median(c["bare"])
+    return float(statistics.median(c[key]) / statistics.median(c["bare"]))
 
 
 # --- figures -----------------------------------------------------------------------------------
 
-STYLE = {
+STYLE: dict[str, dict[str, Any]] = {
     "kd_exact": dict(color="C0", ls="-", lw=2, label="KD, exact energy"),
     "kd_simplified": dict(color="C0", ls="--", label="KD, simplified energy"),
     "viscous_rule": dict(color="C1", ls="-", label="viscous, joint dampers (rule)"),
@@ -235,7 +238,7 @@ def scene_figure(d: D.SceneData, path: Path) -> None:
     plt.close(fig)
 
 
-def scene_color(k: int):
+def scene_color(k: int) -> str | tuple[float, ...]:
     """The k-th scene's colour in the figures with a line per scene: the ten of matplotlib's
     cycle, then the light shades of tab20 (C10 would be C0 again)."""
     if k < 10:
@@ -260,10 +263,7 @@ def kt_figure(results: D.Results, path: Path) -> None:
             continue
         for energy, ls in (("exact", "-"), ("simplified", "--")):
             x = [kt for kt in results.config.kts]
-            y = [
-                times[(energy, kt)] / best if times[(energy, kt)] is not None else np.nan
-                for kt in x
-            ]
+            y = [np.nan if (t := times[(energy, kt)]) is None else t / best for kt in x]
             ax.plot(
                 x,
                 y,
@@ -380,10 +380,9 @@ repeats. Do not edit by hand: every number below is measured by that command.
 """
 
 
-def summary_rules(results: D.Results) -> str:
-    names = ", ".join(f"`{n}`" for n in loop_scenes(results)) or "none here"
-    s = pinsettle.Settings()
-    return f"""### How it is measured
+#: How the scenes part measures, a template filled by summary_rules (every number in it is
+#: a setting of the report or of the solver, quoted where it is set).
+SUMMARY_RULES = """### How it is measured
 
 **Mechanics.** The scenes are solved without joint stops (`limits = false`): the baselines have
 none, so that every method solves the same problem. Stops are measured in the step cost and the
@@ -402,11 +401,11 @@ For a scene with isolated equilibria that is the scene's reference equilibrium (
 how far from it each run landed); the UR5 and the Panda rest on a family of equilibria (a base
 turning about the vertical, wrist turns), and each run is measured against the member it comes
 to. The reference q* of a scene is kinetic damping with `polish=True` and
-`max_e = {D.DEEP_MAX_E:g}`, refined the same way, checked stable or neutral by the independent
+`max_e = {deep_max_e:g}`, refined the same way, checked stable or neutral by the independent
 stiffness, and checked by one more independent Newton step (`check step` below: its size).
 
-**Curves and time.** Kinetic damping (KD) runs with the default settings (kt = {s.kt:g},
-`dt = "auto"`, `err`, `ds`, `polish = {s.polish}`) but `max_e = {D.DEEP_MAX_E:g}` and
+**Curves and time.** Kinetic damping (KD) runs with the default settings (kt = {kt:g},
+`dt = "auto"`, `err`, `ds`, `polish = {polish}`) but `max_e = {deep_max_e:g}` and
 `newton_takeover = False`, so that the damping alone goes on down to round-off and the curve
 shows how its error falls (up to where the default run stops, at its stopping rule or where
 Newton takes over at a damping event, its trajectory is the same); the default run itself is in
@@ -418,19 +417,19 @@ time to a level is that run's when its polish gets there before the curve does: 
 Python, between calls that leave the caches to the interpreter, a microsecond-long solve takes
 longer (the default run's table gives both). The curve comes
 from a run with `trace_every = 1` and `trace_configurations = True` (at most
-{D.CURVE_SAMPLES} samples: the trace halves its samples when full); its trajectory is checked
+{curve_samples} samples: the trace halves its samples when full); its trajectory is checked
 identical to the timed runs', which trace nothing. **Time to a level is the set-up plus the steps
 to it at the run's measured time per step**, for every method alike: KD's set-up (its checks and
 first step estimate, from the call of `solve` to the end of that estimate) is measured by
 `benchmarks/kd_profile.cpp` on the same scene and charged in full, the rest of the solve's
-`wall_time` (medians of up to {results.config.repeats} repeats, fewer for runs over
-{D.REPEAT_BUDGET:g} s) is spread over its steps (the estimates along the way and the final
+`wall_time` (medians of up to {repeats} repeats, fewer for runs over
+{repeat_budget:g} s) is spread over its steps (the estimates along the way and the final
 stability check included); each baseline's set-up (its step and damping from the start) is timed
 by the baseline program and charged in full too. "Time to a level" is the time from which the
 error stays below it to the end of the run (a swing through q* does not count). Every KD run on
-a scene is limited to {D.STEP_BUDGET_FACTOR} times the steps of the run that found the scene's
-reference (at least {D.STEP_BUDGET_MIN:,}; the dt sweep's runs to at least
-{D.DT_SWEEP_SECONDS:g} s): a setting that keeps it from converging ends there, `max_steps`.
+a scene is limited to {step_budget_factor} times the steps of the run that found the scene's
+reference (at least {step_budget_min:,}; the dt sweep's runs to at least
+{dt_sweep_seconds:g} s): a setting that keeps it from converging ends there, `max_steps`.
 
 **Baselines**, on the same Pinocchio dynamics, C++ (`benchmarks/baselines.cpp`, built against
 the installed package: `pinocchio::aba` in the world convention as KD's step,
@@ -449,7 +448,7 @@ have):
   `c = 2 omega / |phi|^2` (`|phi|^2 = nv / trace(M)` without a mode).
 - *viscous, mass-proportional*: `a = ABA(q, v, tau) - c v` (damping `c M v`), dynamic
   relaxation's classic form: every mode decays at the rate c / 2. Rule: `c = 2 omega`.
-- Their step: a safety factor (rule: {D.DT_SAFETY:g}, KD's default `dt_safety`) times the
+- Their step: a safety factor (rule: {dt_safety:g}, KD's default `dt_safety`) times the
   stability limit of semi-implicit Euler with the damping, `4 / (r + sqrt(r^2 + 4
   omega_max^2))`, r = c max eig(M^-1) (joint dampers) or c (mass-proportional).
 - *FIRE* (Bitzek et al., 2006), classic parameters (N_min 5, f_inc 1.1, f_dec 0.5, alpha_start
@@ -463,14 +462,14 @@ have):
   row. Rule as for FIRE.
 - FIRE's mixing in the **mass-matrix metric** (sweep): `v <- (1 - alpha) v + alpha |v|_M d /
   |d|_M`, `d = M^-1 F` (one more ABA at zero velocity), `|v|_M^2 = v^T M v`.
-- **Their sweeps**: the viscous ones over step safety {fmt_list(results.config.safeties)} and c
-  times {fmt_list(results.config.damping_factors)} the rule's; FIRE and FIRE 2.0 over dt_max
-  {fmt_list(results.config.fire_dt_maxes)} times the stability limit, each in both metrics. A
-  sweep run stops at a residual of {LEVEL:g} of the force scale (checked every 16 steps; FIRE has
-  it every step) or after {D.SWEEP_MAX_TIME:g} s; *best* is the setting with the shortest time to
+- **Their sweeps**: the viscous ones over step safety {safeties} and c
+  times {damping_factors} the rule's; FIRE and FIRE 2.0 over dt_max
+  {fire_dt_maxes} times the stability limit, each in both metrics. A
+  sweep run stops at a residual of {level:g} of the force scale (checked every 16 steps; FIRE has
+  it every step) or after {sweep_max_time:g} s; *best* is the setting with the shortest time to
   that level on the scene (an oracle choice per scene, which favours the baselines), run again
-  with its curve. The rule and the best run until the residual is below {D.BASELINE_TARGET:g} of
-  the force scale or {D.BASELINE_MAX_STEPS:,} steps or {D.BASELINE_MAX_TIME:g} s.
+  with its curve. The rule and the best run until the residual is below {baseline_target:g} of
+  the force scale or {baseline_max_steps:,} steps or {baseline_max_time:g} s.
 - A run that blows up (a non-finite value or a residual 1e6 times the start's) or stalls (FIRE:
   1,000 velocity resets without the residual falling tenfold; FIRE 2.0 also its 2,000 uphill
   steps in a row) is started again with every step halved, up to 6 times.
@@ -483,7 +482,7 @@ have):
   *Newton + line search* halves a step until `|tau_static|_2` falls. At most 50 iterations; where
   it lands is judged with the independent stiffness.
 
-**Closed loops** (scenes with `[[loop]]`: {names}). The solver runs Pinocchio's constrained
+**Closed loops** (scenes with `[[loop]]`: {loop_names}). The solver runs Pinocchio's constrained
 dynamics and keeps the pose on the loops; the report measures the closed mechanism the same way,
 with its own projections (Gauss-Newton on the loop errors of the independent reference). Its
 start is the scene's start moved onto the loops, and the force scale is taken there. The residual
@@ -497,6 +496,32 @@ here from Pinocchio's frame placements and compared with the solver's
 baselines run on trees only.
 
 """
+
+
+def summary_rules(results: D.Results) -> str:
+    config = results.config
+    s = pinsettle.Settings()
+    return SUMMARY_RULES.format(
+        loop_names=", ".join(f"`{n}`" for n in loop_scenes(results)) or "none here",
+        kt=s.kt,
+        polish=s.polish,
+        level=LEVEL,
+        repeats=config.repeats,
+        safeties=fmt_list(config.safeties),
+        damping_factors=fmt_list(config.damping_factors),
+        fire_dt_maxes=fmt_list(config.fire_dt_maxes),
+        baseline_max_steps=D.BASELINE_MAX_STEPS,
+        baseline_max_time=D.BASELINE_MAX_TIME,
+        baseline_target=D.BASELINE_TARGET,
+        curve_samples=D.CURVE_SAMPLES,
+        deep_max_e=D.DEEP_MAX_E,
+        dt_safety=D.DT_SAFETY,
+        dt_sweep_seconds=D.DT_SWEEP_SECONDS,
+        repeat_budget=D.REPEAT_BUDGET,
+        step_budget_factor=D.STEP_BUDGET_FACTOR,
+        step_budget_min=D.STEP_BUDGET_MIN,
+        sweep_max_time=D.SWEEP_MAX_TIME,
+    )
 
 
 def scenes_table(results: D.Results) -> str:
@@ -604,7 +629,7 @@ def _pairs(d: D.SceneData, kts: Sequence[float]) -> list[tuple[float, D.Run, D.R
     return [(kt, by[("exact", kt)], by[("simplified", kt)]) for kt in kts]
 
 
-def energy_tally(results: D.Results, kts: Sequence[float]) -> dict:
+def energy_tally(results: D.Results, kts: Sequence[float]) -> D.Record:
     """Steps to the level, simplified against exact, over the scenes and the given kt."""
     ratios, fewer, more, equal, missing = [], 0, 0, 0, []
     for name, d in results.scenes.items():
@@ -635,7 +660,7 @@ def cost_ratio(results: D.Results, name: str = "ur5") -> float:
     if not cost:
         return math.nan
     c = cost["ns_per_step"]
-    return statistics.median(c["simplified"]) / statistics.median(c["exact"])
+    return float(statistics.median(c["simplified"]) / statistics.median(c["exact"]))
 
 
 def kt_scores(results: D.Results, energy: str) -> dict[float, list[float]]:
@@ -660,146 +685,198 @@ def best_kt(score: dict[float, list[float]]) -> float:
     return min(score, key=key)
 
 
-def conclusions(results: D.Results) -> str:
-    scenes = results.scenes
-    out = ["### In short\n"]
-    # Energy measure: steps (deterministic) over every scene and kt pair, and the cost per step.
+#: The energy measures' verdict, by how the steps' and a step's ratios combine (simplified /
+#: exact, within 5 % either way counts as a tie).
+ENERGY_VERDICTS = {
+    "exact": "**choose the exact measure** (the default): the simplified one is slower",
+    "simplified": "the simplified measure is faster on these scenes",
+    "tie": "the two are within 5 % of each other; the exact measure (the default) has units (J), "
+    "so that its `max_e` means the same on every mechanism",
+}
+
+
+def energy_verdict(ratio: float) -> str:
+    """The verdict for a time ratio simplified / exact (steps times cost per step)."""
+    if ratio > 1.05:
+        return ENERGY_VERDICTS["exact"]
+    if ratio < 1 / 1.05:
+        return ENERGY_VERDICTS["simplified"]
+    return ENERGY_VERDICTS["tie"]
+
+
+def energy_bullet(results: D.Results) -> list[str]:
+    """Energy measure: steps (deterministic) over every scene and kt pair, and the cost per
+    step."""
     t = energy_tally(results, results.config.kts)
     g, c = t["geomean"], cost_ratio(results)
-    if g * c > 1.05:
-        verdict = "**choose the exact measure** (the default): the simplified one is slower"
-    elif g * c < 1 / 1.05:
-        verdict = "the simplified measure is faster on these scenes"
-    else:
-        verdict = (
-            "the two are within 5 % of each other; the exact measure (the default) has units (J), "
-            "so that its `max_e` means the same on every mechanism"
-        )
-    out.append(
+    missing = f" Not reached: {', '.join(t['missing'])}." if t["missing"] else ""
+    return [
         f"- **Energy measure**: over {len(t['ratios'])} scene and kt pairs of the kt sweep, the "
         f"simplified measure needed fewer steps to a residual of {LEVEL:g} in {t['fewer']}, more "
         f"in {t['more']} and as many in {t['equal']}; geometric mean of the step ratios "
         f"simplified / exact: {g:.2f}. One step with the simplified measure driving costs {c:.3f} "
         "times one with the exact measure (step_cost, UR5, medians of interleaved repeats): both "
         "are computed every step from the body velocities ABA produced, whichever drives the "
-        f"detector. So {verdict}."
-        + (f" Not reached: {', '.join(t['missing'])}." if t["missing"] else "")
-    )
-    # kt, by steps (the same loop: time follows steps).
+        f"detector. So {energy_verdict(g * c)}." + missing
+    ]
+
+
+def kt_score_text(kt: float, ratios: list[float]) -> str:
+    bad = sum(not math.isfinite(x) for x in ratios)
+    finite = [x for x in ratios if math.isfinite(x)]
+    return f"kt = {kt:g}: {geomean(finite):.2f}" + (f" ({bad} not reached)" if bad else "")
+
+
+def kt_bullets(results: D.Results) -> list[str]:
+    """kt, by steps (the same loop: time follows steps), for each energy measure."""
+    out = []
     for energy in ("exact", "simplified"):
         score = kt_scores(results, energy)
         chosen = best_kt(score)
-        parts = []
-        for kt, ratios in score.items():
-            bad = sum(not math.isfinite(x) for x in ratios)
-            finite = [x for x in ratios if math.isfinite(x)]
-            parts.append(
-                f"kt = {kt:g}: {geomean(finite):.2f}" + (f" ({bad} not reached)" if bad else "")
-            )
+        default = (
+            " (the default)." if chosen == DEFAULTS.kt else f" (the default is {DEFAULTS.kt:g})."
+        )
         out.append(
             f"- **kt** ({energy} energy): steps to a residual of {LEVEL:g} over the scene's "
-            f"fewest, geometric mean over the {len(scenes)} scenes: "
-            + "; ".join(parts)
+            f"fewest, geometric mean over the {len(results.scenes)} scenes: "
+            + "; ".join(kt_score_text(kt, ratios) for kt, ratios in score.items())
             + f". Best: **kt = {chosen:g}**"
-            + (
-                " (the default)."
-                if chosen == DEFAULTS.kt
-                else f" (the default is {DEFAULTS.kt:g})."
-            )
+            + default
         )
-    # The baselines, by time (their steps cost differently): at their rule and at their best.
+    return out
+
+
+def baseline_bullets(
+    results: D.Results, over_kd: str = "KD's with the default settings"
+) -> list[str]:
+    """The baselines, by time (their steps cost differently): at their rule and at their best,
+    over KD's time (``over_kd`` names it)."""
     names = compared(results)
+    out = []
     for family in BASELINES if names else ():
-        best = {n: ratio_to_kd(scenes[n], f"{family}_best") for n in names}
-        rule = {n: ratio_to_kd(scenes[n], f"{family}_rule") for n in names}
+        best = {n: ratio_to_kd(results.scenes[n], f"{family}_best") for n in names}
+        rule = {n: ratio_to_kd(results.scenes[n], f"{family}_rule") for n in names}
         out.append(
             f"- **{D.BASELINE_LABELS[family]}** (same dynamics, C++, the start only), its time to "
-            f"a residual of {LEVEL:g} over KD's with the default settings: at its rule "
+            f"a residual of {LEVEL:g} over {over_kd}: at its rule "
             f"{median_with_failures(rule)}; at its best {median_with_failures(best)}."
         )
-    if loop_scenes(results):
-        out.append(f"- The {trees_only(results)} (see Closed loops below).")
+    return out
+
+
+def trees_only_bullet(results: D.Results) -> list[str]:
+    if not loop_scenes(results):
+        return []
+    return [f"- The {trees_only(results)} (see Closed loops below)."]
+
+
+def root_kind(run: D.Run) -> str:
+    """Where a Newton run ended, in words: a stable root, no root, ..."""
+    if run.landing.q is None:
+        return "no root"
+    kind = f"{'an' if run.stability[0] in 'aeiou' else 'a'} {run.stability} root"
+    if run.landing.from_reference > 1e-6:
+        kind += " other than the reference q*"
+    return kind
+
+
+def newton_bullets(results: D.Results) -> list[str]:
+    out = []
     for key in ("newton", "newton_ls"):
         kinds: dict[str, list[str]] = {}
-        for name, d in scenes.items():
-            run = d.runs[key]
-            kind = (
-                f"{'an' if run.stability[0] in 'aeiou' else 'a'} {run.stability} root"
-                if run.landing.q is not None
-                else "no root"
-            )
-            if run.landing.q is not None and run.landing.from_reference > 1e-6:
-                kind += " other than the reference q*"
-            kinds.setdefault(kind, []).append(name)
-        label = d.runs[key].label
+        for name, d in results.scenes.items():
+            kinds.setdefault(root_kind(d.runs[key]), []).append(name)
+        label = list(results.scenes.values())[-1].runs[key].label
         out.append(
             f"- **{label}** from the same start: "
             + "; ".join(f"{kind} on {', '.join(names)}" for kind, names in kinds.items())
             + "."
         )
-    # The stopping rule and the other settings.
-    slopes = []
-    for d in scenes.values():
-        runs = [r for r in d.sweeps["max_e"] if r.settings.get("energy") == "exact"]
-        x = [math.log(r.settings["max_e"]) for r in runs if r.distance > 0]
-        y = [math.log(r.distance) for r in runs if r.distance > 0]
-        if len(x) >= 2:
-            slopes.append(float(np.polyfit(x, y, 1)[0]))
-    if slopes:
-        out.append(
-            f"- **max_e** (exact energy) sets the accuracy: the final distance goes as max_e^p "
-            f"with p from {min(slopes):.2f} to {max(slopes):.2f} over the scenes (median "
-            f"{statistics.median(slopes):.2f}; least squares, log-log), at a cost of steps "
-            "(table below). With the simplified measure `max_e` has no unit of energy, so the "
-            "same number stops at another accuracy on each mechanism."
-        )
+    return out
+
+
+def max_e_slope(d: D.SceneData) -> float | None:
+    """The final distance's power of max_e on one scene (exact energy; log-log least squares)."""
+    runs = [r for r in d.sweeps["max_e"] if r.settings.get("energy") == "exact"]
+    x = [math.log(r.settings["max_e"]) for r in runs if r.distance > 0]
+    y = [math.log(r.distance) for r in runs if r.distance > 0]
+    return float(np.polyfit(x, y, 1)[0]) if len(x) >= 2 else None
+
+
+def max_e_bullet(results: D.Results) -> list[str]:
+    slopes = [p for p in map(max_e_slope, results.scenes.values()) if p is not None]
+    if not slopes:
+        return []
+    return [
+        f"- **max_e** (exact energy) sets the accuracy: the final distance goes as max_e^p "
+        f"with p from {min(slopes):.2f} to {max(slopes):.2f} over the scenes (median "
+        f"{statistics.median(slopes):.2f}; least squares, log-log), at a cost of steps "
+        "(table below). With the simplified measure `max_e` has no unit of energy, so the "
+        "same number stops at another accuracy on each mechanism."
+    ]
+
+
+def err_bullet(results: D.Results) -> list[str]:
     stalled: dict[float, list[str]] = {}
-    for name, d in scenes.items():
+    for name, d in results.scenes.items():
         for r in d.sweeps["err"]:
             if r.status != "converged":
                 stalled.setdefault(r.settings["err"], []).append(name)
-    if stalled:
-        out.append(
-            "- **err**: "
-            + "; ".join(
-                f"err = {err:g} kept {', '.join(names)} from converging"
-                for err, names in stalled.items()
-            )
-            + " (a peak counts only when the energy rises and falls by more than err times "
-            "itself within one step; a slow swing sampled by many steps does not, and goes "
-            "undamped); the other values converged on every scene."
+    if not stalled:
+        return []
+    return [
+        "- **err**: "
+        + "; ".join(
+            f"err = {err:g} kept {', '.join(names)} from converging"
+            for err, names in stalled.items()
         )
-    on_off = []
-    for d in scenes.values():
-        runs = {
-            r.settings["backtrack"]: r
-            for r in d.sweeps["backtrack"]
-            if r.settings["energy"] == "exact"
-        }
-        a, b = steps_to(runs[False]), steps_to(runs[True])
-        if a and b:
-            on_off.append(b / a)
-    if on_off:
-        out.append(
-            f"- **Backtracking** (exact energy): steps to a residual of {LEVEL:g} on / off, "
-            f"geometric mean {geomean(on_off):.2f} (from {min(on_off):.2f} to {max(on_off):.2f}; "
-            f"fewer on {sum(x < 1 for x in on_off)} of {len(on_off)} scenes)."
-        )
-    failed = {}
+        + " (a peak counts only when the energy rises and falls by more than err times "
+        "itself within one step; a slow swing sampled by many steps does not, and goes "
+        "undamped); the other values converged on every scene."
+    ]
+
+
+def backtrack_ratio(d: D.SceneData) -> float | None:
+    """Steps to the level with backtracking over without (exact energy); None if one missed."""
+    runs = {
+        r.settings["backtrack"]: r for r in d.sweeps["backtrack"] if r.settings["energy"] == "exact"
+    }
+    a, b = steps_to(runs[False]), steps_to(runs[True])
+    return b / a if a and b else None
+
+
+def backtrack_bullet(results: D.Results) -> list[str]:
+    on_off = [x for x in map(backtrack_ratio, results.scenes.values()) if x is not None]
+    if not on_off:
+        return []
+    return [
+        f"- **Backtracking** (exact energy): steps to a residual of {LEVEL:g} on / off, "
+        f"geometric mean {geomean(on_off):.2f} (from {min(on_off):.2f} to {max(on_off):.2f}; "
+        f"fewer on {sum(x < 1 for x in on_off)} of {len(on_off)} scenes)."
+    ]
+
+
+def dt_bullet(results: D.Results) -> list[str]:
+    scenes = results.scenes
+    failed: dict[str, list[str]] = {}
     for name, d in scenes.items():
         for r in d.sweeps["dt"]:
             if steps_to(r) is None:
                 failed.setdefault(r.label, []).append(name)
-    if failed:
-        out.append(
-            f"- **Time step**: a residual of {LEVEL:g} was not reached with "
-            + "; ".join(f"`{label}` on {', '.join(names)}" for label, names in failed.items())
-            + "; with the automatic step (the default) on "
-            + f"{sum(steps_to(d.sweeps['dt'][0]) is not None for d in scenes.values())} of the "
-            f"{len(scenes)} scenes."
-        )
-    # What the stiff-mode scaling does (the baselines have none).
-    for name, d in scenes.items():
+    if not failed:
+        return []
+    auto = sum(steps_to(d.sweeps["dt"][0]) is not None for d in scenes.values())
+    return [
+        f"- **Time step**: a residual of {LEVEL:g} was not reached with "
+        + "; ".join(f"`{label}` on {', '.join(names)}" for label, names in failed.items())
+        + f"; with the automatic step (the default) on {auto} of the {len(scenes)} scenes."
+    ]
+
+
+def stiff_mode_bullets(results: D.Results) -> list[str]:
+    """What the stiff-mode scaling does (the baselines have none)."""
+    out = []
+    for name, d in results.scenes.items():
         scaled = d.runs["kd_exact"].extra.get("scaled_modes", 0)
         if not scaled:
             continue
@@ -813,16 +890,41 @@ def conclusions(results: D.Results) -> str:
             + outcome_steps_time(runs["auto, unscaled"])
             + ". The baselines have no such scaling: their step is set by the stiff mode."
         )
-    out += closed_loops_short(results)
+    return out
+
+
+def rests_bullet(results: D.Results) -> list[str]:
+    scenes = results.scenes
     kd_ok = [
         name
         for name, d in scenes.items()
         if all(d.runs[k].stability in ("stable", "neutral") for k in ("kd_exact", "kd_simplified"))
     ]
-    out.append(
+    return [
         f"- KD came to a stable or neutral rest on {len(kd_ok)} of the {len(scenes)} scenes with "
         "both energy measures."
+    ]
+
+
+def conclusions(results: D.Results) -> str:
+    # The bullets of "In short", in their order: each a list of lines (empty: not measured).
+    bullets = (
+        energy_bullet,
+        kt_bullets,
+        baseline_bullets,
+        trees_only_bullet,
+        newton_bullets,
+        max_e_bullet,
+        err_bullet,
+        backtrack_bullet,
+        dt_bullet,
+        stiff_mode_bullets,
+        closed_loops_short,
+        rests_bullet,
     )
+    out = ["### In short\n"]
+    for bullet in bullets:
+        out += bullet(results)
     return "\n".join(out) + "\n\n"
 
 
@@ -1014,8 +1116,7 @@ def energy_section(results: D.Results) -> str:
         for level in D.RESIDUAL_LEVELS:
             a, b = e.reach("residual", level), s.reach("residual", level)
             cells.append(f"{fmt_steps(a and a[0])} / {fmt_steps(b and b[0])}")
-        a, b = time_to(e), time_to(s)
-        cells.append(f"{fmt_time(a)} / {fmt_time(b)}")
+        cells.append(f"{fmt_time(time_to(e))} / {fmt_time(time_to(s))}")
         rows.append(cells)
     head = ["scene", "ns per step", f"peaks before residual {LEVEL:g}"]
     head += [f"steps to distance {x:g}" for x in D.DISTANCE_LEVELS]
@@ -1093,11 +1194,11 @@ def stopping_section(results: D.Results, figures: str) -> str:
     names = list(results.scenes)
     for key, label in (("err", "err"), ("ds", "ds"), ("max_e", "max_e")):
         rows = []
-        runs_by_value: dict = {}
+        runs_by_value: dict[tuple[str, float], dict[str, D.Run]] = {}
         for name in names:
             for r in results.scenes[name].sweeps[key]:
-                value = (r.settings.get("energy", "exact"), r.settings[key])
-                runs_by_value.setdefault(value, {})[name] = r
+                by = (r.settings.get("energy", "exact"), r.settings[key])
+                runs_by_value.setdefault(by, {})[name] = r
         for (energy, value), runs in runs_by_value.items():
             cells = [f"{value:g}" + (f" ({energy})" if key == "max_e" else "")]
             for name in names:
@@ -1249,25 +1350,25 @@ def cost_section(results: D.Results) -> str:
     )
 
 
-def solve_time(row: dict) -> float:
+def solve_time(row: D.Record) -> float:
     """A scaling chain's default solve, timed whole with its polish (median of the repeats; the
     profile's parts are timed in the same solve without it)."""
     return float(row["profile"]["median"]["polish_wall"])
 
 
-def solve_steps(row: dict) -> int:
+def solve_steps(row: D.Record) -> int:
     """The steps of a scaling chain's default solve (solve_time's): with Newton's takeover they
     may be fewer than the profile's plain solve took."""
     p = row["profile"]
     return int(p.get("polish_steps", p["steps"]))
 
 
-def measured_chains(results: D.Results) -> list[dict]:
+def measured_chains(results: D.Results) -> list[D.Record]:
     """The chains of the scaling section that pinsettle took (not refused)."""
     return [row for row in results.scaling if "refused" not in row]
 
 
-def refused_chains(results: D.Results) -> list[dict]:
+def refused_chains(results: D.Results) -> list[D.Record]:
     """The chains of the scaling section that pinsettle refused (their rows hold its message)."""
     return [row for row in results.scaling if "refused" in row]
 
@@ -1299,102 +1400,115 @@ def refusals(results: D.Results) -> str:
     return (
         ", ".join(f"{row['n']}" for row in refused)
         + " links: pinsettle refuses the model: "
-        + refused[0]["refused"].strip().splitlines()[-1]
+        + str(refused[0]["refused"]).strip().splitlines()[-1]
         + "\n\n"
     )
 
 
-def pair_slope(a: dict, b: dict) -> float:
+def pair_slope(a: D.Record, b: D.Record) -> float:
     """The exponent of the solve time between two chain lengths."""
     return slope([a["n"], b["n"]], [solve_time(a), solve_time(b)])
 
 
+def scaling_row(row: D.Record) -> list[str]:
+    """One chain length's row of the scaling table."""
+    if "refused" in row:
+        return [str(row["n"]), "**refused**", *["-"] * 11]
+    p = row["profile"]
+    m = p["median"]
+    wall, steps = solve_time(row), max(solve_steps(row), 1)
+    deep = row.get("deep")
+    return [
+        str(row["n"]),
+        f"{p['status']}",
+        f"{solve_steps(row):,}",
+        fmt_time(wall),
+        fmt_time(wall / steps),
+        fmt_time(m["bare_step"]),
+        f"{wall / steps / m['bare_step']:.2f}",
+        f"{fmt_time(m['setup'])} ({m['setup'] / m['wall']:.0%})",
+        f"{p['estimate_count']}: {m['estimates'] / m['wall']:.0%}",
+        f"{p['assessment_count']}: {m['assessments'] / m['wall']:.0%}",
+        fmt_e(row["residual"]),
+        fmt_steps(steps_to(deep)) if deep else "-",
+        fmt_time(time_to(deep)) if deep else "-",
+    ]
+
+
+def converged_chains(results: D.Results) -> list[D.Record]:
+    """The chains whose default solve converged: the ones the growth is fitted over."""
+    return [r for r in measured_chains(results) if r["profile"]["status"] == "converged"]
+
+
+def scaling_fits(results: D.Results) -> str:
+    """The growth of steps, step and time over the converged lengths, and goal 5's verdict."""
+    done = converged_chains(results)
+    if len(done) < 2:
+        return ""
+    n = [r["n"] for r in done]
+    wall = [solve_time(r) for r in done]
+    steps = [solve_steps(r) for r in done]
+    per = [w / s for w, s in zip(wall, steps, strict=True)]
+    bare = [r["profile"]["median"]["bare_step"] for r in done]
+    fits = (
+        f"Least-squares fits (log-log) over the converged lengths ({n[0]} to {n[-1]}): steps "
+        f"grow as n^{slope(n, steps):.2f}, time per step as n^{slope(n, per):.2f} (the bare "
+        f"step as n^{slope(n, bare):.2f}: ABA is O(n)), time as n^{slope(n, wall):.2f}. "
+    )
+    pairs = [(a, b) for a, b in zip(done, done[1:], strict=False) if b["n"] >= 2 * a["n"]]
+    local = [f"{a['n']} to {b['n']}: n^{pair_slope(a, b):.2f}" for a, b in pairs]
+    if local:
+        fits += "Between neighbours, time grows as " + ", ".join(local) + ". "
+    verdict = slope(n, wall) <= 2.0 and all(pair_slope(a, b) <= 2.0 for a, b in pairs)
+    unfinished = unfinished_chains(results)
+    return (
+        fits
+        + "**Goal 5 of issue 20** (time no faster than n^2 over 5 to 1,000 links, a step O(n)): "
+        + ("met over the converged lengths" if verdict else "**not met**")
+        + (f"; {unfinished} (**not met** there)" if unfinished else "")
+        + ".\n\n"
+    )
+
+
+SCALING_COLUMNS = (
+    "links",
+    "status",
+    "steps",
+    "time",
+    "per step",
+    "bare step",
+    "ratio",
+    "set-up",
+    "estimates",
+    "assessments",
+    "final residual",
+    f"steps to {LEVEL:g}",
+    f"time to {LEVEL:g}",
+)
+
+
 def scaling_section(results: D.Results, figures: str) -> str:
-    rows = []
-    for row in results.scaling:
-        if "refused" in row:
-            rows.append([str(row["n"]), "**refused**", *["-"] * 11])
-            continue
-        p = row["profile"]
-        m = p["median"]
-        wall, steps = solve_time(row), max(solve_steps(row), 1)
-        deep = row.get("deep")
-        rows.append(
-            [
-                str(row["n"]),
-                f"{p['status']}",
-                f"{solve_steps(row):,}",
-                fmt_time(wall),
-                fmt_time(wall / steps),
-                fmt_time(m["bare_step"]),
-                f"{wall / steps / m['bare_step']:.2f}",
-                f"{fmt_time(m['setup'])} ({m['setup'] / m['wall']:.0%})",
-                f"{p['estimate_count']}: {m['estimates'] / m['wall']:.0%}",
-                f"{p['assessment_count']}: {m['assessments'] / m['wall']:.0%}",
-                fmt_e(row["residual"]),
-                fmt_steps(steps_to(deep)) if deep else "-",
-                fmt_time(time_to(deep)) if deep else "-",
-            ]
-        )
-    done = [r for r in measured_chains(results) if r["profile"]["status"] == "converged"]
-    fits = ""
-    if len(done) >= 2:
-        n = [r["n"] for r in done]
-        wall = [solve_time(r) for r in done]
-        steps = [solve_steps(r) for r in done]
-        per = [w / s for w, s in zip(wall, steps, strict=True)]
-        bare = [r["profile"]["median"]["bare_step"] for r in done]
-        fits = (
-            f"Least-squares fits (log-log) over the converged lengths ({n[0]} to {n[-1]}): steps "
-            f"grow as n^{slope(n, steps):.2f}, time per step as n^{slope(n, per):.2f} (the bare "
-            f"step as n^{slope(n, bare):.2f}: ABA is O(n)), time as n^{slope(n, wall):.2f}. "
-        )
-        pairs = [(a, b) for a, b in zip(done, done[1:], strict=False) if b["n"] >= 2 * a["n"]]
-        local = [f"{a['n']} to {b['n']}: n^{pair_slope(a, b):.2f}" for a, b in pairs]
-        if local:
-            fits += "Between neighbours, time grows as " + ", ".join(local) + ". "
-        verdict = slope(n, wall) <= 2.0 and all(pair_slope(a, b) <= 2.0 for a, b in pairs)
-        unfinished = unfinished_chains(results)
-        fits += (
-            "**Goal 5 of issue 20** (time no faster than n^2 over 5 to 1,000 links, a step O(n)): "
-            + ("met over the converged lengths" if verdict else "**not met**")
-            + (f"; {unfinished} (**not met** there)" if unfinished else "")
-            + ".\n\n"
-        )
+    config = results.config
     return (
         "Chains of `robots/make_chain.py` (0.1 m, 0.1 kg links) released horizontal, default "
-        f"settings within `max_time = {results.config.scaling_max_time:g}` s, profiled by "
+        f"settings within `max_time = {config.scaling_max_time:g}` s, profiled by "
         "`benchmarks/kd_profile.cpp` (one run past "
-        f"{results.config.deep_chain_max} links, else the median of up to "
-        f"{results.config.sweep_repeats}): status, steps and wall time of the default solve (the "
+        f"{config.deep_chain_max} links, else the median of up to "
+        f"{config.sweep_repeats}): status, steps and wall time of the default solve (the "
         "polish and Newton's takeover included), time per step, a bare `aba` + `integrate` step "
         "and the ratio, the set-up, the step estimates and stability assessments (count: share "
         "of the solve's time with `polish = False`, the damping's own run), the final residual "
         "(relative, independent physics); up to "
-        f"{results.config.deep_chain_max} links also the steps and time to a "
+        f"{config.deep_chain_max} links also the steps and time to a "
         f"residual of {LEVEL:g} (`max_e = {D.DEEP_MAX_E:g}`, `newton_takeover = False`).\n\n"
         + table(
-            [
-                "links",
-                "status",
-                "steps",
-                "time",
-                "per step",
-                "bare step",
-                "ratio",
-                "set-up",
-                "estimates",
-                "assessments",
-                "final residual",
-                f"steps to {LEVEL:g}",
-                f"time to {LEVEL:g}",
-            ],
-            rows,
+            SCALING_COLUMNS,
+            [scaling_row(row) for row in results.scaling],
             right=(0, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12),
         )
         + "\n"
         + refusals(results)
-        + fits
+        + scaling_fits(results)
         + joint_inertia_table(results)
         + f"![scaling]({figures}/scaling.png)\n\n"
     )
@@ -1628,6 +1742,40 @@ def defaults_section(results: D.Results) -> str:
     )
 
 
+def baseline_cell(d: D.SceneData, key: str) -> str:
+    """A baseline run's cell: its time over KD's in bold (its own in brackets), or why not."""
+    run = d.runs[key]
+    r = ratio_to_kd(d, key)
+    t = time_to(run)
+    if r is not None:
+        return f"**{r:.2g}** ({fmt_time(t)})"
+    return f"not reached ({run.status})" if t is None else f"({fmt_time(t)})"
+
+
+def comparison_row(d: D.SceneData, name: str) -> list[str]:
+    tk = kd_time(d)
+    cells = [f"`{name}`", fmt_time(tk) if tk is not None else outcome_time(d.runs[kd_key()])]
+    for family in BASELINES:
+        cells += [baseline_cell(d, f"{family}_{kind}") for kind in ("rule", "best")]
+    return cells
+
+
+def comparison_bullet(results: D.Results, names: list[str], family: str) -> str:
+    """One baseline family over KD, at its rule and at its best, and where its best wins."""
+    rule = {n: ratio_to_kd(results.scenes[n], f"{family}_rule") for n in names}
+    best = {n: ratio_to_kd(results.scenes[n], f"{family}_best") for n in names}
+    sooner = [n for n, r in best.items() if r is not None and r < 1]
+    wins = (
+        f". Faster than KD at its best on {len(sooner)} of {len(names)}: " + ", ".join(sooner)
+        if sooner
+        else ". KD is faster on every scene it reached"
+    )
+    return (
+        f"- **{D.BASELINE_LABELS[family]}**, its time over KD's: at its rule "
+        f"{median_with_failures(rule)}; at its best {median_with_failures(best)}" + wins + "."
+    )
+
+
 def comparison_section(results: D.Results) -> str:
     """The baselines at their rule and at their best against KD's defaults, per scene."""
     names = compared(results)
@@ -1636,40 +1784,8 @@ def comparison_section(results: D.Results) -> str:
     head = ["scene", f"KD (defaults): time to {LEVEL:g}"]
     for family in BASELINES:
         head += [f"{D.BASELINE_LABELS[family]}: rule", "best"]
-    rows = []
-    for name in names:
-        d = results.scenes[name]
-        tk = kd_time(d)
-        cells = [f"`{name}`", fmt_time(tk) if tk is not None else outcome_time(d.runs[kd_key()])]
-        for family in BASELINES:
-            for kind in ("rule", "best"):
-                run = d.runs[f"{family}_{kind}"]
-                r = ratio_to_kd(d, f"{family}_{kind}")
-                t = time_to(run)
-                cells.append(
-                    f"**{r:.2g}** ({fmt_time(t)})"
-                    if r is not None
-                    else f"not reached ({run.status})"
-                    if t is None
-                    else f"({fmt_time(t)})"
-                )
-        rows.append(cells)
-    lines = []
-    for family in BASELINES:
-        rule = {n: ratio_to_kd(results.scenes[n], f"{family}_rule") for n in names}
-        best = {n: ratio_to_kd(results.scenes[n], f"{family}_best") for n in names}
-        sooner = [n for n, r in best.items() if r is not None and r < 1]
-        lines.append(
-            f"- **{D.BASELINE_LABELS[family]}**, its time over KD's: at its rule "
-            f"{median_with_failures(rule)}; at its best {median_with_failures(best)}"
-            + (
-                f". Faster than KD at its best on {len(sooner)} of {len(names)}: "
-                + ", ".join(sooner)
-                if sooner
-                else ". KD is faster on every scene it reached"
-            )
-            + "."
-        )
+    rows = [comparison_row(results.scenes[name], name) for name in names]
+    apart = apart_scenes(results)
     return (
         "### Baselines at their rule and at their best\n\n"
         f"Time to a residual of {LEVEL:g} of each baseline over KD's with the default settings "
@@ -1677,15 +1793,11 @@ def comparison_section(results: D.Results) -> str:
         "ends below the level, its polish included, whichever is sooner), per scene (in bold; "
         "below 1: the baseline is faster; its time in brackets), at its rule "
         "setting and at its best over its sweep (settings in the next table). Tree scenes"
-        + (
-            f", `{'`, `'.join(apart_scenes(results))}` apart (below)"
-            if apart_scenes(results)
-            else ""
-        )
+        + (f", `{'`, `'.join(apart)}` apart (below)" if apart else "")
         + ".\n\n"
         + table(head, rows, right=tuple(range(1, len(head))))
         + "\n"
-        + "\n".join(lines)
+        + "\n".join(comparison_bullet(results, names, family) for family in BASELINES)
         + "\n\n"
         + settings_table(results)
         + sweep_tables(results)
@@ -1864,7 +1976,7 @@ def stops_ratio(results: D.Results, name: str) -> float:
 GOAL4_SCENES = ("ur5", "chain20", "chain100")
 
 
-def overhead_rows(results: D.Results) -> list[dict]:
+def overhead_rows(results: D.Results) -> list[D.Record]:
     """The overhead split per scene, as fractions of the solve's wall time (medians): of the
     plain solve (polish off), and of the default solve (its set-up, estimates, assessments and
     Newton's stiffness matrices; Newton's static-force evaluations, O(n) each, are left out)."""
@@ -1908,7 +2020,7 @@ def overhead_rows(results: D.Results) -> list[dict]:
     return out
 
 
-def goal4_verdict(rows: list[dict]) -> str:
+def goal4_verdict(rows: list[D.Record]) -> str:
     """Goal 4's shares (the damping's own run, polish off, and the default solve), met or not,
     and why not where the default solve's Newton is what passes the bound."""
     text = ", ".join(
@@ -1930,28 +2042,58 @@ def goal4_verdict(rows: list[dict]) -> str:
     return text + ": **not met**." + why
 
 
+def overhead_row(r: D.Record) -> list[str]:
+    w = r["wall"]
+    p = r["parts"]
+    return [
+        f"`{r['name']}`",
+        str(r["nv"]),
+        f"{r['steps']:,} ({r['status']})",
+        fmt_time(w),
+        f"{fmt_time(p['setup'])} ({p['setup'] / w:.0%})",
+        f"{r['estimate_count']}: {fmt_time(p['estimates'])} ({p['estimates'] / w:.0%})",
+        f"{r['assessment_count']}: {fmt_time(p['assessments'])} ({p['assessments'] / w:.0%})",
+        f"**{r['fraction']:.0%}**",
+        f"{fmt_time(r['bare'])} ({r['bare'] / w:.0%})",
+        f"{r['default_steps']:,}, {fmt_time(r['default_wall'])}, {r['polish_iterations']} it.",
+        f"**{r['fraction_polish']:.0%}**",
+    ]
+
+
+OVERHEAD_COLUMNS = (
+    "scene",
+    "nv",
+    "steps",
+    "solve",
+    "set-up",
+    "estimates",
+    "assessments",
+    "overhead",
+    "bare steps",
+    "default solve",
+    "its overhead",
+)
+
+OVERHEAD_INTRO = (
+    "`benchmarks/kd_profile.cpp`: the solve with the default settings but `polish = False` "
+    "(the default is `polish = {polish}`) timed whole (`wall_time`) and in its parts, by "
+    "wrapping the library's "
+    "`computeTimeScale` (step estimates), `assessStability` (rest checks and the final "
+    "verdict) and `computeStiffnessMatrix` (the polish's Newton steps) at link time (`ld "
+    "--wrap`: the solver's code is unchanged, each call timed, nested calls counted once): "
+    "the *set-up* (from the call of `solve` to the end of the first step estimate: the checks "
+    "and the first estimate), the later *step estimates* (count: time), the *stability "
+    "assessments* (count: time), their sum as a fraction of the solve, the bare steps "
+    "(the solve's steps times a bare `aba` + `integrate` step) for scale, and the *default "
+    "solve* (`polish = True`, and with it Newton's takeover at damping events, which may "
+    "end the run before the plain one ends: its steps, wall time and Newton iterations) "
+    "with the same parts and the time of its stiffness matrices (Newton's) as a fraction of "
+    "it; Newton's static-force evaluations, O(n) each, are left out. Medians of repeats "
+    "(the default solves made one after the other, after the plain ones)."
+)
+
+
 def overhead_section(results: D.Results) -> str:
-    rows = []
-    for r in overhead_rows(results):
-        w = r["wall"]
-        rows.append(
-            [
-                f"`{r['name']}`",
-                str(r["nv"]),
-                f"{r['steps']:,} ({r['status']})",
-                fmt_time(w),
-                f"{fmt_time(r['parts']['setup'])} ({r['parts']['setup'] / w:.0%})",
-                f"{r['estimate_count']}: {fmt_time(r['parts']['estimates'])} "
-                f"({r['parts']['estimates'] / w:.0%})",
-                f"{r['assessment_count']}: {fmt_time(r['parts']['assessments'])} "
-                f"({r['parts']['assessments'] / w:.0%})",
-                f"**{r['fraction']:.0%}**",
-                f"{fmt_time(r['bare'])} ({r['bare'] / w:.0%})",
-                f"{r['default_steps']:,}, {fmt_time(r['default_wall'])}, "
-                f"{r['polish_iterations']} it.",
-                f"**{r['fraction_polish']:.0%}**",
-            ]
-        )
     goal = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
     verdict = ""
     if goal:
@@ -1959,42 +2101,12 @@ def overhead_section(results: D.Results) -> str:
             "\n\n**Goal 4 of issue 20** (set-up, step estimates, stability assessments and polish "
             "at most 25% of a solve on the UR5, chain20 and chain100): " + goal4_verdict(goal)
         )
-    s = pinsettle.Settings()
+    rows = [overhead_row(r) for r in overhead_rows(results)]
     return (
-        "`benchmarks/kd_profile.cpp`: the solve with the default settings but `polish = False` "
-        f"(the default is `polish = {s.polish}`) timed whole (`wall_time`) and in its parts, by "
-        "wrapping the library's "
-        "`computeTimeScale` (step estimates), `assessStability` (rest checks and the final "
-        "verdict) and `computeStiffnessMatrix` (the polish's Newton steps) at link time (`ld "
-        "--wrap`: the solver's code is unchanged, each call timed, nested calls counted once): "
-        "the *set-up* (from the call of `solve` to the end of the first step estimate: the checks "
-        "and the first estimate), the later *step estimates* (count: time), the *stability "
-        "assessments* (count: time), their sum as a fraction of the solve, the bare steps "
-        "(the solve's steps times a bare `aba` + `integrate` step) for scale, and the *default "
-        "solve* (`polish = True`, and with it Newton's takeover at damping events, which may "
-        "end the run before the plain one ends: its steps, wall time and Newton iterations) "
-        "with the same parts and the time of its stiffness matrices (Newton's) as a fraction of "
-        "it; Newton's static-force evaluations, O(n) each, are left out. Medians of repeats "
-        "(the default solves made one after the other, after the plain ones)."
+        OVERHEAD_INTRO.format(polish=pinsettle.Settings().polish)
         + verdict
         + "\n\n"
-        + table(
-            [
-                "scene",
-                "nv",
-                "steps",
-                "solve",
-                "set-up",
-                "estimates",
-                "assessments",
-                "overhead",
-                "bare steps",
-                "default solve",
-                "its overhead",
-            ],
-            rows,
-            right=tuple(range(1, 11)),
-        )
+        + table(OVERHEAD_COLUMNS, rows, right=tuple(range(1, 11)))
         + "\n"
     )
 
@@ -2004,63 +2116,75 @@ def slope(x: Sequence[float], y: Sequence[float]) -> float:
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
 
 
-def mujoco_ratio(row: dict) -> float | None:
+def mujoco_ratio(row: D.Record) -> float | None:
     """MuJoCo's wall time over KD's on a robot both settle; None otherwise."""
     mj = row["mujoco"]
     if mj.get("status") != "settled" or row["status"] != "converged":
         return None
-    return statistics.median(mj["seconds"]) / statistics.median(row["seconds"])
+    return float(statistics.median(mj["seconds"]) / statistics.median(row["seconds"]))
 
 
-def gallery_section(results: D.Results, figures: str) -> str:
-    rows = []
-    for r in results.gallery:
-        mj = r["mujoco"]
-        scale = r["force_scale"]
-        rel = r["residual"] / scale if scale > 0 else math.nan
-        stops = ", ".join(f"{j} ({side})" for j, side in r["contacts"].items()) or "-"
-        if mj.get("status") in ("settled", "not settled", "diverged"):
-            mj_cells = [
-                mj["status"],
-                f"{mj['sim_time']:g} s",
-                fmt_time(statistics.median(mj["seconds"]))
-                + ("" if mj["status"] == "settled" else " (the budget, checks included)"),
-                fmt_e(mj["residual"] / scale if scale > 0 else mj["residual"]),
-                f"{max(mj['outside'], 0.0):.1e}",
-                mj["stability"] if mj["stability"] != "unstable" else "**unstable**",
-                f"{mj['distance']:.2g}",
-            ]
-        else:
-            mj_cells = [mj.get("status", "-"), "-", "-", "-", "-", "-", "-"]
-        ratio = mujoco_ratio(r)
-        rows.append(
-            [
-                f"`{r['name']}`",
-                str(r["nv"]),
-                r["status"],
-                f"{r['steps']:,}",
-                fmt_time(statistics.median(r["seconds"])),
-                stops,
-                f"{r['stability']} ({r['verdict']})",
-                fmt_e(rel if scale > 0 else r["residual"]),
-                "yes" if r["outside"] <= 0 else f"**no** ({r['outside']:.1e})",
-                *mj_cells,
-                f"**{ratio:.0f}**" if ratio is not None else "-",
-            ]
-        )
-    failed = [
-        f"`{r['name']}`: {r['mujoco']['reason']}"
-        for r in results.gallery
-        if r["mujoco"].get("status") == "cannot load"
+MUJOCO_MEASURED = ("settled", "not settled", "diverged")
+
+
+def mujoco_cells(mj: D.Record, scale: float) -> list[str]:
+    """The MuJoCo columns of a gallery row ('-' where it did not run)."""
+    if mj.get("status") not in MUJOCO_MEASURED:
+        return [mj.get("status", "-"), "-", "-", "-", "-", "-", "-"]
+    return [
+        mj["status"],
+        f"{mj['sim_time']:g} s",
+        fmt_time(statistics.median(mj["seconds"]))
+        + ("" if mj["status"] == "settled" else " (the budget, checks included)"),
+        fmt_e(mj["residual"] / scale if scale > 0 else mj["residual"]),
+        f"{max(mj['outside'], 0.0):.1e}",
+        mj["stability"] if mj["stability"] != "unstable" else "**unstable**",
+        f"{mj['distance']:.2g}",
     ]
-    ratios = {r["name"]: mujoco_ratio(r) for r in results.gallery}
-    both = {n: x for n, x in ratios.items() if x is not None}
-    inside = [
-        r["name"]
-        for r in results.gallery
-        if r["status"] == "converged" and r["outside"] <= 0 and r["stability"] != "unstable"
+
+
+def gallery_row(r: D.Record) -> list[str]:
+    scale = r["force_scale"]
+    rel = r["residual"] / scale if scale > 0 else math.nan
+    ratio = mujoco_ratio(r)
+    return [
+        f"`{r['name']}`",
+        str(r["nv"]),
+        r["status"],
+        f"{r['steps']:,}",
+        fmt_time(statistics.median(r["seconds"])),
+        ", ".join(f"{j} ({side})" for j, side in r["contacts"].items()) or "-",
+        f"{r['stability']} ({r['verdict']})",
+        fmt_e(rel if scale > 0 else r["residual"]),
+        "yes" if r["outside"] <= 0 else f"**no** ({r['outside']:.1e})",
+        *mujoco_cells(r["mujoco"], scale),
+        f"**{ratio:.0f}**" if ratio is not None else "-",
     ]
-    text = (
+
+
+GALLERY_COLUMNS = (
+    "robot",
+    "nv",
+    "status",
+    "steps",
+    "time",
+    "on a stop",
+    "stability",
+    "residual",
+    "inside limits",
+    "MuJoCo",
+    "simulated",
+    "MuJoCo time",
+    "MuJoCo residual",
+    "past a limit",
+    "MuJoCo rests",
+    "distance",
+    "MuJoCo / KD",
+)
+
+
+def gallery_intro(results: D.Results) -> str:
+    return (
         "Every robot `pinsettle robots` lists, root fixed (`floating = false`), released at rest "
         "from neutral with the default settings (`pinsettle.solve(model)`, joint stops from the "
         "URDF: issue 18), side by side with MuJoCo's damped settle of the same URDF in the same "
@@ -2092,86 +2216,101 @@ def gallery_section(results: D.Results, figures: str) -> str:
         "rad or m: near 0 for the same rest; a robot with neutral directions, such as a base "
         "turning freely, may come to another rest of the same family). Last column: MuJoCo's "
         "time over pinsettle's.\n\n"
-        + table(
-            [
-                "robot",
-                "nv",
-                "status",
-                "steps",
-                "time",
-                "on a stop",
-                "stability",
-                "residual",
-                "inside limits",
-                "MuJoCo",
-                "simulated",
-                "MuJoCo time",
-                "MuJoCo residual",
-                "past a limit",
-                "MuJoCo rests",
-                "distance",
-                "MuJoCo / KD",
-            ],
-            rows,
-            right=(1, 3, 4, 7, 10, 11, 12, 13, 15, 16),
+    )
+
+
+def mujoco_both(results: D.Results) -> dict[str, float]:
+    """MuJoCo's time over pinsettle's, on the robots both settle."""
+    ratios = {r["name"]: mujoco_ratio(r) for r in results.gallery}
+    return {n: x for n, x in ratios.items() if x is not None}
+
+
+def settled_inside(results: D.Results) -> list[str]:
+    """The robots pinsettle settled inside their limits, not on an unstable rest."""
+    return [
+        r["name"]
+        for r in results.gallery
+        if r["status"] == "converged" and r["outside"] <= 0 and r["stability"] != "unstable"
+    ]
+
+
+def saddle_note(results: D.Results, both: dict[str, float]) -> str:
+    """Where MuJoCo stopped on a saddle, and its ratio without those robots."""
+    unstable = mujoco_saddle_stops(results.gallery, both)
+    if not unstable:
+        return ""
+    text = (
+        f" MuJoCo's settle ends on an unstable rest (a saddle its damped motion did not "
+        f"leave) on {', '.join(unstable)}: there pinsettle pushes off and goes on to a "
+        "stable rest, so the two times are of different answers."
+    )
+    fair = [both[n] for n in both if n not in unstable]
+    if fair:
+        text += (
+            f" Without them, MuJoCo took {statistics.median(fair):.0f} times pinsettle's "
+            f"time (median over {len(fair)}; {min(fair):.1f} to {max(fair):.0f})."
         )
+    return text
+
+
+def goal3_paragraph(both: dict[str, float]) -> str:
+    if not both:
+        return ""
+    values = sorted(both.values())
+    below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
+    met = not below and statistics.median(values) >= 300
+    return (
+        f"\n\n**Goal 3 of issue 20** (at least 100 times faster than MuJoCo on every robot "
+        f"both settle, median at least 300 times): over the {len(both)} robots both settle, "
+        f"MuJoCo took {statistics.median(values):.0f} times pinsettle's time (median; "
+        f"{values[0]:.1f} to {values[-1]:.0f})"
+        + (f"; below 100 on {', '.join(below)}" if below else "")
+        + (": met." if met else ": **not met**.")
+    )
+
+
+def floating_table(results: D.Results) -> str:
+    if not results.floating:
+        return ""
+    rows = [
+        [
+            f"`{r['name']}`",
+            str(r["nv"]),
+            r["status"],
+            f"{r['steps']:,}",
+            fmt_spread(r["seconds"]),
+            r["reason"] or "-",
+        ]
+        for r in results.floating
+    ]
+    return (
+        "The floating-base robots with their free-flyer (`floating = true`), default "
+        "settings: they fall (no ground), and the solver should say `no_equilibrium` "
+        "quickly.\n\n"
+        + table(["robot", "nv", "status", "steps", "time", "reason"], rows, right=(1, 3, 4))
         + "\n"
     )
-    text += (
+
+
+def gallery_section(results: D.Results, figures: str) -> str:
+    rows = [gallery_row(r) for r in results.gallery]
+    failed = [
+        f"`{r['name']}`: {r['mujoco']['reason']}"
+        for r in results.gallery
+        if r["mujoco"].get("status") == "cannot load"
+    ]
+    both = mujoco_both(results)
+    text = (
+        gallery_intro(results)
+        + table(GALLERY_COLUMNS, rows, right=(1, 3, 4, 7, 10, 11, 12, 13, 15, 16))
+        + "\n"
         f"pinsettle converged inside the limits (independent check) and not on an unstable rest "
-        f"on {len(inside)} of {len(results.gallery)} robots."
+        f"on {len(settled_inside(results))} of {len(results.gallery)} robots."
     )
     if failed:
         text += " MuJoCo cannot load " + "; ".join(failed) + "."
-    unstable = mujoco_saddle_stops(results.gallery, both)
-    if unstable:
-        text += (
-            f" MuJoCo's settle ends on an unstable rest (a saddle its damped motion did not "
-            f"leave) on {', '.join(unstable)}: there pinsettle pushes off and goes on to a "
-            "stable rest, so the two times are of different answers."
-        )
-        fair = [both[n] for n in both if n not in unstable]
-        if fair:
-            text += (
-                f" Without them, MuJoCo took {statistics.median(fair):.0f} times pinsettle's "
-                f"time (median over {len(fair)}; {min(fair):.1f} to {max(fair):.0f})."
-            )
-    if both:
-        values = sorted(both.values())
-        below = [n for n, x in both.items() if x < 100]
-        text += (
-            f"\n\n**Goal 3 of issue 20** (at least 100 times faster than MuJoCo on every robot "
-            f"both settle, median at least 300 times): over the {len(both)} robots both settle, "
-            f"MuJoCo took {statistics.median(values):.0f} times pinsettle's time (median; "
-            f"{values[0]:.1f} to {values[-1]:.0f})"
-            + (
-                f"; below 100 on {', '.join(f'{n} ({both[n]:.1f})' for n in below)}"
-                if below
-                else ""
-            )
-            + (": met." if not below and statistics.median(values) >= 300 else ": **not met**.")
-        )
-    text += f"\n\n![gallery]({figures}/gallery.png)\n\n"
-    if results.floating:
-        rows = [
-            [
-                f"`{r['name']}`",
-                str(r["nv"]),
-                r["status"],
-                f"{r['steps']:,}",
-                fmt_spread(r["seconds"]),
-                r["reason"] or "-",
-            ]
-            for r in results.floating
-        ]
-        text += (
-            "The floating-base robots with their free-flyer (`floating = true`), default "
-            "settings: they fall (no ground), and the solver should say `no_equilibrium` "
-            "quickly.\n\n"
-            + table(["robot", "nv", "status", "steps", "time", "reason"], rows, right=(1, 3, 4))
-            + "\n"
-        )
-    return text
+    text += saddle_note(results, both) + goal3_paragraph(both)
+    return text + f"\n\n![gallery]({figures}/gallery.png)\n\n" + floating_table(results)
 
 
 def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None, int] | None:
@@ -2181,13 +2320,13 @@ def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None, in
     halved), with that run's velocity resets (None for the viscous baselines) and its steps to
     the level; None when none got there."""
     fire = family.startswith("fire")
-    found = [
-        (time_to(run), run.extra.get("resets") if fire else None, int(steps_to(run)))
-        for run in (d.runs[f"{family}_rule"], d.runs[f"{family}_best"])
-        if time_to(run) is not None
-    ]
+    found: list[tuple[float, int | None, int]] = []
+    for run in (d.runs[f"{family}_rule"], d.runs[f"{family}_best"]):
+        hit = run.reach("residual", LEVEL)  # (steps, time)
+        if hit is not None:
+            found.append((hit[1], run.extra.get("resets") if fire else None, int(hit[0])))
     found += [
-        (p.time_to, p.resets if fire else None, p.steps)
+        (p.seconds, p.resets if fire else None, p.steps)
         for p in d.baseline_sweep.get(family, [])
         if p.time_to is not None
     ]
@@ -2243,7 +2382,7 @@ def goal1_reasons(
     return text
 
 
-def goal3_reasons(gallery: list[dict], both: dict[str, float]) -> str:
+def goal3_reasons(gallery: list[D.Record], both: dict[str, float]) -> str:
     """Why pinsettle is less than 100 times faster than MuJoCo on a robot, from what was
     measured: MuJoCo stopped on a saddle (another answer), or pinsettle's run is a few steps
     against MuJoCo's shortest settle (the still window it must pass)."""
@@ -2279,7 +2418,7 @@ def goal3_reasons(gallery: list[dict], both: dict[str, float]) -> str:
     return text
 
 
-def mujoco_saddle_stops(gallery: list[dict], both: dict[str, float]) -> list[str]:
+def mujoco_saddle_stops(gallery: list[D.Record], both: dict[str, float]) -> list[str]:
     """The robots both settle (``both``) where MuJoCo's settle ended on an unstable rest."""
     return [
         r["name"]
@@ -2327,144 +2466,233 @@ def joint_inertia_growth(results: D.Results) -> str:
     )
 
 
-def goals_section(results: D.Results) -> str:
-    """The goals of issues 18 and 20, each measured in this run: met or not, in plain words."""
-    lines = []
+@dataclasses.dataclass
+class Behind:
+    """The scenes where KD is slower than a baseline at its best, for goal 1's line: one entry
+    each, and the scenes each reason of goal1_reasons applies to."""
+
+    entries: list[str] = dataclasses.field(default_factory=list)
+    frequent: list[str] = dataclasses.field(default_factory=list)
+    setup_heavy: list[str] = dataclasses.field(default_factory=list)
+    single: list[tuple[str, str, int, float, int, float]] = dataclasses.field(default_factory=list)
+
+
+def behind_entry(
+    name: str, label: str, t_b: float, t_k: float, kd: D.Run, resets: int | None
+) -> str:
+    """'name (baseline time against KD's; how often KD damps; its set-up's share)'."""
+    every = kd.steps / kd.peaks if kd.peaks else math.inf
+    reset = f" ({kd.peaks:,} times), {label} resets {resets:,} times" if resets is not None else ""
+    return (
+        f"{name} ({label} {fmt_time(t_b)} against KD's {fmt_time(t_k)}; KD damps once every "
+        f"{every:.0f} steps" + reset + f"; KD's set-up {fmt_time(kd.setup)} is "
+        f"{kd.setup / t_k:.0%} of its time)"
+    )
+
+
+def note_behind(behind: Behind, name: str, d: D.SceneData) -> None:
+    """Add the scene to ``behind`` where KD did not reach the level or a baseline was faster."""
+    reach = kd_reach(d)
+    if reach is None:
+        behind.entries.append(f"{name} (KD did not reach it)")
+        return
+    tk, steps_k = reach
+    bests = {f: b for f in BASELINES if (b := fastest_baseline(d, f)) is not None}
+    faster = {f: b[0] for f, b in bests.items() if b[0] < tk}
+    if not faster:
+        return
+    f = min(faster, key=lambda family: faster[family])
+    kd = d.runs[kd_key()]
+    label = D.BASELINE_LABELS[f]
+    behind.entries.append(behind_entry(name, label, faster[f], tk, kd, bests[f][1]))
+    every = kd.steps / kd.peaks if kd.peaks else math.inf
+    if every < FREQUENT_DAMPING and d.nv > 1:  # one mode: no slow swing to stop
+        behind.frequent.append(name)
+    if d.nv == 1 and steps_k:
+        behind.single.append((name, label, bests[f][2], faster[f], steps_k, tk))
+    if kd.setup / tk > SETUP_HEAVY:  # of the time the line gives, set-up included
+        behind.setup_heavy.append(name)
+
+
+def fire_rule_failures(results: D.Results) -> str:
+    """Where FIRE at its rule did not reach the level, and how many of those KD settled."""
+    scenes = results.scenes
+    fails = [
+        n for n, d in scenes.items() if d.baseline_sweep and time_to(d.runs["fire_rule"]) is None
+    ]
+    if not fails:
+        return ". FIRE at its rule fails none"
+    kd_ok = [n for n in fails if kd_time(scenes[n]) is not None]
+    return f". FIRE at its rule fails {', '.join(fails)}; KD settles {len(kd_ok)} of them"
+
+
+def goal1_lines(results: D.Results) -> list[str]:
     names = compared(results)
-    if names:
-        behind, frequent, setup_heavy = [], [], []
-        single: list[tuple[str, str, int, float, int, float]] = []
-        for name in names:
-            d = results.scenes[name]
-            reach = kd_reach(d)
-            bests = {f: fastest_baseline(d, f) for f in BASELINES}
-            bests = {f: b for f, b in bests.items() if b is not None}
-            if reach is None:
-                behind.append(f"{name} (KD did not reach it)")
-                continue
-            tk, steps_k = reach
-            faster = {f: t for f, (t, _, _) in bests.items() if t < tk}
-            if faster:
-                f = min(faster, key=faster.get)
-                kd = d.runs[kd_key()]
-                every = kd.steps / kd.peaks if kd.peaks else math.inf
-                share = kd.setup / tk  # of the time the line gives, set-up included
-                resets = bests[f][1]
-                behind.append(
-                    f"{name} ({D.BASELINE_LABELS[f]} {fmt_time(faster[f])} against KD's "
-                    f"{fmt_time(tk)}; KD damps once every {every:.0f} steps"
-                    + (
-                        f" ({kd.peaks:,} times), {D.BASELINE_LABELS[f]} resets {resets:,} times"
-                        if resets is not None
-                        else ""
-                    )
-                    + f"; KD's set-up {fmt_time(kd.setup)} is {share:.0%} of its time)"
-                )
-                if every < FREQUENT_DAMPING and d.nv > 1:  # one mode: no slow swing to stop
-                    frequent.append(name)
-                if d.nv == 1 and steps_k:
-                    label = D.BASELINE_LABELS[f]
-                    single.append((name, label, bests[f][2], faster[f], steps_k, tk))
-                if share > SETUP_HEAVY:
-                    setup_heavy.append(name)
-        fire_fails = [
-            n
-            for n in results.scenes
-            if results.scenes[n].baseline_sweep
-            and time_to(results.scenes[n].runs["fire_rule"]) is None
-        ]
-        kd_ok = [n for n in fire_fails if kd_time(results.scenes[n]) is not None]
-        lines.append(
-            f"- **Goal 1** (KD with the default settings at least as fast to a residual of "
-            f"{LEVEL:g} as every baseline at its best, on every tree scene; a baseline's best is "
-            "its fastest run to that level: its rule, a point of its sweep or the sweep's best "
-            "setting run in full): "
-            + (
-                f"met on {len(names) - len(behind)} of {len(names)}; **not met** on "
-                + "; ".join(behind)
-                if behind
-                else f"met on all {len(names)}"
-            )
-            + (
-                f". FIRE at its rule fails {', '.join(fire_fails)}; KD settles {len(kd_ok)} of them"
-                if fire_fails
-                else ". FIRE at its rule fails none"
-            )
-            + " (the whole comparison, per scene, in the Scenes part)."
-            + goal1_reasons(frequent, setup_heavy, single)
-        )
-        defaults = [
-            (n, d.runs["kd_default"]) for n, d in results.scenes.items() if "kd_default" in d.runs
-        ]
-        worse = [f"{n} ({fmt_e(r.residual)})" for n, r in defaults if not r.residual <= LEVEL]
-        lines.append(
-            f"- **Goal 2** (the default run ends at a relative residual of at most {LEVEL:g}): "
-            + (
-                f"**not met** on {len(worse)} of {len(defaults)} scenes: " + ", ".join(worse)
-                if worse
-                else f"met on all {len(defaults)} scenes"
-            )
-            + "."
-        )
-    if results.gallery:
-        both = {r["name"]: mujoco_ratio(r) for r in results.gallery if mujoco_ratio(r)}
-        if both:
-            values = list(both.values())
-            below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
-            lines.append(
-                f"- **Goal 3** (at least 100 times faster than MuJoCo's damped settle on every "
-                f"robot both settle, median at least 300): median {statistics.median(values):.0f} "
-                f"over {len(values)} robots"
-                + (f"; below 100: {', '.join(below)}" if below else "")
-                + (": met." if not below and statistics.median(values) >= 300 else ": **not met**.")
-                + goal3_reasons(results.gallery, both)
-            )
+    if not names:
+        return []
+    behind = Behind()
+    for name in names:
+        note_behind(behind, name, results.scenes[name])
+    done = len(names) - len(behind.entries)
+    verdict = (
+        f"met on {done} of {len(names)}; **not met** on " + "; ".join(behind.entries)
+        if behind.entries
+        else f"met on all {len(names)}"
+    )
+    return [
+        f"- **Goal 1** (KD with the default settings at least as fast to a residual of "
+        f"{LEVEL:g} as every baseline at its best, on every tree scene; a baseline's best is "
+        "its fastest run to that level: its rule, a point of its sweep or the sweep's best "
+        "setting run in full): "
+        + verdict
+        + fire_rule_failures(results)
+        + " (the whole comparison, per scene, in the Scenes part)."
+        + goal1_reasons(behind.frequent, behind.setup_heavy, behind.single)
+    ]
+
+
+def goal2_lines(results: D.Results) -> list[str]:
+    if not compared(results):
+        return []
+    defaults = [
+        (n, d.runs["kd_default"]) for n, d in results.scenes.items() if "kd_default" in d.runs
+    ]
+    worse = [f"{n} ({fmt_e(r.residual)})" for n, r in defaults if not r.residual <= LEVEL]
+    verdict = (
+        f"**not met** on {len(worse)} of {len(defaults)} scenes: " + ", ".join(worse)
+        if worse
+        else f"met on all {len(defaults)} scenes"
+    )
+    return [
+        f"- **Goal 2** (the default run ends at a relative residual of at most {LEVEL:g}): "
+        + verdict
+        + "."
+    ]
+
+
+def goal3_lines(results: D.Results) -> list[str]:
+    both = mujoco_both(results)
+    if not both:
+        return []
+    median = statistics.median(both.values())
+    below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
+    return [
+        f"- **Goal 3** (at least 100 times faster than MuJoCo's damped settle on every "
+        f"robot both settle, median at least 300): median {median:.0f} over {len(both)} robots"
+        + (f"; below 100: {', '.join(below)}" if below else "")
+        + (": met." if not below and median >= 300 else ": **not met**.")
+        + goal3_reasons(results.gallery, both)
+    ]
+
+
+def goal4_rows(results: D.Results) -> list[D.Record]:
+    """The overhead rows goal 4 names (a quick run: the scenes it has)."""
     rows = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
-    rows = rows or overhead_rows(results)  # a quick run: the scenes it has
-    if rows:
-        lines.append(
-            "- **Goal 4** (set-up, step estimates, stability assessments and polish at most 25% "
-            "of a solve on the UR5, chain20, chain100): " + goal4_verdict(rows)
-        )
-    done = [r for r in measured_chains(results) if r["profile"]["status"] == "converged"]
-    if len(done) >= 2:
-        n = [r["n"] for r in done]
+    return rows or overhead_rows(results)
+
+
+def goal4_lines(results: D.Results) -> list[str]:
+    rows = goal4_rows(results)
+    if not rows:
+        return []
+    return [
+        "- **Goal 4** (set-up, step estimates, stability assessments and polish at most 25% "
+        "of a solve on the UR5, chain20, chain100): " + goal4_verdict(rows)
+    ]
+
+
+@dataclasses.dataclass
+class ChainGrowth:
+    """The converged chains' lengths and, for each, the default solve's time, steps and time
+    per step: what goal 5 and the README's chains line fit."""
+
+    n: list[int]
+    wall: list[float]
+    steps: list[int]
+    per: list[float]
+
+    @classmethod
+    def of(cls, results: D.Results) -> ChainGrowth | None:
+        done = converged_chains(results)
+        if len(done) < 2:
+            return None
         wall = [solve_time(r) for r in done]
         per = [w / max(solve_steps(r), 1) for w, r in zip(wall, done, strict=True)]
-        unfinished = unfinished_chains(results)
-        lines.append(
-            f"- **Goal 5** (time no faster than n^2 from 5 to 1,000 links, a step O(n)): time "
-            f"grows as n^{slope(n, wall):.2f} and a step as n^{slope(n, per):.2f} over "
-            f"{n[0]} to {n[-1]} links"
-            + (
-                f"; {unfinished}: **not met**."
-                if unfinished
-                else (": met." if slope(n, wall) <= 2 else ": **not met**.")
-            )
-            + goal5_reasons(results, n, [solve_steps(r) for r in done], per, wall)
+        return cls([r["n"] for r in done], wall, [solve_steps(r) for r in done], per)
+
+    def text(self) -> str:
+        return (
+            f"time grows as n^{slope(self.n, self.wall):.2f} and a step as "
+            f"n^{slope(self.n, self.per):.2f} over {self.n[0]} to {self.n[-1]} links"
         )
-    if results.step_cost:
-        ratios = {n: stops_ratio(results, n) for n in ("ur5", "panda") if n in results.step_cost}
-        if ratios:
-            lines.append(
-                "- **Issue 18, step cost** (a step with joint stops at most 1.1 times one "
-                "without, UR5 and Panda): "
-                + ", ".join(f"{n} {x:.2f}" for n, x in ratios.items())
-                + (": met." if max(ratios.values()) <= 1.1 else ": **not met**.")
-            )
-    if results.gallery:
-        ok = [
-            r["name"]
-            for r in results.gallery
-            if r["status"] == "converged" and r["outside"] <= 0 and r["stability"] != "unstable"
-        ]
-        falls = [f"{r['name']} {r['status']} in {fmt_time(r['median'])}" for r in results.floating]
-        lines.append(
-            f"- **Issue 18, gallery**: {len(ok)} of {len(results.gallery)} robots converge inside "
-            "their limits with the default settings (independent check)"
-            + (f"; floating bases: {', '.join(falls)}" if falls else "")
-            + "."
-        )
+
+
+def goal5_lines(results: D.Results) -> list[str]:
+    growth = ChainGrowth.of(results)
+    if growth is None:
+        return []
+    unfinished = unfinished_chains(results)
+    if unfinished:
+        verdict = f"; {unfinished}: **not met**."
+    else:
+        verdict = ": met." if slope(growth.n, growth.wall) <= 2 else ": **not met**."
+    return [
+        "- **Goal 5** (time no faster than n^2 from 5 to 1,000 links, a step O(n)): "
+        + growth.text()
+        + verdict
+        + goal5_reasons(results, growth.n, growth.steps, growth.per, growth.wall)
+    ]
+
+
+def stop_ratios(results: D.Results) -> dict[str, float]:
+    """A step with joint stops over one without, on the UR5 and the Panda (where measured)."""
+    return {n: stops_ratio(results, n) for n in ("ur5", "panda") if n in results.step_cost}
+
+
+def step_cost_goal_lines(results: D.Results) -> list[str]:
+    ratios = stop_ratios(results)
+    if not ratios:
+        return []
+    return [
+        "- **Issue 18, step cost** (a step with joint stops at most 1.1 times one "
+        "without, UR5 and Panda): "
+        + ", ".join(f"{n} {x:.2f}" for n, x in ratios.items())
+        + (": met." if max(ratios.values()) <= 1.1 else ": **not met**.")
+    ]
+
+
+def gallery_tally(results: D.Results) -> str:
+    """'k of n robots converge inside their limits ...; floating bases: ...'."""
+    falls = [f"{r['name']} {r['status']} in {fmt_time(r['median'])}" for r in results.floating]
+    return (
+        f"{len(settled_inside(results))} of {len(results.gallery)} robots converge inside "
+        "their limits with the default settings (independent check)"
+        + (f"; floating bases: {', '.join(falls)}" if falls else "")
+    )
+
+
+def gallery_goal_lines(results: D.Results) -> list[str]:
+    if not results.gallery:
+        return []
+    return [f"- **Issue 18, gallery**: {gallery_tally(results)}."]
+
+
+#: The goals of issues 18 and 20, in the Goals part's order: each a function of the results
+#: giving its line (none when this run did not measure it).
+GOALS = (
+    goal1_lines,
+    goal2_lines,
+    goal3_lines,
+    goal4_lines,
+    goal5_lines,
+    step_cost_goal_lines,
+    gallery_goal_lines,
+)
+
+
+def goals_section(results: D.Results) -> str:
+    """The goals of issues 18 and 20, each measured in this run: met or not, in plain words."""
+    lines = [line for goal in GOALS for line in goal(results)]
     return (
         "## Goals\n\n"
         "The figures issues 18 and 20 ask for, as measured in this run (details in the parts "
@@ -2594,10 +2822,11 @@ README_BEGIN = "<!-- bench:summary (written by benchmarks/report.py) -->"
 README_END = "<!-- /bench:summary -->"
 
 
-def readme_block(results: D.Results) -> str:
-    """The README's speed section: the main ratios of the report and the goals, as measured."""
-    m = results.machine
+def step_cost_line(results: D.Results) -> list[str]:
+    """One step over a bare step, per model and per kind of element, and the stops' cost."""
     names = list(results.step_cost)
+    if not names:
+        return []
 
     def ratio(name: str, key: str) -> float:
         return cost_median(results, name, key) / cost_median(results, name, "bare")
@@ -2607,57 +2836,121 @@ def readme_block(results: D.Results) -> str:
         return f"{min(values):.2f}-{max(values):.2f}"
 
     costs = ", ".join(f"{n} {ratio(n, 'exact'):.2f}" for n in names)
-    t = energy_tally(results, results.config.kts)
-    score = kt_scores(results, "exact")
-    chosen = best_kt(score)
-    lines = [
-        README_BEGIN,
-        f"Measured by `python benchmarks/report.py` on this project's {m['cores']}-core machine "
-        f"({m['date']}, shared with other jobs: ratios within one run, medians of repeats); the "
-        "whole report, with plots of error against wall time and steps for each scene, is "
-        "[docs/benchmarks.md](docs/benchmarks.md).",
-        "",
+    stops = ", ".join(f"{n} {stops_ratio(results, n):.2f}" for n in names)
+    return [
         f"- **One step** costs {costs} times a bare `pinocchio::aba` + `pinocchio::integrate` "
         f"step on the same model (median of interleaved repeats; `benchmarks/step_cost.cpp`). A "
         f"scene without elements: {span('no_elements')}; a joint spring on every joint: "
         f"{span('joint_springs')}; one point spring: {span('point_spring')} (a forward-kinematics "
-        "pass per step to place its ends); the model's joint stops over no stops: "
-        + ", ".join(f"{n} {stops_ratio(results, n):.2f}" for n in names)
-        + ".",
+        f"pass per step to place its ends); the model's joint stops over no stops: {stops}."
+    ]
+
+
+def energy_line(results: D.Results) -> list[str]:
+    t = energy_tally(results, results.config.kts)
+    return [
         f"- **Exact or simplified energy**: per step, simplified / exact "
         f"{cost_ratio(results):.3f} (UR5); over {len(t['ratios'])} scene and kt pairs, "
         f"{t['geomean']:.2f} times the steps to a residual of {LEVEL:g} (geometric mean; fewer "
-        f"in {t['fewer']}, more in {t['more']}, as many in {t['equal']}).",
-        f"- **kt**: the fewest steps to a residual of {LEVEL:g} came with kt = {chosen:g} "
-        f"(geometric mean over the scenes of the steps over each scene's fewest: "
-        + ", ".join(
-            f"{kt:g}: {geomean([x for x in r if math.isfinite(x)]):.2f}" for kt, r in score.items()
-        )
-        + ").",
+        f"in {t['fewer']}, more in {t['more']}, as many in {t['equal']})."
     ]
-    scenes = compared(results)
-    for family in BASELINES if scenes else ():
-        rule = {n: ratio_to_kd(results.scenes[n], f"{family}_rule") for n in scenes}
-        best = {n: ratio_to_kd(results.scenes[n], f"{family}_best") for n in scenes}
-        lines.append(
-            f"- **{D.BASELINE_LABELS[family]}** (same dynamics, C++, the start only), its time to "
-            f"a residual of {LEVEL:g} over KD's defaults: at its rule "
-            f"{median_with_failures(rule)}; at its best {median_with_failures(best)}."
-        )
+
+
+def kt_line(results: D.Results) -> list[str]:
+    score = kt_scores(results, "exact")
+    means = ", ".join(
+        f"{kt:g}: {geomean([x for x in r if math.isfinite(x)]):.2f}" for kt, r in score.items()
+    )
+    return [
+        f"- **kt**: the fewest steps to a residual of {LEVEL:g} came with kt = "
+        f"{best_kt(score):g} (geometric mean over the scenes of the steps over each scene's "
+        f"fewest: {means})."
+    ]
+
+
+def readme_baseline_lines(results: D.Results) -> list[str]:
+    lines = baseline_bullets(results, over_kd="KD's defaults")
     if loop_scenes(results):
         lines.append(f"- The {trees_only(results)}.")
-    goals = goals_section(results).split("\n\n", 2)[-1].strip().splitlines()
-    lines += [line.replace("- **Goal", "- **Issue 20, goal") for line in goals]
+    return lines
+
+
+def mujoco_line(results: D.Results) -> list[str]:
+    both = mujoco_both(results)
+    if not both:
+        return []
+    values = sorted(both.values())
+    return [
+        f"- **MuJoCo**: its damped settle of the same URDF took {statistics.median(values):.0f} "
+        f"times pinsettle's time (median over the {len(values)} robots both settle; "
+        f"{values[0]:.1f} to {values[-1]:.0f})." + saddle_note(results, both)
+    ]
+
+
+def gallery_line(results: D.Results) -> list[str]:
+    if not results.gallery:
+        return []
+    return [f"- **Robot gallery**: {gallery_tally(results)}."]
+
+
+def overhead_line(results: D.Results) -> list[str]:
+    rows = goal4_rows(results)
+    if not rows:
+        return []
+    shares = ", ".join(
+        f"{r['name']} {r['fraction']:.1%} ({r['fraction_polish']:.1%} in the default solve)"
+        for r in rows
+    )
+    return [
+        "- **Where a solve's time goes**: the set-up, step estimates, stability assessments and "
+        f"(in the default solve) the polish's Newton take {shares} of a solve's time "
+        "(`benchmarks/kd_profile.cpp`)."
+    ]
+
+
+def chains_line(results: D.Results) -> list[str]:
+    growth = ChainGrowth.of(results)
+    if growth is None:
+        return []
+    unfinished = unfinished_chains(results)
+    return ["- **Chains**: " + growth.text() + (f"; {unfinished}" if unfinished else "") + "."]
+
+
+#: The README's speed section, in its order: what was measured, without the goals (those are
+#: in the report's Goals part). Each a function of the results giving its lines.
+README_LINES = (
+    step_cost_line,
+    energy_line,
+    kt_line,
+    readme_baseline_lines,
+    mujoco_line,
+    gallery_line,
+    overhead_line,
+    chains_line,
+)
+
+
+def wrap(line: str) -> str:
+    """A README line wrapped at 100 characters, a bullet's continuation indented."""
+    if not line or line.startswith("<!--"):
+        return line
+    return textwrap.fill(line, 100, subsequent_indent="  " if line.startswith("- ") else "")
+
+
+def readme_block(results: D.Results) -> str:
+    """The README's speed section: the main ratios of the report, as measured."""
+    m = results.machine
+    lines = [
+        README_BEGIN,
+        f"Measured by `python benchmarks/report.py` on this project's {m['cores']}-core machine "
+        f"({m['date']}, shared with other jobs: ratios within one run, medians of repeats); the "
+        "whole report, with plots of error against wall time and steps for each scene and the "
+        "goals this project set itself, is [docs/benchmarks.md](docs/benchmarks.md).",
+        "",
+    ]
+    lines += [line for part in README_LINES for line in part(results)]
     lines.append(README_END)
-    wrapped = []
-    for line in lines:
-        bullet = line.startswith("- ")
-        wrapped.append(
-            textwrap.fill(line, 100, subsequent_indent="  " if bullet else "")
-            if line and not line.startswith("<!--")
-            else line
-        )
-    return "\n".join(wrapped)
+    return "\n".join(wrap(line) for line in lines)
 
 
 def update_readme(results: D.Results, readme: Path) -> bool:

@@ -48,6 +48,7 @@ Every number in the report is computed by this script; nothing is typed in by ha
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -60,7 +61,9 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from datetime import date
+from functools import partial
 from pathlib import Path
+from typing import TextIO, cast
 
 import numpy as np
 import pinocchio
@@ -98,6 +101,7 @@ from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants a
     Config,
     Curve,
     Landing,
+    Record,
     Reference,
     Results,
     Run,
@@ -117,7 +121,8 @@ def _library(name: str) -> BenchScene:
     path = ROOT / "robots" / f"{name}.toml"
     scene = pinsettle.load_scene(path)
     scene.limits = False
-    reference = CachedReference.from_toml(path)
+    # from_toml builds its own class (tests/scene_reference.py types it as the base class).
+    reference = cast(CachedReference, CachedReference.from_toml(path))
     reference.limits = False
     return BenchScene(name, scene, scene.description, reference)
 
@@ -293,7 +298,7 @@ def _target(ref: Reference, land: Landing) -> np.ndarray:
     return land.q if land.q is not None else ref.q
 
 
-def timed_solves(scene: pinsettle.Scene, settings: dict, repeats: int) -> list:
+def timed_solves(scene: pinsettle.Scene, settings: Record, repeats: int) -> list[pinsettle.Result]:
     """Up to ``repeats`` solves (no more once they took REPEAT_BUDGET in all)."""
     timed = [pinsettle.solve(scene, **settings)]
     while len(timed) < repeats and sum(r.wall_time for r in timed) < REPEAT_BUDGET:
@@ -301,10 +306,63 @@ def timed_solves(scene: pinsettle.Scene, settings: dict, repeats: int) -> list:
     return timed
 
 
+@dataclasses.dataclass
+class Traced:
+    """What the traced run of a KD solve adds: the error curve, the steps of its damping events
+    and the largest loop error over its samples (nan on a tree)."""
+
+    curve: Curve | None = None
+    damping: list[int] = dataclasses.field(default_factory=list)
+    along: float = math.nan
+
+
+def traced_run(
+    statics: Statics, settings: Record, result: pinsettle.Result, target: np.ndarray
+) -> Traced:
+    """The same solve again with every step's configuration traced: the same trajectory (the
+    solver is deterministic; checked), sampled into the error curve."""
+    traced = pinsettle.solve(
+        statics.scene,
+        **settings,
+        trace_every=1,
+        trace_configurations=True,
+        trace_capacity=CURVE_SAMPLES,
+    )
+    if traced.steps != result.steps or not np.array_equal(traced.q, result.q):
+        raise RuntimeError(f"{statics.scene.name}: the traced run took another path")
+    t = traced.trace
+    if t is None or t.q is None:  # trace_every = 1 with configurations: never
+        raise RuntimeError(f"{statics.scene.name}: the traced run has no trace")
+    steps = np.append(t.step, traced.steps)
+    rows = np.vstack([t.q, traced.q[None, :]])
+    along = max(statics.loop_error(row) for row in rows) if statics.loops else math.nan
+    damping = [
+        step for step, kind in zip(t.event_step, t.event_kind, strict=True) if kind == "damping"
+    ]
+    return Traced(curve_of(statics, target, steps, rows), damping, along)
+
+
+def kd_extra(statics: Statics, result: pinsettle.Result, traced: Traced) -> Record:
+    """A KD run's extra record: its step control, damping events and loop errors."""
+    return {
+        "dt": result.dt,
+        "dt_estimates": result.dt_estimates,
+        "dt_reductions": result.dt_reductions,
+        "scaled_modes": result.scaled_modes,
+        "polish_iterations": result.polish_iterations,
+        "damping_steps": np.array(traced.damping),  # steps of the damping events (traced run)
+        # Largest loop error (m) of the final q, measured here (Statics.loop_error) and by
+        # the solver (Result.constraint_error), and over the traced run's samples.
+        "constraint_error": statics.loop_error(result.q),
+        "solver_constraint_error": result.constraint_error,
+        "constraint_error_along": traced.along,
+    }
+
+
 def run_kd(
     statics: Statics,
     ref: Reference,
-    settings: dict,
+    settings: Record,
     repeats: int,
     curve: bool = True,
     label: str = "",
@@ -320,26 +378,7 @@ def run_kd(
     result = timed[-1]
     land = landing(statics, ref, result.q)
     target = _target(ref, land)
-    c, damping, along = None, [], math.nan
-    if curve:
-        traced = pinsettle.solve(
-            statics.scene,
-            **settings,
-            trace_every=1,
-            trace_configurations=True,
-            trace_capacity=CURVE_SAMPLES,
-        )
-        if traced.steps != result.steps or not np.array_equal(traced.q, result.q):
-            raise RuntimeError(f"{statics.scene.name}: the traced run took another path")
-        t = traced.trace
-        steps = np.append(t.step, traced.steps)
-        rows = np.vstack([t.q, traced.q[None, :]])
-        c = curve_of(statics, target, steps, rows)
-        if statics.loops:
-            along = max(statics.loop_error(row) for row in rows)
-        damping = [
-            step for step, kind in zip(t.event_step, t.event_kind, strict=True) if kind == "damping"
-        ]
+    traced = traced_run(statics, settings, result, target) if curve else Traced()
     energy = settings.get("energy", pinsettle.Settings().energy)
     return Run(
         statics.scene.name,
@@ -354,20 +393,8 @@ def run_kd(
         land.stability,
         land,
         peaks=result.peaks,
-        curve=c,
-        extra={
-            "dt": result.dt,
-            "dt_estimates": result.dt_estimates,
-            "dt_reductions": result.dt_reductions,
-            "scaled_modes": result.scaled_modes,
-            "polish_iterations": result.polish_iterations,
-            "damping_steps": np.array(damping),  # steps of the damping events (traced run)
-            # Largest loop error (m) of the final q, measured here (Statics.loop_error) and by
-            # the solver (Result.constraint_error), and over the traced run's samples.
-            "constraint_error": statics.loop_error(result.q),
-            "solver_constraint_error": result.constraint_error,
-            "constraint_error_along": along,
-        },
+        curve=traced.curve,
+        extra=kd_extra(statics, result, traced),
         setup=min(setup, min(r.wall_time for r in timed)),
     )
 
@@ -467,18 +494,24 @@ def write_spec(statics: Statics, work: Path, tag: str, lines: Sequence[str]) -> 
     return spec
 
 
-def run_program(program: Path, spec: Path) -> dict:
+def last_json(stdout: str) -> Record:
+    """The record a C++ program prints as its last line (JSON)."""
+    record: Record = json.loads(stdout.strip().splitlines()[-1])
+    return record
+
+
+def run_program(program: Path, spec: Path) -> Record:
     proc = subprocess.run([str(program), str(spec)], capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"{program.name} {spec} failed: {proc.stderr}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return last_json(proc.stdout)
 
 
-def _settings_lines(family: str, settings: dict) -> list[str]:
+def _settings_lines(family: str, settings: Record) -> list[str]:
     return [f"method {family}", *(f"{key} {value}" for key, value in settings.items())]
 
 
-def _tag(family: str, settings: dict) -> str:
+def _tag(family: str, settings: Record) -> str:
     return family + "".join(f".{k}{v}" for k, v in settings.items())
 
 
@@ -487,7 +520,7 @@ def run_baseline(
     statics: Statics,
     ref: Reference,
     family: str,
-    settings: dict,
+    settings: Record,
     repeats: int,
     work: Path,
     label: str,
@@ -543,7 +576,7 @@ def run_baseline(
 
 
 def sweep_point(
-    program: Path, statics: Statics, family: str, settings: dict, work: Path, repeats: int
+    program: Path, statics: Statics, family: str, settings: Record, work: Path, repeats: int
 ) -> SweepPoint:
     """A baseline with the given settings, stopped at the residual LEVEL (time to it: its
     set-up and loop, median of the repeats)."""
@@ -583,7 +616,7 @@ def run_kd_profile(
     repeats: int,
     polish: bool,
     max_time: float = 60.0,
-) -> dict:
+) -> Record:
     """benchmarks/kd_profile on the scene: the default solve's set-up, estimates, assessments
     (and with ``polish`` the polished solve), medians of the repeats in ``median``."""
     spec = write_spec(
@@ -612,7 +645,7 @@ def run_kd_profile(
     return out
 
 
-def time_in_cpp(run: Run, profile: dict) -> None:
+def time_in_cpp(run: Run, profile: Record) -> None:
     """The default run's times from benchmarks/kd_profile's polished solves (C++, a fresh solver
     each repeat, as benchmarks/baselines.cpp times each baseline run); those from
     ``pinsettle.solve`` are kept in ``extra["python_seconds"]``. The two must be the same run."""
@@ -660,17 +693,17 @@ def run_newton(statics: Statics, ref: Reference, line_search: bool) -> Run:
 
 def run_step_cost(
     program: Path, urdf: Path, steps: int, repeats: int, only: str | None = None
-) -> dict:
+) -> Record:
     args = [str(program), str(urdf), str(steps), str(repeats), "--json"]
     if only:
         args += ["--only", only]
     proc = subprocess.run(args, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"step_cost {urdf} failed: {proc.stderr}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return last_json(proc.stdout)
 
 
-def run_loop_step_cost(program: Path, scene: pinsettle.Scene, steps: int, repeats: int) -> dict:
+def run_loop_step_cost(program: Path, scene: pinsettle.Scene, steps: int, repeats: int) -> Record:
     """benchmarks/loop_step_cost on a scene with loops: its URDF, its loops by frame name and
     its start (the program moves it onto the loops as the solver does); gravity alone."""
     if scene.locked or scene.urdf is None:  # the program builds the whole URDF's model
@@ -684,7 +717,7 @@ def run_loop_step_cost(program: Path, scene: pinsettle.Scene, steps: int, repeat
     proc = subprocess.run(args, capture_output=True, text=True)
     if proc.returncode != 0 or proc.stderr.strip():
         raise RuntimeError(f"loop_step_cost {scene.name} failed: {proc.stderr}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return last_json(proc.stdout)
 
 
 def cost_urdf(name: str) -> Path:
@@ -699,7 +732,7 @@ def cost_urdf(name: str) -> Path:
 class Progress:
     """A progress bar on stderr: done/total, elapsed time and what runs now."""
 
-    def __init__(self, total: int, stream=sys.stderr) -> None:
+    def __init__(self, total: int, stream: TextIO = sys.stderr) -> None:
         self.total, self.done, self.start, self.stream = total, 0, time.perf_counter(), stream
         self.tty = stream.isatty()
 
@@ -751,156 +784,193 @@ QUICK = Config(
 Task = tuple[str, Callable[[], None]]
 
 
+@dataclasses.dataclass
+class SceneJob:
+    """What the scenes section's tasks share: the configuration, the results they fill, the C++
+    programs, a work folder and the scenes (built once)."""
+
+    config: Config
+    results: Results
+    programs: Path
+    work: Path
+    benches: dict[str, BenchScene]
+
+
+def kd_setup(d: SceneData) -> float:
+    """The solver's set-up on a scene (benchmarks/kd_profile; 0 on a scene with loops)."""
+    return d.profile["median"]["setup"] if d.profile else 0.0
+
+
+def scene_setup(job: SceneJob, name: str) -> None:
+    """The scene's reference equilibrium and, on a tree, the solver's set-up and the default
+    solve timed in C++."""
+    bench = job.benches[name]
+    statics = Statics(bench.scene, bench.reference)
+    d = SceneData(
+        bench,
+        statics,
+        reference(statics),
+        bench.description,
+        statics.force_scale,
+        statics.model.nv,
+        len(bench.scene.loops),
+        statics.mobility,
+    )
+    d.apart = name in APART
+    if not d.loops:
+        program = job.programs / "kd_profile"
+        d.profile = run_kd_profile(program, statics, job.work, job.config.repeats, True)
+    job.results.scenes[name] = d
+
+
+def scene_main_runs(job: SceneJob, name: str) -> None:
+    d = job.results.scenes[name]
+    s, ref, reps = d.statics, d.ref, job.config.repeats
+    for energy in ("exact", "simplified"):
+        d.runs[f"kd_{energy}"] = run_kd(s, ref, {"energy": energy, **DEEP}, reps, setup=kd_setup(d))
+    # The default settings, nothing changed: where they stop (goal 2 of issue 20).
+    d.runs["kd_default"] = run_kd(
+        s, ref, {}, reps, curve=False, label="KD defaults", setup=kd_setup(d)
+    )
+    if d.profile:
+        time_in_cpp(d.runs["kd_default"], d.profile)
+
+
+def scene_newton(job: SceneJob, name: str) -> None:
+    d = job.results.scenes[name]
+    d.runs["newton"] = run_newton(d.statics, d.ref, line_search=False)
+    d.runs["newton_ls"] = run_newton(d.statics, d.ref, line_search=True)
+
+
+def scene_baseline(job: SceneJob, name: str, family: str) -> None:
+    """A baseline at its rule, its sweep, and its best setting run in full (the rule's run
+    again when that was the best)."""
+    d = job.results.scenes[name]
+    s, ref, reps = d.statics, d.ref, job.config.repeats
+    baselines, work = job.programs / "baselines", job.work
+    rule = BASELINE_RULES[family]
+    label = BASELINE_LABELS[family]
+    d.runs[f"{family}_rule"] = run_baseline(
+        baselines, s, ref, family, rule, reps, work, f"{label}, rule"
+    )
+    points = [
+        sweep_point(baselines, s, family, settings, work, job.config.sweep_repeats)
+        for settings in job.config.sweep(family)
+    ]
+    d.baseline_sweep[family] = points
+    done = [p for p in points if p.time_to is not None]
+    best = min(done, key=lambda p: p.seconds, default=None)
+    if best is None or best.settings == rule:
+        d.runs[f"{family}_best"] = d.runs[f"{family}_rule"]
+        return
+    d.runs[f"{family}_best"] = run_baseline(
+        baselines,
+        s,
+        ref,
+        family,
+        best.settings,
+        reps,
+        work,
+        f"{label}, best ({setting_label(family, best.settings)})",
+    )
+
+
+def scene_kt_sweep(job: SceneJob, name: str) -> None:
+    d = job.results.scenes[name]
+    d.sweeps["kt"] = [
+        run_kd(
+            d.statics,
+            d.ref,
+            {"energy": e, "kt": kt, **DEEP},
+            job.config.sweep_repeats,
+            setup=kd_setup(d),
+        )
+        for e in ("exact", "simplified")
+        for kt in job.config.kts
+    ]
+
+
+def scene_stop_sweeps(job: SceneJob, name: str) -> None:
+    d = job.results.scenes[name]
+    s, ref, sreps, config = d.statics, d.ref, job.config.sweep_repeats, job.config
+    d.sweeps["err"] = [run_kd(s, ref, {"err": x}, sreps, curve=False) for x in config.errs]
+    d.sweeps["ds"] = [run_kd(s, ref, {"ds": x}, sreps, curve=False) for x in config.dss]
+    d.sweeps["max_e"] = [
+        run_kd(s, ref, {"max_e": x, "energy": e}, sreps, curve=False)
+        for e in ("exact", "simplified")
+        for x in config.max_es
+    ]
+
+
+def dt_sweep(d: SceneData, sreps: int) -> list[Run]:
+    """The automatic step (with and without stiff-mode scaling) against fixed steps."""
+    s, ref, setup = d.statics, d.ref, kd_setup(d)
+    start_dt = DT_SAFETY * s.time_scale(s.q0, True)["critical_step"]
+    # At least DT_SWEEP_SECONDS each: an unscaled stiff mode needs many small steps.
+    budget = {
+        **DEEP,
+        "max_steps": max(ref.step_budget, int(DT_SWEEP_SECONDS / ref.seconds_per_step)),
+    }
+    unscaled = {**budget, "scale_stiff_modes": False}
+    return [
+        run_kd(s, ref, budget, sreps, label="auto", setup=setup),
+        run_kd(s, ref, unscaled, sreps, label="auto, unscaled", setup=setup),
+        run_kd(s, ref, {**budget, "dt": start_dt}, sreps, label="fixed, start"),
+        run_kd(s, ref, {**budget, "dt": start_dt / 4}, sreps, label="fixed, start / 4"),
+    ]
+
+
+def scene_other_sweeps(job: SceneJob, name: str) -> None:
+    d = job.results.scenes[name]
+    sreps = job.config.sweep_repeats
+    d.sweeps["backtrack"] = [
+        run_kd(
+            d.statics,
+            d.ref,
+            {**DEEP, "energy": e, "backtrack": b},
+            sreps,
+            setup=kd_setup(d),
+        )
+        for e in ("exact", "simplified")
+        for b in (False, True)
+    ]
+    d.sweeps["dt"] = dt_sweep(d, sreps)
+
+
 def scene_tasks(config: Config, results: Results, programs: Path, work: Path) -> list[Task]:
     """The scenes section: references, KD, the baselines and their sweeps, Newton, KD's
     sweeps."""
-    tasks: list[Task] = []
-    baselines = programs / "baselines"
-    reps, sreps = config.repeats, config.sweep_repeats
     benches = {name: make_scene(name) for name in config.scenes}  # built once
+    job = SceneJob(config, results, programs, work, benches)
+    tasks: list[Task] = []
     for name in config.scenes:
-
-        def setup(name=name):
-            bench = benches[name]
-            statics = Statics(bench.scene, bench.reference)
-            d = SceneData(
-                bench,
-                statics,
-                reference(statics),
-                bench.description,
-                statics.force_scale,
-                statics.model.nv,
-                len(bench.scene.loops),
-                statics.mobility,
-            )
-            d.apart = name in APART
-            if not d.loops:  # the solver's set-up, and the default solve timed in C++
-                d.profile = run_kd_profile(programs / "kd_profile", statics, work, reps, True)
-            results.scenes[name] = d
-
-        tasks.append((f"{name}: reference equilibrium, the solver's set-up", setup))
-
-        def main_runs(name=name):
-            d = results.scenes[name]
-            s, ref = d.statics, d.ref
-            setup = d.profile["median"]["setup"] if d.profile else 0.0
-            for energy in ("exact", "simplified"):
-                d.runs[f"kd_{energy}"] = run_kd(
-                    s, ref, {"energy": energy, **DEEP}, reps, setup=setup
-                )
-            # The default settings, nothing changed: where they stop (goal 2 of issue 20).
-            d.runs["kd_default"] = run_kd(
-                s, ref, {}, reps, curve=False, label="KD defaults", setup=setup
-            )
-            if d.profile:
-                time_in_cpp(d.runs["kd_default"], d.profile)
-
-        tasks.append((f"{name}: kinetic damping, both energy measures, defaults", main_runs))
-
-        def newton_runs(name=name):
-            d = results.scenes[name]
-            d.runs["newton"] = run_newton(d.statics, d.ref, line_search=False)
-            d.runs["newton_ls"] = run_newton(d.statics, d.ref, line_search=True)
-
-        tasks.append((f"{name}: Newton from the start", newton_runs))
-
+        tasks += [
+            (
+                f"{name}: reference equilibrium, the solver's set-up",
+                partial(scene_setup, job, name),
+            ),
+            (
+                f"{name}: kinetic damping, both energy measures, defaults",
+                partial(scene_main_runs, job, name),
+            ),
+            (f"{name}: Newton from the start", partial(scene_newton, job, name)),
+        ]
         if not benches[name].scene.loops:  # the C++ baselines run unconstrained ABA
-            for family in BASELINES:
-
-                def baseline_runs(name=name, family=family):
-                    d = results.scenes[name]
-                    s, ref = d.statics, d.ref
-                    rule = BASELINE_RULES[family]
-                    label = BASELINE_LABELS[family]
-                    d.runs[f"{family}_rule"] = run_baseline(
-                        baselines, s, ref, family, rule, reps, work, f"{label}, rule"
-                    )
-                    points = [
-                        sweep_point(baselines, s, family, settings, work, sreps)
-                        for settings in config.sweep(family)
-                    ]
-                    d.baseline_sweep[family] = points
-                    done = [p for p in points if p.time_to is not None]
-                    best = min(done, key=lambda p: p.seconds, default=None)
-                    if best is None or best.settings == rule:
-                        d.runs[f"{family}_best"] = d.runs[f"{family}_rule"]
-                    else:
-                        d.runs[f"{family}_best"] = run_baseline(
-                            baselines,
-                            s,
-                            ref,
-                            family,
-                            best.settings,
-                            reps,
-                            work,
-                            f"{label}, best ({setting_label(family, best.settings)})",
-                        )
-
-                tasks.append(
-                    (f"{name}: {BASELINE_LABELS[family]}, its rule and its sweep", baseline_runs)
+            tasks += [
+                (
+                    f"{name}: {BASELINE_LABELS[family]}, its rule and its sweep",
+                    partial(scene_baseline, job, name, family),
                 )
-
-        def sweep_kt(name=name):
-            d = results.scenes[name]
-            setup = d.profile["median"]["setup"] if d.profile else 0.0
-            d.sweeps["kt"] = [
-                run_kd(
-                    d.statics,
-                    d.ref,
-                    {"energy": e, "kt": kt, **DEEP},
-                    sreps,
-                    setup=setup,
-                )
-                for e in ("exact", "simplified")
-                for kt in config.kts
+                for family in BASELINES
             ]
-
-        tasks.append((f"{name}: kt sweep", sweep_kt))
-
-        def sweep_stop(name=name):
-            d = results.scenes[name]
-            s, ref = d.statics, d.ref
-            d.sweeps["err"] = [run_kd(s, ref, {"err": x}, sreps, curve=False) for x in config.errs]
-            d.sweeps["ds"] = [run_kd(s, ref, {"ds": x}, sreps, curve=False) for x in config.dss]
-            d.sweeps["max_e"] = [
-                run_kd(s, ref, {"max_e": x, "energy": e}, sreps, curve=False)
-                for e in ("exact", "simplified")
-                for x in config.max_es
-            ]
-
-        tasks.append((f"{name}: err, ds and max_e sweeps", sweep_stop))
-
-        def sweep_other(name=name):
-            d = results.scenes[name]
-            s, ref = d.statics, d.ref
-            setup = d.profile["median"]["setup"] if d.profile else 0.0
-            deep = dict(DEEP)
-            d.sweeps["backtrack"] = [
-                run_kd(s, ref, {**deep, "energy": e, "backtrack": b}, sreps, setup=setup)
-                for e in ("exact", "simplified")
-                for b in (False, True)
-            ]
-            start_dt = DT_SAFETY * s.time_scale(s.q0, True)["critical_step"]
-            # At least DT_SWEEP_SECONDS each: an unscaled stiff mode needs many small steps.
-            budget = {
-                **deep,
-                "max_steps": max(ref.step_budget, int(DT_SWEEP_SECONDS / ref.seconds_per_step)),
-            }
-            d.sweeps["dt"] = [
-                run_kd(s, ref, budget, sreps, label="auto", setup=setup),
-                run_kd(
-                    s,
-                    ref,
-                    {**budget, "scale_stiff_modes": False},
-                    sreps,
-                    label="auto, unscaled",
-                    setup=setup,
-                ),
-                run_kd(s, ref, {**budget, "dt": start_dt}, sreps, label="fixed, start"),
-                run_kd(s, ref, {**budget, "dt": start_dt / 4}, sreps, label="fixed, start / 4"),
-            ]
-
-        tasks.append((f"{name}: backtracking, fixed against automatic dt", sweep_other))
+        tasks += [
+            (f"{name}: kt sweep", partial(scene_kt_sweep, job, name)),
+            (f"{name}: err, ds and max_e sweeps", partial(scene_stop_sweeps, job, name)),
+            (
+                f"{name}: backtracking, fixed against automatic dt",
+                partial(scene_other_sweeps, job, name),
+            ),
+        ]
     return tasks
 
 
@@ -909,7 +979,7 @@ def cost_tasks(config: Config, results: Results, programs: Path) -> list[Task]:
     tasks: list[Task] = []
     for name in config.cost_models:
 
-        def cost(name=name):
+        def cost(name: str = name) -> None:
             results.step_cost[name] = run_step_cost(
                 programs / "step_cost",
                 cost_urdf(name),
@@ -922,7 +992,7 @@ def cost_tasks(config: Config, results: Results, programs: Path) -> list[Task]:
         if not _library_has_loops(name):
             continue
 
-        def loop_cost(name=name):
+        def loop_cost(name: str = name) -> None:
             results.loop_step_cost[name] = run_loop_step_cost(
                 programs / "loop_step_cost",
                 make_scene(name).scene,
@@ -943,7 +1013,7 @@ def overhead_tasks(config: Config, results: Results, programs: Path, work: Path)
     tasks: list[Task] = []
     for name in config.overhead_scenes:
 
-        def overhead(name=name):
+        def overhead(name: str = name) -> None:
             bench = make_scene(name)
             statics = Statics(bench.scene, bench.reference)
             results.overhead[name] = run_kd_profile(
@@ -956,7 +1026,7 @@ def overhead_tasks(config: Config, results: Results, programs: Path, work: Path)
 
 def joint_inertia_run(
     scene: pinsettle.Scene, statics: Statics, q_star: np.ndarray, repeats: int, config: Config
-) -> dict:
+) -> Record:
     """The chain's default solve but with scale_joint_inertia on (an option, off by default),
     from Python: status, steps, the median wall time of the repeats, the joints given an inertia,
     the final residual (relative, independent physics) and the distance to straight down."""
@@ -975,69 +1045,66 @@ def joint_inertia_run(
     }
 
 
+def chain_statics(n: int, bench: BenchScene) -> tuple[Statics, np.ndarray, float, str]:
+    """A chain's statics and its rest hanging straight down (checked stable, with its residual
+    and verdict)."""
+    statics = Statics(bench.scene, bench.reference)
+    q_star = pinocchio.neutral(statics.full)  # hanging straight down, checked below
+    residual = statics.residual(q_star)
+    verdict = statics.verdict(q_star)[0]
+    if not (residual <= 1e-14 and verdict == "stable"):
+        raise RuntimeError(f"chain{n}: straight down is not a stable rest ({verdict})")
+    return statics, q_star, residual, verdict
+
+
+def scale_chain(config: Config, results: Results, programs: Path, work: Path, n: int) -> None:
+    """One chain length of the scaling section (a row of results.scaling)."""
+    bench = chain_scene(n)
+    try:
+        statics, q_star, residual, verdict = chain_statics(n, bench)
+    except ValueError as e:  # a model pinsettle refuses (too many degrees of freedom)
+        results.scaling.append({"n": n, "refused": str(e)})
+        return
+    long_chain = n > config.deep_chain_max
+    repeats = 1 if long_chain else config.sweep_repeats
+    # The default solve, polish included: the stopping rule leaves the last digits to it.
+    profile = run_kd_profile(
+        programs / "kd_profile", statics, work, repeats, True, max_time=config.scaling_max_time
+    )
+    q_final = statics.compiled.full_q(np.array(profile["polish_q"]))
+    row = {
+        "n": n,
+        "profile": profile,
+        "residual": statics.residual(q_final),
+        "distance": statics.distance(q_star, q_final),
+    }
+    row["joint_inertia"] = joint_inertia_run(bench.scene, statics, q_star, repeats, config)
+    if not long_chain:
+        ref = Reference(q_star, residual, verdict, 0, math.nan, 0.0, profile["steps"], 0.0)
+        row["deep"] = run_kd(
+            statics,
+            ref,
+            {**DEEP, "max_time": config.scaling_max_time},
+            1,
+            label="deep",
+            setup=profile["median"]["setup"],
+        )
+    path = work / f"chain{n}.urdf"
+    path.write_text(chain_urdf(n))
+    steps = max(200, min(config.step_cost_steps, config.step_cost_steps * 20 // n))
+    only = "bare" if long_chain else "bare,exact"
+    row["cost"] = run_step_cost(programs / "step_cost", path, steps, 3, only=only)
+    results.scaling.append(row)
+
+
 def scaling_tasks(config: Config, results: Results, programs: Path, work: Path) -> list[Task]:
     """Chains of config.chain_lengths: the default solve profiled (benchmarks/kd_profile, within
     config.scaling_max_time; timed whole with its polish, in parts without), the bare step, and up
     to config.deep_chain_max links a run to round-off and the whole step cost."""
-    tasks: list[Task] = []
-    for n in config.chain_lengths:
-
-        def scale(n=n):
-            bench = chain_scene(n)
-            try:
-                statics = Statics(bench.scene, bench.reference)
-            except ValueError as e:  # a model pinsettle refuses (too many degrees of freedom)
-                results.scaling.append({"n": n, "refused": str(e)})
-                return
-            q_star = pinocchio.neutral(statics.full)  # hanging straight down, checked below
-            residual = statics.residual(q_star)
-            verdict = statics.verdict(q_star)[0]
-            if not (residual <= 1e-14 and verdict == "stable"):
-                raise RuntimeError(f"chain{n}: straight down is not a stable rest ({verdict})")
-            long_chain = n > config.deep_chain_max
-            # The default solve, polish included: the stopping rule leaves the last digits to it.
-            profile = run_kd_profile(
-                programs / "kd_profile",
-                statics,
-                work,
-                1 if long_chain else config.sweep_repeats,
-                True,
-                max_time=config.scaling_max_time,
-            )
-            q_final = statics.compiled.full_q(np.array(profile["polish_q"]))
-            row = {
-                "n": n,
-                "profile": profile,
-                "residual": statics.residual(q_final),
-                "distance": statics.distance(q_star, q_final),
-            }
-            row["joint_inertia"] = joint_inertia_run(
-                bench.scene, statics, q_star, 1 if long_chain else config.sweep_repeats, config
-            )
-            if not long_chain:
-                ref = Reference(q_star, residual, verdict, 0, math.nan, 0.0, profile["steps"], 0.0)
-                row["deep"] = run_kd(
-                    statics,
-                    ref,
-                    {**DEEP, "max_time": config.scaling_max_time},
-                    1,
-                    label="deep",
-                    setup=profile["median"]["setup"],
-                )
-            path = work / f"chain{n}.urdf"
-            path.write_text(chain_urdf(n))
-            steps = max(200, min(config.step_cost_steps, config.step_cost_steps * 20 // n))
-            row["cost"] = run_step_cost(
-                programs / "step_cost",
-                path,
-                steps,
-                3,
-                only="bare" if long_chain else "bare,exact",
-            )
-            results.scaling.append(row)
-
-        tasks.append((f"scaling: chain of {n}", scale))
-    return tasks
+    return [
+        (f"scaling: chain of {n}", partial(scale_chain, config, results, programs, work, n))
+        for n in config.chain_lengths
+    ]
 
 
 def gallery_tasks(config: Config, results: Results) -> list[Task]:
@@ -1047,7 +1114,7 @@ def gallery_tasks(config: Config, results: Results) -> list[Task]:
 
     for name in names:
 
-        def robot(name=name):
+        def robot(name: str = name) -> None:
             results.gallery.append(
                 gallery.measure_robot(
                     name,
@@ -1061,7 +1128,7 @@ def gallery_tasks(config: Config, results: Results) -> list[Task]:
         if not gallery.is_floating(name):
             continue
 
-        def falling(name=name):
+        def falling(name: str = name) -> None:
             results.floating.append(gallery.measure_floating(name, config.gallery_repeats))
 
         tasks.append((f"gallery: {name} with a floating base", falling))
@@ -1099,7 +1166,7 @@ def cpu_model() -> str:
     return platform.machine()
 
 
-def machine() -> dict:
+def machine() -> Record:
     return {
         "cpu": cpu_model(),
         "cores": os.cpu_count(),

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pinsettle
@@ -37,7 +38,7 @@ def bistable(stiffness: float, rest_length: float, load: float | None) -> pinset
     return scene
 
 
-def releases():
+def releases() -> Iterator[tuple[pinsettle.Scene, np.ndarray]]:
     """(scene, start) of every release."""
     for k, r0, load in itertools.product((30.0, 40.0, 55.0), (1.3, 1.5, 1.6), (None, 0.5)):
         scene = bistable(k, r0, load)
@@ -45,10 +46,12 @@ def releases():
             yield scene, np.array([t0])
 
 
-def measure(settings=SETTINGS) -> tuple[int, dict]:
+def measure(
+    settings: Sequence[tuple[float, bool]] = SETTINGS,
+) -> tuple[int, dict[tuple[float, bool], list[tuple[float, float, float]]]]:
     """The number of releases and, per (dt_safety, backtrack), those that ended elsewhere than
     the reference (scene index, start angle, rest, reference rest)."""
-    off: dict = {s: [] for s in settings}
+    off: dict[tuple[float, bool], list[tuple[float, float, float]]] = {s: [] for s in settings}
     count = 0
     for scene, q0 in releases():
         count += 1
@@ -57,7 +60,8 @@ def measure(settings=SETTINGS) -> tuple[int, dict]:
         for c, backtrack in settings:
             result = pinsettle.solve(scene, q0, dt_safety=c, backtrack=backtrack)
             if not (result.converged and abs(result.q[0] - reference.q[0]) <= TOLERANCE):
-                off[(c, backtrack)].append((float(q0[0]), float(result.q[0]), reference.q[0]))
+                rests = (float(q0[0]), float(result.q[0]), float(reference.q[0]))
+                off[(c, backtrack)].append(rests)
     return count, off
 
 

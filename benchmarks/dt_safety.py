@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from typing import Any
 
 import pinsettle
 
@@ -19,7 +20,7 @@ KTS = [0.0, 0.5, 0.9]
 NO_EQUILIBRIUM = {"torque_disk", "free_fall", "overloaded_pendulum"}
 
 
-def measure(factors: list[float], max_steps: int) -> list[dict]:
+def measure(factors: list[float], max_steps: int) -> list[dict[str, Any]]:
     rows = []
     scenes = [s for s in pinsettle.scene_names() if s not in NO_EQUILIBRIUM]
     for c in factors:

@@ -22,6 +22,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinsettle
@@ -32,7 +33,7 @@ sys.path.insert(0, str(HERE))
 import stress  # noqa: E402  (benchmarks/stress.py)
 
 # Settings that take the loop down each of its branches, on top of a scene's own.
-VARIANTS: dict[str, dict] = {
+VARIANTS: dict[str, dict[str, Any]] = {
     "default": {},
     "kt0": {"kt": 0.0},
     "kt0.9": {"kt": 0.9},
@@ -67,7 +68,7 @@ def _digest(*arrays: object) -> str:
     return h.hexdigest()[:16]
 
 
-def fingerprint(result: pinsettle.Result) -> dict:
+def fingerprint(result: pinsettle.Result) -> dict[str, Any]:
     out = {name: getattr(result, name) for name in COUNTERS}
     out["state"] = _digest(result.q, result.v, [result.residual, result.sim_time, result.dt])
     out["energies"] = _digest([result.kinetic_energy, result.simplified_kinetic_energy])
@@ -88,8 +89,8 @@ def fingerprint(result: pinsettle.Result) -> dict:
     return out
 
 
-def _runs() -> dict[str, dict]:
-    runs: dict[str, dict] = {}
+def _runs() -> dict[str, dict[str, Any]]:
+    runs: dict[str, dict[str, Any]] = {}
     for path in sorted((HERE.parent / "robots").glob("*.toml")):
         name = path.stem
         scene = pinsettle.load_scene(path)

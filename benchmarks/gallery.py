@@ -28,6 +28,7 @@ import statistics
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio
@@ -53,7 +54,7 @@ except ImportError:  # pragma: no cover - reported in the gallery
 MISSING = "mujoco is not installed (pip install '.[bench]')"
 
 
-def mujoco_info() -> dict:
+def mujoco_info() -> dict[str, Any]:
     if mujoco is None:
         return {"missing": MISSING}
     return {"version": mujoco.__version__}
@@ -61,13 +62,13 @@ def mujoco_info() -> dict:
 
 def is_floating(name: str) -> bool:
     """Whether pinsettle gives the robot a free-flyer root by default."""
-    return pinsettle.load_robot(name).joints[1].shortname() == "JointModelFreeFlyer"
+    return bool(pinsettle.load_robot(name).joints[1].shortname() == "JointModelFreeFlyer")
 
 
 # --- pinsettle --------------------------------------------------------------------------------
 
 
-def _solves(model: pinocchio.Model, repeats: int) -> list:
+def _solves(model: pinocchio.Model, repeats: int) -> list[pinsettle.Result]:
     """Up to max(repeats, GALLERY_KD_REPEATS) default solves (no more once they took
     REPEAT_BUDGET)."""
     repeats = max(repeats, GALLERY_KD_REPEATS)
@@ -77,7 +78,7 @@ def _solves(model: pinocchio.Model, repeats: int) -> list:
     return solves
 
 
-def rest_check(ref: CachedReference, q: np.ndarray) -> dict:
+def rest_check(ref: CachedReference, q: np.ndarray) -> dict[str, Any]:
     """The conditions of a rest against the URDF's stops at q, recomputed independently: the
     largest violation (N m or N), the joints on a stop, and how far the worst joint is outside
     its limits (rad or m; 0 inside)."""
@@ -96,7 +97,9 @@ def rest_check(ref: CachedReference, q: np.ndarray) -> dict:
     }
 
 
-def verdict(ref: CachedReference, q: np.ndarray, force: np.ndarray, contacts: dict) -> str:
+def verdict(
+    ref: CachedReference, q: np.ndarray, force: np.ndarray, contacts: dict[str, Any]
+) -> str:
     """Stable, neutral or unstable at q: the eigenvalues of the symmetric part of the
     central-difference stiffness of the independent force, restricted to the joints not pressed
     on a stop (a reaction within 1e-9 of the largest static force counts as free)."""
@@ -174,9 +177,9 @@ def load_mujoco(path: Path) -> tuple[object | None, str, list[str]]:
     return model, "", warnings
 
 
-def mujoco_q(mj_model, qpos: np.ndarray, model: pinocchio.Model) -> np.ndarray:
+def mujoco_q(mj_model: Any, qpos: np.ndarray, model: pinocchio.Model) -> np.ndarray:
     """MuJoCo's hinge and slide joints by name into a Pinocchio configuration."""
-    q = pinocchio.neutral(model)
+    q: np.ndarray = pinocchio.neutral(model)
     seen = set()
     for j in range(mj_model.njnt):
         name = mj_model.joint(j).name
@@ -196,7 +199,7 @@ def mujoco_q(mj_model, qpos: np.ndarray, model: pinocchio.Model) -> np.ndarray:
     return q
 
 
-def mujoco_settle(path: Path, max_sim: float, repeats: int) -> dict:
+def mujoco_settle(path: Path, max_sim: float, repeats: int) -> dict[str, Any]:
     """MuJoCo's damped settle of the URDF (see the top of the file)."""
     if mujoco is None:
         return {"status": "not installed", "reason": MISSING}
@@ -255,7 +258,7 @@ def mujoco_settle(path: Path, max_sim: float, repeats: int) -> dict:
 # --- one robot ----------------------------------------------------------------------------------
 
 
-def measure_robot(name: str, repeats: int, mujoco_max_sim: float) -> dict:
+def measure_robot(name: str, repeats: int, mujoco_max_sim: float) -> dict[str, Any]:
     """pinsettle (default settings, root fixed) and MuJoCo on one robot, both checked with the
     independent rest conditions."""
     urdf = pinsettle.robot_urdf(name)
@@ -305,7 +308,7 @@ def measure_robot(name: str, repeats: int, mujoco_max_sim: float) -> dict:
     return row
 
 
-def measure_floating(name: str, repeats: int) -> dict:
+def measure_floating(name: str, repeats: int) -> dict[str, Any]:
     """The robot with its free-flyer root and the default settings: it falls."""
     model = pinsettle.load_robot(name, floating=True)
     solves = _solves(model, repeats)

@@ -36,7 +36,7 @@ LOOP_TOLERANCE = 1e-13
 class CachedReference(Reference):
     """tests/scene_reference.py's Reference with one pinocchio.Data per model."""
 
-    _datas: dict = field(default_factory=dict, repr=False)
+    _datas: dict[int, pinocchio.Data] = field(default_factory=dict, repr=False)
 
     def data_of(self, model: pinocchio.Model) -> pinocchio.Data:
         data = self._datas.get(id(model))
@@ -44,7 +44,7 @@ class CachedReference(Reference):
             data = self._datas[id(model)] = model.createData()
         return data
 
-    def _kinematics(self, model, q):
+    def _kinematics(self, model: pinocchio.Model, q: np.ndarray) -> pinocchio.Data:
         data = self.data_of(model)
         pinocchio.computeJointJacobians(model, data, q)  # also the forward kinematics
         pinocchio.updateFramePlacements(model, data)
@@ -55,8 +55,11 @@ class CachedReference(Reference):
 
     def force_reduced(self, model: pinocchio.Model, q: np.ndarray) -> np.ndarray:
         if not self.has_elements():  # gravity alone: Pinocchio's generalized gravity
-            return pinocchio.computeGeneralizedGravity(model, self.data_of(model), q).copy()
-        return super().force_reduced(model, q)
+            data = self.data_of(model)
+            gravity: np.ndarray = pinocchio.computeGeneralizedGravity(model, data, q).copy()
+            return gravity
+        force: np.ndarray = super().force_reduced(model, q)
+        return force
 
 
 class Physics:
@@ -105,7 +108,8 @@ class Physics:
         _, J = self.loop_jacobian(q_full)
         _, s, vt = np.linalg.svd(J)
         rank = int(np.sum(s > 1e-9 * s[0])) if s.size else 0
-        return vt[rank:].T
+        basis: np.ndarray = vt[rank:].T
+        return basis
 
     def project(self, q_full: np.ndarray, iterations: int = 50) -> np.ndarray:
         """q_full moved onto the loops (least-norm Gauss-Newton); all nan when they cannot be
@@ -160,4 +164,5 @@ class Physics:
         K of ``stiffness``, rank cut 1e-8 (neutral directions are left alone)."""
         f = self.force(q_full) if f is None else f
         K, B = self.stiffness(q_full)
-        return B @ np.linalg.lstsq(K, -(B.T @ f), rcond=1e-8)[0]
+        step: np.ndarray = B @ np.linalg.lstsq(K, -(B.T @ f), rcond=1e-8)[0]
+        return step

@@ -13,6 +13,7 @@ import numpy as np
 import pinocchio
 import pinsettle
 from independent import CachedReference, Physics
+from pinsettle import _core
 
 
 class Statics:
@@ -86,7 +87,8 @@ class Statics:
 
     def tangent(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
         """qb - qa on the free joints (dim model.nv of the reduced model)."""
-        return pinocchio.difference(self.full, qa, qb)[self.compiled.v_index]
+        dq: np.ndarray = pinocchio.difference(self.full, qa, qb)[self.compiled.v_index]
+        return dq
 
     def distances(self, q_ref: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """max |q - q_ref| over the free joints for each row of ``rows`` (angles modulo 2 pi)."""
@@ -95,7 +97,8 @@ class Statics:
         else:
             d = np.array([self.tangent(q_ref, row) for row in rows])
         d[:, self.angle] = np.remainder(d[:, self.angle] + math.pi, 2 * math.pi) - math.pi
-        return np.max(np.abs(d), axis=1)
+        worst: np.ndarray = np.max(np.abs(d), axis=1)
+        return worst
 
     def distance(self, qa: np.ndarray, qb: np.ndarray) -> float:
         return float(self.distances(qa, qb[None, :])[0])
@@ -131,9 +134,10 @@ class Statics:
         f = self.force(q) if f is None else f
         report = self.stiffness(q)
         B = report.basis
-        return B @ np.linalg.lstsq(report.stiffness_matrix, -(B.T @ f), rcond=1e-10)[0]
+        step: np.ndarray = B @ np.linalg.lstsq(report.stiffness_matrix, -(B.T @ f), rcond=1e-10)[0]
+        return step
 
-    def time_scale(self, q: np.ndarray, scale_stiff_modes: bool = False) -> dict:
+    def time_scale(self, q: np.ndarray, scale_stiff_modes: bool = False) -> _core._TimeScale:
         return pinsettle._core.time_scale(
             self.model, q[self.compiled.q_index], self.elements, scale_stiff_modes, self.loops
         )

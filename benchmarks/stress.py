@@ -29,9 +29,10 @@ import os
 import platform
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio
@@ -46,6 +47,10 @@ MAX_TIME = 60.0  # s of wall clock per run: a run that needs more is a failure, 
 # --- the physics, written out independently of pinsettle's elements ---------------------------
 
 
+#: A point in a frame (m).
+Point = tuple[float, float, float]
+
+
 @dataclass
 class Physics:
     """A mechanism and what acts on it, in a form both pinsettle and the reference read."""
@@ -53,7 +58,7 @@ class Physics:
     model: pinocchio.Model
     joint_springs: list[tuple[str, float, float]] = field(default_factory=list)  # joint, k, rest
     # (frame a, point in a, frame b, point in b, stiffness, rest length)
-    springs: list[tuple[str, tuple, str, tuple, float, float]] = field(default_factory=list)
+    springs: list[tuple[str, Point, str, Point, float, float]] = field(default_factory=list)
     loads: list[tuple[str, float]] = field(default_factory=list)  # joint, effort (1-DoF)
     # joint, lower, upper (rad or m, 1-DoF): the only stops; the model's own limits are off
     stops: list[tuple[str, float, float]] = field(default_factory=list)
@@ -76,7 +81,9 @@ class Physics:
         return scene
 
 
-def _point_jacobian(model, data, frame: str, point) -> tuple[np.ndarray, np.ndarray]:
+def _point_jacobian(
+    model: pinocchio.Model, data: pinocchio.Data, frame: str, point: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
     """World position of a point fixed in a frame and its linear Jacobian (world axes)."""
     fid = model.getFrameId(frame)
     placement = data.oMf[fid]
@@ -91,7 +98,7 @@ def static_force(physics: Physics, q: np.ndarray) -> np.ndarray:
     """Net static generalized force: gravity minus springs and loads; zero at an equilibrium."""
     model = physics.model
     data = model.createData()
-    force = pinocchio.computeGeneralizedGravity(model, data, q).copy()
+    force: np.ndarray = pinocchio.computeGeneralizedGravity(model, data, q).copy()
     for joint, k, rest in physics.joint_springs:
         j = model.getJointId(joint)
         force[model.idx_vs[j]] += k * (q[model.idx_qs[j]] - rest)
@@ -164,7 +171,7 @@ def pressed(physics: Physics, q: np.ndarray) -> tuple[np.ndarray, str]:
     model = physics.model
     force = static_force(physics, q)
     slack = 1e-8 * max(float(np.max(np.abs(force))), 1e-300)
-    held = []
+    held: list[int] = []
     for joint, lower, upper in physics.stops:
         j = model.getJointId(joint)
         x, i = float(q[model.idx_qs[j]]), model.idx_vs[j]
@@ -219,7 +226,11 @@ def stability(physics: Physics, q: np.ndarray, held: np.ndarray | None = None) -
 # --- the cases ----------------------------------------------------------------------------------
 
 
-def chain(masses, lengths, gravity: float = 9.81) -> pinocchio.Model:
+def chain(
+    masses: Sequence[float] | np.ndarray,
+    lengths: Sequence[float] | np.ndarray,
+    gravity: float = 9.81,
+) -> pinocchio.Model:
     """A planar chain of revolute joints about y, link k a rod of mass masses[k] and length
     lengths[k] (centre of mass at its middle), each with a frame 'link{k}' at its root."""
     model = pinocchio.Model()
@@ -245,7 +256,7 @@ def chain(masses, lengths, gravity: float = 9.81) -> pinocchio.Model:
     return model
 
 
-def heavy_and_light(light_joint) -> pinocchio.Model:
+def heavy_and_light(light_joint: pinocchio.JointModel) -> pinocchio.Model:
     """A 10 kg pendulum (1 m) carrying a 10 g body on a second joint at its tip."""
     model = chain([10.0], [1.0])
     joint = model.addJoint(
@@ -262,14 +273,19 @@ def heavy_and_light(light_joint) -> pinocchio.Model:
     return model
 
 
+#: A case's builder: the reference physics (None where there is no equilibrium to check),
+#: the scene and its start.
+Build = Callable[[], tuple[Physics | None, pinsettle.Scene, np.ndarray]]
+
+
 @dataclass
 class Case:
     name: str
     group: str
-    build: Callable[[], tuple[Physics | None, pinsettle.Scene, np.ndarray]]
+    build: Build
     expect: str = "equilibrium"  # or a status: "no_equilibrium"
     note: str = ""
-    settings: dict = field(default_factory=dict)  # beyond the defaults, said in the table
+    settings: dict[str, Any] = field(default_factory=dict)  # beyond the defaults, in the table
 
 
 def model_stops(model: pinocchio.Model) -> list[tuple[str, float, float]]:
@@ -291,17 +307,17 @@ def model_stops(model: pinocchio.Model) -> list[tuple[str, float, float]]:
     return stops
 
 
-def _physics_case(physics: Physics, q0) -> Callable:
-    def build():
+def _physics_case(physics: Physics, q0: Sequence[float] | np.ndarray) -> Build:
+    def build() -> tuple[Physics | None, pinsettle.Scene, np.ndarray]:
         return physics, physics.scene(), np.asarray(q0, dtype=float)
 
     return build
 
 
-def _scene_case(name: str, reference: bool = True) -> Callable:
+def _scene_case(name: str, reference: bool = True) -> Build:
     """A scene of robots/ (gravity only when ``reference``: the reference needs no elements)."""
 
-    def build():
+    def build() -> tuple[Physics | None, pinsettle.Scene, np.ndarray]:
         scene = pinsettle.load_scene(pinsettle.scene_path(name))
         stops = model_stops(scene.model) if scene.limits and not scene.joint_limits else []
         physics = Physics(scene.model, stops=stops) if reference else None
@@ -480,6 +496,8 @@ def run(case: Case, energy: str, kt: float) -> Outcome:
     if not finite:
         why = "non-finite q or v"
     elif case.expect == "equilibrium":
+        if physics is None:  # only the no-equilibrium cases go without
+            raise RuntimeError(f"{case.name}: an equilibrium case needs its reference physics")
         if not result.converged:
             why = f"ended {result.status}"
         else:
@@ -601,7 +619,7 @@ def kept_sections(path: Path) -> str:
     return "" if at < 0 else old[at:]
 
 
-def report(outcomes: list[Outcome], passed: int, dt_rows) -> str:
+def report(outcomes: list[Outcome], passed: int, dt_rows: list[dict[str, Any]] | None) -> str:
     from datetime import date
 
     total = sum(o.seconds for o in outcomes)
@@ -628,7 +646,7 @@ def _cpu() -> str:
     return platform.machine()
 
 
-def dt_table(rows) -> str:
+def dt_table(rows: list[dict[str, Any]]) -> str:
     lines = [
         "| c (dt_safety) | converged | total steps | median steps | step halvings | failed |",
         "| --- | --- | ---: | ---: | ---: | --- |",

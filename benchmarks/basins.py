@@ -46,12 +46,16 @@ def releases() -> Iterator[tuple[pinsettle.Scene, np.ndarray]]:
             yield scene, np.array([t0])
 
 
-def measure(
-    settings: Sequence[tuple[float, bool]] = SETTINGS,
-) -> tuple[int, dict[tuple[float, bool], list[tuple[float, float, float]]]]:
+#: (dt_safety, backtrack), and the releases that ended elsewhere with them: (start angle, rest,
+#: reference rest).
+Setting = tuple[float | str, bool]
+Missed = dict[Setting, list[tuple[float, float, float]]]
+
+
+def measure(settings: Sequence[Setting] = SETTINGS) -> tuple[int, Missed]:
     """The number of releases and, per (dt_safety, backtrack), those that ended elsewhere than
     the reference (scene index, start angle, rest, reference rest)."""
-    off: dict[tuple[float, bool], list[tuple[float, float, float]]] = {s: [] for s in settings}
+    off: Missed = {s: [] for s in settings}
     count = 0
     for scene, q0 in releases():
         count += 1

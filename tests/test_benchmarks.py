@@ -12,6 +12,7 @@ import dataclasses
 import importlib.util
 import math
 import os
+import re
 import statistics
 import sys
 import types
@@ -155,6 +156,41 @@ def test_goal_1_says_which_baseline_is_faster_and_why(quick):
         assert f"Why, on {name} (one degree of freedom): {name}: " in line
         assert f"{best[2]:,} steps in {report_writer.fmt_time(best[0])}" in line
         assert f"KD {steps:,} in" in line
+
+
+#: What the README's speed section must not say: it reports measurements to users; the goals
+#: of the issues, met or not, are in the report's Goals part.
+GOAL_WORDS = re.compile(r"\bissue\b|\bgoal\b|\bmet\b|#\d", re.IGNORECASE)
+
+
+def summary_block(text: str) -> str:
+    start = text.index(report_writer.README_BEGIN)
+    return text[start : text.index(report_writer.README_END, start)]
+
+
+def test_the_readme_block_says_what_was_measured_and_no_goals(quick):
+    results, _, _ = quick
+    block = report_writer.readme_block(results)
+    assert block.startswith(report_writer.README_BEGIN)
+    assert block.endswith(report_writer.README_END)
+    assert not GOAL_WORDS.search(block), GOAL_WORDS.search(block)
+    flat = " ".join(block.split())  # unwrapped
+    for start in ("- **One step**", "- **Robot gallery**", "- **Where a solve's time goes**"):
+        assert start in flat, start
+    # The same measurements as the report's Goals part, without the verdicts.
+    assert report_writer.gallery_tally(results) in flat
+    goals = report_writer.goals_section(results)
+    assert report_writer.gallery_tally(results) in goals and "**Goal 4**" in goals
+    for line in block.splitlines():
+        assert len(line) <= 100, line
+
+
+def test_the_committed_readme_summary_has_no_goals():
+    # The README's block is the generator's (the last full run's numbers): no issue numbers, no
+    # goals met or not.
+    readme = (report.ROOT / "README.md").read_text(encoding="utf-8")
+    block = summary_block(readme)
+    assert not GOAL_WORDS.search(block), GOAL_WORDS.search(block)
 
 
 def test_goal_5_says_why_from_the_measured_growth():

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
-from ._mjcf_actuators import _actuators
+from ._mjcf_actuators import _actuators, _ActuatorSprings
 from ._mjcf_mass import _EPS, _GeomMass, _mesh_mass, _MeshMass, _shape_mass
 from ._mjcf_parse import (
     _MASS_SHAPES,
@@ -59,7 +59,7 @@ from ._mjcf_parse import (
     _to_se3,
     _z_to,
 )
-from ._mjcf_statics import _joint_statics, _option, _other_sections
+from ._mjcf_statics import _joint_statics, _option, _other_sections, _Statics
 
 __all__ = ["FREE_OBJECTS", "MjcfError", "MjcfModel", "is_mjcf", "load_mjcf"]
 
@@ -209,48 +209,59 @@ class _Writer:
         """The body's inertial, or the geoms its mass comes from (MuJoCo's rules: explicit
         unless inertiafromgeom is true or the inertial is missing; geoms in the inertia group
         range with a non-zero mass or density)."""
-        reader = self.reader
-        c = reader.compiler
+        c = self.reader.compiler
         use_geoms = c.inertiafromgeom == "true" or (
             c.inertiafromgeom == "auto" and body.inertial is None
         )
-        if not use_geoms:
-            if body.inertial is None:
-                reader.refuse(
-                    f'<body name="{body.name}">',
-                    'without <inertial> while <compiler inertiafromgeom="false">',
-                    "give it an <inertial>",
-                )
-                return
-            a = body.inertial.attrib
-            where = f"{reader.path}: <inertial> of body '{body.name}'"
-            mass = max(float(_floats(a.get("mass", ""), f"{where} mass", (1,))[0]), c.boundmass)
-            if mass < 0:
-                raise MjcfError(f"{where} mass: must be >= 0, got {mass:g}")
-            inertial = ET.SubElement(el, "inertial", mass=repr(mass))
-            assert body.inertial_pose is not None
-            self._place(inertial, body.inertial_pose)
-            rotation = body.inertial_pose.rotation
-            if "fullinertia" in a:
-                full = _floats(a["fullinertia"], f"{where} fullinertia", (6,))
-                inertial.set("fullinertia", _text(full))
-                xx, yy, zz, xy, xz, yz = full
-                tensor = rotation @ np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-            else:
-                if "diaginertia" not in a and body.joints:
-                    raise MjcfError(
-                        f"{where}: neither diaginertia nor fullinertia, and the body moves "
-                        "(MuJoCo refuses a moving body without inertia too): give one"
-                    )
-                diagonal = _floats(a.get("diaginertia", "0 0 0"), f"{where} diaginertia", (3,))
-                inertial.set("diaginertia", _text(diagonal))
-                tensor = rotation @ np.diag(diagonal)
-            self.inertias[body.name] = (
-                mass,
-                np.array(body.inertial_pose.translation),
-                tensor @ rotation.T,
+        if use_geoms:
+            self._mass_from_geoms(el, body)
+        elif body.inertial is None:
+            self.reader.refuse(
+                f'<body name="{body.name}">',
+                'without <inertial> while <compiler inertiafromgeom="false">',
+                "give it an <inertial>",
             )
-            return
+        else:
+            self._given_mass(el, body, body.inertial)
+
+    def _given_mass(self, el: ET.Element, body: _Body, given: ET.Element) -> None:
+        """The body's own <inertial> (boundmass applied, as MuJoCo does)."""
+        reader = self.reader
+        a = given.attrib
+        where = f"{reader.path}: <inertial> of body '{body.name}'"
+        mass = max(
+            float(_floats(a.get("mass", ""), f"{where} mass", (1,))[0]), reader.compiler.boundmass
+        )
+        if mass < 0:
+            raise MjcfError(f"{where} mass: must be >= 0, got {mass:g}")
+        inertial = ET.SubElement(el, "inertial", mass=repr(mass))
+        assert body.inertial_pose is not None
+        self._place(inertial, body.inertial_pose)
+        rotation = body.inertial_pose.rotation
+        if "fullinertia" in a:
+            full = _floats(a["fullinertia"], f"{where} fullinertia", (6,))
+            inertial.set("fullinertia", _text(full))
+            xx, yy, zz, xy, xz, yz = full
+            tensor = rotation @ np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+        else:
+            if "diaginertia" not in a and body.joints:
+                raise MjcfError(
+                    f"{where}: neither diaginertia nor fullinertia, and the body moves "
+                    "(MuJoCo refuses a moving body without inertia too): give one"
+                )
+            diagonal = _floats(a.get("diaginertia", "0 0 0"), f"{where} diaginertia", (3,))
+            inertial.set("diaginertia", _text(diagonal))
+            tensor = rotation @ np.diag(diagonal)
+        self.inertias[body.name] = (
+            mass,
+            np.array(body.inertial_pose.translation),
+            tensor @ rotation.T,
+        )
+
+    def _mass_from_geoms(self, el: ET.Element, body: _Body) -> None:
+        """MuJoCo's InertiaFromGeom: the geoms' masses, centres and inertias summed, then
+        boundmass and boundinertia on the total and its principal moments."""
+        c = self.reader.compiler
         parts = [part for geom in body.geoms if (part := self._geom_mass(body, geom))]
         if not parts:
             if c.boundmass > 0:
@@ -262,8 +273,6 @@ class _Writer:
                     diaginertia=_text([c.boundinertia] * 3),
                 )
             return
-        # MuJoCo's InertiaFromGeom: the geoms' masses, centres and inertias summed, then
-        # boundmass and boundinertia on the total and its principal moments.
         mass = sum(part.mass for part in parts)
         com: np.ndarray = np.sum([part.mass * part.com for part in parts], axis=0) / mass
         inertia: np.ndarray = np.sum(
@@ -428,77 +437,92 @@ def _structure(reader: _Reader, floating: bool, free_objects: str) -> _Structure
     humanoid) floats, as in MuJoCo. ``floating`` adds a free joint to the root body of a file
     that has none: the single top-level body other than the free objects, without a joint of
     its own."""
-    path = reader.path
     if free_objects not in FREE_OBJECTS:
         raise MjcfError(
             f"free_objects: expected 'keep' or 'lock', got {free_objects!r} ('keep': free "
             "objects stay free and fall; 'lock': they are fixed where the file places them)"
         )
+    _check_free_joints(reader)
+    top = reader.bodies
+    free_top = [b for b in top if b.joints and b.joints[0].kind == "free"]
+    objects = [b for b in free_top if not any(_has_joints(c) for c in b.children)]
+    structure = _Structure({b.name: b.joints[0].name for b in free_top})
+    if objects:
+        _free_objects(reader, structure, objects, free_objects)
+    if floating:
+        _add_floating(reader, structure, objects)
+    structure.single = len(top) == 1 and top[0].name in structure.free
+    return structure
+
+
+def _check_free_joints(reader: _Reader) -> None:
+    """A free joint is a top-level body's only joint (MuJoCo's rule)."""
     top = reader.bodies
     for body in reader.all_bodies():
         if any(j.kind == "free" for j in body.joints):
             if len(body.joints) > 1:
-                raise MjcfError(f"{path}: body '{body.name}' has a free joint and other joints")
+                raise MjcfError(
+                    f"{reader.path}: body '{body.name}' has a free joint and other joints"
+                )
             if body not in top:
                 raise MjcfError(
-                    f"{path}: body '{body.name}' has a free joint but is not a top-level body "
-                    "(MuJoCo refuses this too): move it to <worldbody>"
+                    f"{reader.path}: body '{body.name}' has a free joint but is not a top-level "
+                    "body (MuJoCo refuses this too): move it to <worldbody>"
                 )
-    free_top = [b for b in top if b.joints]
-    free_top = [b for b in free_top if b.joints[0].kind == "free"]
-    objects = [b for b in free_top if not any(_has_joints(c) for c in b.children)]
-    structure = _Structure({b.name: b.joints[0].name for b in free_top})
-    if objects:
-        names = _names([b.name for b in objects])
-        plural = len(objects) > 1
-        if free_objects == "lock":
-            structure.locked = [b.name for b in objects]
-            for b in objects:
-                del structure.free[b.name]
-            reader.notes.append(
-                f"free object{'s' if plural else ''} {names} locked where the file places "
-                f'{"them" if plural else "it"} (free_objects = "lock")'
-            )
-        else:
-            reader.notes.append(
-                f"free object{'s' if plural else ''} {names} kept free (free_objects = "
-                f'"keep"): nothing holds {"them" if plural else "it"} (contacts play no '
-                f"part): under gravity {'they fall' if plural else 'it falls'} and the solve "
-                'ends no_equilibrium; free_objects = "lock" (--free-objects lock) fixes '
-                f"{'them' if plural else 'it'} where the file places {'them' if plural else 'it'}"
-            )
-    if floating:
-        robots = [b for b in top if b not in objects]
-        own = [b for b in robots if b.name in structure.free]
-        if own:
-            reader.notes.append(
-                f"floating: body '{own[0].name}' floats by the file's own free joint "
-                f"'{structure.free[own[0].name]}'; nothing added"
-            )
-        elif len(robots) != 1:
-            raise MjcfError(
-                f"{path}: floating: {len(robots)} top-level bodies ("
-                + _names([b.name for b in robots])
-                + ")"
-                + (
-                    f" beside the free objects ({_names([b.name for b in objects])})"
-                    if objects
-                    else ""
-                )
-                + "; a free joint goes on a single root body: give one a <freejoint/> in the "
-                "file instead"
-            )
-        elif robots[0].joints:
-            raise MjcfError(
-                f"{path}: floating: the root body '{robots[0].name}' is attached by joint "
-                f"'{robots[0].joints[0].name}' already; give it a <freejoint/> in the file "
-                "instead"
-            )
-        else:
-            structure.added = "root_joint"
-            structure.free[robots[0].name] = "root_joint"
-    structure.single = len(top) == 1 and top[0].name in structure.free
-    return structure
+
+
+def _free_objects(
+    reader: _Reader, structure: _Structure, objects: list[_Body], free_objects: str
+) -> None:
+    """The free objects kept free or locked (their free joints taken out), and a note."""
+    names = _names([b.name for b in objects])
+    s, them = ("s", "them") if len(objects) > 1 else ("", "it")
+    if free_objects == "lock":
+        structure.locked = [b.name for b in objects]
+        for b in objects:
+            del structure.free[b.name]
+        reader.notes.append(
+            f'free object{s} {names} locked where the file places {them} (free_objects = "lock")'
+        )
+        return
+    falls = "they fall" if len(objects) > 1 else "it falls"
+    reader.notes.append(
+        f'free object{s} {names} kept free (free_objects = "keep"): nothing holds {them} '
+        f"(contacts play no part): under gravity {falls} and the solve ends no_equilibrium; "
+        f'free_objects = "lock" (--free-objects lock) fixes {them} where the file places {them}'
+    )
+
+
+def _add_floating(reader: _Reader, structure: _Structure, objects: list[_Body]) -> None:
+    """``floating``: a free joint on the single root body beside the free objects, or a note
+    that the file's own free joint floats it already."""
+    path = reader.path
+    robots = [b for b in reader.bodies if b not in objects]
+    own = [b for b in robots if b.name in structure.free]
+    if own:
+        reader.notes.append(
+            f"floating: body '{own[0].name}' floats by the file's own free joint "
+            f"'{structure.free[own[0].name]}'; nothing added"
+        )
+        return
+    if len(robots) != 1:
+        beside = f" beside the free objects ({_names([b.name for b in objects])})"
+        raise MjcfError(
+            f"{path}: floating: {len(robots)} top-level bodies ("
+            + _names([b.name for b in robots])
+            + ")"
+            + (beside if objects else "")
+            + "; a free joint goes on a single root body: give one a <freejoint/> in the "
+            "file instead"
+        )
+    if robots[0].joints:
+        raise MjcfError(
+            f"{path}: floating: the root body '{robots[0].name}' is attached by joint "
+            f"'{robots[0].joints[0].name}' already; give it a <freejoint/> in the file "
+            "instead"
+        )
+    structure.added = "root_joint"
+    structure.free[robots[0].name] = "root_joint"
 
 
 def _build(xml: ET.Element, path: Path) -> pinocchio.Model:
@@ -662,18 +686,21 @@ class _Ends:
         return name
 
 
+_Loop = tuple[str, tuple[float, ...], str, tuple[float, ...], str]
+_ZERO = (0.0, 0.0, 0.0)
+
+
 def _loops(
     reader: _Reader,
     model: pinocchio.Model,
     q0: np.ndarray,
     flags: Mapping[str, bool],
-) -> list[tuple[str, tuple[float, ...], str, tuple[float, ...], str]]:
+) -> list[_Loop]:
     """The connect and weld equalities as loops (frame_a, point_a, frame_b, point_b, kind)."""
-    loops: list[tuple[str, tuple[float, ...], str, tuple[float, ...], str]] = []
+    loops: list[_Loop] = []
     ends = _Ends(reader, model, q0)
     inactive: list[str] = []
     disabled: list[str] = []
-    zero = (0.0, 0.0, 0.0)
     for section in reader.root.findall("equality"):
         for k, el in enumerate(section):
             a = reader._resolved(el, None)
@@ -686,63 +713,63 @@ def _loops(
                     "remove it in a copy (its joints or bodies then settle independently), "
                     'or <option><flag equality="disable"/>',
                 )
-                continue
-            if _flag(a.get("active", "true"), f"{where} active", ("true", "false")) == "false":
+            elif _flag(a.get("active", "true"), f"{where} active", ("true", "false")) == "false":
                 inactive.append(label)
-                continue
-            if not (flags["equality"] and flags["constraint"]):
+            elif not (flags["equality"] and flags["constraint"]):
                 disabled.append(label)
-                continue
-            sites = "site1" in a or "site2" in a
-            if sites:
-                if not ("site1" in a and "site2" in a) or "body1" in a or "body2" in a:
-                    raise MjcfError(f"{where}: give site1 and site2, or body1 (and body2)")
-                fa, pa = ends.site(a["site1"], where)
-                fb, pb = ends.site(a["site2"], where)
-                if el.tag == "connect" or _weld_as_point(a, where):
-                    loops.append((fa, tuple(pa.translation), fb, tuple(pb.translation), "point"))
-                else:
-                    loops.append(
-                        (
-                            ends.add(f"{label}/site1", fa, pa),
-                            zero,
-                            ends.add(f"{label}/site2", fb, pb),
-                            zero,
-                            "frame",
-                        )
-                    )
-                continue
-            if "body1" not in a:
-                raise MjcfError(f"{where}: needs body1 (or site1 and site2)")
-            fa = ends.body(a["body1"], where)
-            fb = ends.body(a.get("body2", "world"), where)
-            x_a, x_b = ends.placement(fa), ends.placement(fb)
-            if el.tag == "connect":
-                if "anchor" not in a:
-                    raise MjcfError(f"{where}: a connect by bodies needs an anchor")
-                anchor = _floats(a["anchor"], f"{where} anchor", (3,))
-                # The point on body2 is where the anchor is at qpos0 (MuJoCo's rule).
-                on_b = x_b.actInv(x_a.act(anchor))
-                loops.append((fa, tuple(anchor), fb, tuple(on_b), "point"))
-                continue
-            anchor = _floats(a.get("anchor", "0 0 0"), f"{where} anchor", (3,))
-            relpose = _floats(a.get("relpose", "0 1 0 0 0 0 0"), f"{where} relpose", (7,))
-            if np.any(relpose[3:]):
-                w, x, y, z = relpose[3:] / np.linalg.norm(relpose[3:])
-                on_a = _to_se3(pinocchio.Quaternion(w, x, y, z).matrix(), relpose[:3])
-            else:  # the relative pose of qpos0
-                on_a = x_a.actInv(x_b) * _to_se3(np.eye(3), anchor)
-            if _weld_as_point(a, where):
-                loops.append((fa, tuple(on_a.translation), fb, tuple(anchor), "point"))
+            elif "site1" in a or "site2" in a:
+                loops.append(_site_loop(ends, el.tag, a, label, where))
             else:
-                loops.append(
-                    (ends.add(f"{label}/body1", fa, on_a), zero, fb, tuple(anchor), "frame")
-                )
+                loops.append(_body_loop(ends, el.tag, a, label, where))
     if inactive:
         reader.notes.append(f'ignored: inactive equalities {_names(inactive)} (active="false")')
     if disabled:
         reader.notes.append(f"ignored: equalities {_names(disabled)}: disabled by <option><flag>")
     return loops
+
+
+def _site_loop(ends: _Ends, tag: str, a: Mapping[str, str], label: str, where: str) -> _Loop:
+    """A connect or weld between two sites: their points, or frames at their poses."""
+    if not ("site1" in a and "site2" in a) or "body1" in a or "body2" in a:
+        raise MjcfError(f"{where}: give site1 and site2, or body1 (and body2)")
+    fa, pa = ends.site(a["site1"], where)
+    fb, pb = ends.site(a["site2"], where)
+    if tag == "connect" or _weld_as_point(a, where):
+        return fa, tuple(pa.translation), fb, tuple(pb.translation), "point"
+    return (
+        ends.add(f"{label}/site1", fa, pa),
+        _ZERO,
+        ends.add(f"{label}/site2", fb, pb),
+        _ZERO,
+        "frame",
+    )
+
+
+def _body_loop(ends: _Ends, tag: str, a: Mapping[str, str], label: str, where: str) -> _Loop:
+    """A connect or weld between two bodies (body2: the world where not given), as MuJoCo
+    places its ends at qpos0."""
+    if "body1" not in a:
+        raise MjcfError(f"{where}: needs body1 (or site1 and site2)")
+    fa = ends.body(a["body1"], where)
+    fb = ends.body(a.get("body2", "world"), where)
+    x_a, x_b = ends.placement(fa), ends.placement(fb)
+    if tag == "connect":
+        if "anchor" not in a:
+            raise MjcfError(f"{where}: a connect by bodies needs an anchor")
+        anchor = _floats(a["anchor"], f"{where} anchor", (3,))
+        # The point on body2 is where the anchor is at qpos0 (MuJoCo's rule).
+        on_b = x_b.actInv(x_a.act(anchor))
+        return fa, tuple(anchor), fb, tuple(on_b), "point"
+    anchor = _floats(a.get("anchor", "0 0 0"), f"{where} anchor", (3,))
+    relpose = _floats(a.get("relpose", "0 1 0 0 0 0 0"), f"{where} relpose", (7,))
+    if np.any(relpose[3:]):
+        w, x, y, z = relpose[3:] / np.linalg.norm(relpose[3:])
+        on_a = _to_se3(pinocchio.Quaternion(w, x, y, z).matrix(), relpose[:3])
+    else:  # the relative pose of qpos0
+        on_a = x_a.actInv(x_b) * _to_se3(np.eye(3), anchor)
+    if _weld_as_point(a, where):
+        return fa, tuple(on_a.translation), fb, tuple(anchor), "point"
+    return ends.add(f"{label}/body1", fa, on_a), _ZERO, fb, tuple(anchor), "frame"
 
 
 def _weld_as_point(attrs: Mapping[str, str], where: str) -> bool:
@@ -777,18 +804,63 @@ def load_mjcf(
             static effect that cannot be honoured (the message names the elements).
     """
     path = Path(path)
-    reader = _Reader(path)
-    gravity, flags = _option(reader)
-    statics = _joint_statics(reader, flags)
-    _other_sections(reader, flags)
-    actuators = _actuators(reader, flags, actuator_springs)
-    structure = _structure(reader, floating, free_objects)
+    read = _read_file(path, floating, free_objects, actuator_springs)
+    reader, structure = read.reader, read.structure
     writer = _Writer(reader, structure)
     reader.check_refusals()
     if not reader.bodies:
         raise MjcfError(f"{path}: no body in <worldbody>: nothing to settle")
     model = _build(writer.xml, path)
     joints = _qpos_order(reader, structure)
+    _check_joints(path, model, joints, structure)
+    _set_limits(model, joints, read.statics.limits)
+    model.gravity = pinocchio.Motion(read.gravity, np.zeros(3))
+    q0, start = _reference(reader, model, joints, structure)
+    for name, q in _keyframes(reader, model, joints, q0, structure.added is not None).items():
+        model.referenceConfigurations[name] = q
+    model.referenceConfigurations["qpos0"] = q0
+    loops = _loops(reader, model, q0, read.flags)
+    reader.check_refusals()
+    return MjcfModel(
+        model=model,
+        name=str(writer.xml.get("model")),
+        joint_springs=read.statics.springs,
+        loops=loops,
+        start=start,
+        notes=reader.notes,
+        inertias=writer.inertias,
+        actuator_springs=read.actuators.springs,
+        actuator_rests=read.actuators.rests,
+    )
+
+
+@dataclass
+class _FileRead:
+    """What the file says, read before any model is built."""
+
+    reader: _Reader
+    gravity: np.ndarray
+    flags: dict[str, bool]
+    statics: _Statics
+    actuators: _ActuatorSprings
+    structure: _Structure
+
+
+def _read_file(path: Path, floating: bool, free_objects: str, actuator_springs: bool) -> _FileRead:
+    reader = _Reader(path)
+    gravity, flags = _option(reader)
+    statics = _joint_statics(reader, flags)
+    _other_sections(reader, flags)
+    actuators = _actuators(reader, flags, actuator_springs)
+    structure = _structure(reader, floating, free_objects)
+    return _FileRead(reader, gravity, flags, statics, actuators, structure)
+
+
+def _check_joints(
+    path: Path, model: pinocchio.Model, joints: list[_Joint], structure: _Structure
+) -> None:
+    """Pinocchio's model has the file's joints (a locked free object's left out), and one
+    of them moves."""
     locked = {j.name for j in joints if j.body in structure.locked}
     expected = [j for j in joints if j.name not in locked]
     missing = [j.name for j in expected if not model.existJointName(j.name)]
@@ -802,27 +874,15 @@ def load_mjcf(
             f"{path}: no joint: every body is fixed, nothing to settle"
             + ('; free_objects = "keep" lets the free objects fall' if locked else "")
         )
+
+
+def _set_limits(
+    model: pinocchio.Model, joints: list[_Joint], limits: Mapping[str, tuple[float, float]]
+) -> None:
+    """The hinge and slide joints' ranges as position limits, infinite where not limited."""
     lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
     for joint in joints:
         if joint.kind in ("hinge", "slide"):
             iq = model.idx_qs[model.getJointId(joint.name)]
-            lower[iq], upper[iq] = statics.limits.get(joint.name, (-math.inf, math.inf))
+            lower[iq], upper[iq] = limits.get(joint.name, (-math.inf, math.inf))
     model.lowerPositionLimit, model.upperPositionLimit = lower, upper
-    model.gravity = pinocchio.Motion(gravity, np.zeros(3))
-    q0, start = _reference(reader, model, joints, structure)
-    for name, q in _keyframes(reader, model, joints, q0, structure.added is not None).items():
-        model.referenceConfigurations[name] = q
-    model.referenceConfigurations["qpos0"] = q0
-    loops = _loops(reader, model, q0, flags)
-    reader.check_refusals()
-    return MjcfModel(
-        model=model,
-        name=str(writer.xml.get("model")),
-        joint_springs=statics.springs,
-        loops=loops,
-        start=start,
-        notes=reader.notes,
-        inertias=writer.inertias,
-        actuator_springs=actuators.springs,
-        actuator_rests=actuators.rests,
-    )

@@ -74,7 +74,8 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "robots"))
 sys.path.insert(0, str(HERE))
 import gallery  # noqa: E402  (benchmarks/gallery.py: the robots and MuJoCo)
-import report_writer  # noqa: E402  (benchmarks/report_writer.py: figures and markdown)
+import report_readme  # noqa: E402  (benchmarks/report_readme.py: the README's speed section)
+import report_writer  # noqa: E402  (benchmarks/report_writer.py: the report's text)
 import stress  # noqa: E402  (benchmarks/stress.py: the heavy-and-light model)
 from independent import CachedReference  # noqa: E402  (benchmarks/independent.py)
 from make_chain import chain_urdf  # noqa: E402  (robots/make_chain.py)
@@ -1219,7 +1220,7 @@ def generate(
     if (
         update_readme
         and set(sections) == set(SECTIONS)
-        and report_writer.update_readme(results, ROOT / "README.md")
+        and report_readme.update_readme(results, ROOT / "README.md")
     ):
         log("updated the speed section of README.md")
     log(f"wrote {output / 'benchmarks.md'} and {output / 'benchmarks'}/")

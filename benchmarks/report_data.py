@@ -1,6 +1,6 @@
 """What the benchmark report measures and writes: its constants and the records of its
-measurements. benchmarks/report.py fills them in, benchmarks/report_writer.py turns them into
-figures and text; both import this module, and the writer never imports report.py.
+measurements. benchmarks/report.py fills them in, the report_* modules (report_writer.py says
+which does what) turn them into figures and text; none of those imports report.py.
 """
 
 from __future__ import annotations

@@ -1,69 +1,83 @@
-"""The figures and the text of the benchmark report (benchmarks/report.py measures).
+"""The text of the benchmark report, docs/benchmarks.md (benchmarks/report.py measures).
 
-Everything written here is computed from the measurements: the conclusions too, by the rules
-stated next to them.
+The report's modules, each on the ones before it: report_data (the constants and records of the
+measurements), report_format (how numbers and tables are written), report_measures (what is
+derived from the records: times to the level, ratios), report_figures (the figures),
+report_goals (the Goals part), this module (every other part, and the file's regions) and
+report_readme (the README's speed section). Everything written is computed from the
+measurements: the conclusions too, by the rules stated next to them.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 import statistics
-import textwrap
-from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pinsettle
 import report_data as D
+from report_figures import (
+    FLOOR,
+    gallery_figure,
+    kt_figure,
+    max_e_figure,
+    scaling_figure,
+    scene_figure,
+)
+from report_format import (
+    fmt_e,
+    fmt_list,
+    fmt_spread,
+    fmt_steps,
+    fmt_time,
+    geomean,
+    median_with_failures,
+    plural,
+    slope,
+    table,
+)
+from report_goals import (
+    goal3_paragraph,
+    goal4_verdict,
+    goals_section,
+    saddle_note,
+    unfinished_chains,
+)
+from report_measures import (
+    BASELINES,
+    DEFAULTS,
+    GOAL4_SCENES,
+    LEVEL,
+    apart_scenes,
+    best_kt,
+    compared,
+    converged_chains,
+    cost_median,
+    cost_ratio,
+    energy_tally,
+    kd_key,
+    kd_time,
+    kt_scores,
+    loop_cost_ratio,
+    loop_scenes,
+    mujoco_both,
+    mujoco_ratio,
+    overhead_rows,
+    pair_slope,
+    ratio_to_kd,
+    refused_chains,
+    settled_inside,
+    solve_steps,
+    solve_time,
+    steps_to,
+    stops_ratio,
+    time_to,
+    worst_constraint_error,
+)
 
-#: Values below this are drawn at it on the log axes (exact zeros happen at round-off).
-FLOOR = 1e-17
-LEVEL = D.RESIDUAL_LEVELS[-1]  # the level the conclusions compare at
-#: The solver's default settings, which the texts quote (they may change).
-DEFAULTS = pinsettle.Settings()
-
-
-# --- formatting ---------------------------------------------------------------------------------
-
-
-def fmt_time(seconds: float | None) -> str:
-    if seconds is None or not math.isfinite(seconds):
-        return "-"
-    if seconds >= 1.0:
-        return f"{seconds:.2f} s"
-    if seconds >= 1e-3:
-        return f"{seconds * 1e3:.3g} ms"
-    return f"{seconds * 1e6:.3g} us"
-
-
-def fmt_spread(values: Sequence[float], scale: float = 1.0) -> str:
-    """Median (min-max) of values times scale, in a time unit."""
-    vals = [v * scale for v in values]
-    med = statistics.median(vals)
-    if len(vals) == 1:
-        return f"{fmt_time(med)} (1 run)"
-    lo, hi = min(vals), max(vals)
-    unit, factor = ("s", 1.0) if med >= 1 else ("ms", 1e3) if med >= 1e-3 else ("us", 1e6)
-    return f"{med * factor:.3g} {unit} ({lo * factor:.3g}-{hi * factor:.3g})"
-
-
-def fmt_steps(steps: float | None) -> str:
-    return "-" if steps is None else f"{int(steps):,}"
-
-
-def plural(n: int, word: str) -> str:
-    return f"{n:,} {word}" + ("" if n == 1 else "s")
-
-
-def fmt_e(x: float | None) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{x:.1e}"
-
-
-def reach(run: D.Run, quantity: str, level: float) -> tuple[float, float] | None:
-    return run.reach(quantity, level)
+# --- cells and phrases ---------------------------------------------------------------------------
 
 
 def reach_cell(run: D.Run, quantity: str, level: float, spread: bool = True) -> tuple[str, str]:
@@ -108,29 +122,6 @@ def landed(run: D.Run) -> str:
     return run.landing.stability
 
 
-def geomean(values: Sequence[float]) -> float:
-    values = [v for v in values if v is not None and math.isfinite(v) and v > 0]
-    return math.exp(statistics.fmean(math.log(v) for v in values)) if values else math.nan
-
-
-def time_to(run: D.Run, level: float = LEVEL) -> float | None:
-    hit = run.reach("residual", level)
-    return None if hit is None else hit[1]
-
-
-def steps_to(run: D.Run, level: float = LEVEL) -> float | None:
-    hit = run.reach("residual", level)
-    return None if hit is None else hit[0]
-
-
-BASELINES = D.BASELINES
-
-
-def loop_scenes(results: D.Results) -> list[str]:
-    """The scenes with closed loops, in the report's order."""
-    return [name for name, d in results.scenes.items() if d.loops]
-
-
 def trees_only(results: D.Results) -> str:
     """The sentence that says why the loop scenes have no baselines ('' when there are none)."""
     names = loop_scenes(results)
@@ -144,225 +135,7 @@ def trees_only(results: D.Results) -> str:
     )
 
 
-def kd_runs(d: D.SceneData) -> list[D.Run]:
-    """Every kinetic-damping run on a scene: the main runs and the sweeps'."""
-    runs = [r for r in d.runs.values() if r.method == "kd"]
-    return runs + [r for sweep in d.sweeps.values() for r in sweep if r.method == "kd"]
-
-
-def worst_constraint_error(d: D.SceneData) -> float:
-    """Largest final loop error (m) over every KD run on the scene, as measured by the report
-    and as reported by the solver."""
-    return max(
-        float(max(r.extra["constraint_error"], r.extra["solver_constraint_error"]))
-        for r in kd_runs(d)
-    )
-
-
-def loop_cost_ratio(results: D.Results, name: str, key: str = "exact") -> float:
-    """The solver's step on a scene with loops over a bare ``pinocchio::constraintDynamics`` +
-    ``integrate`` step (benchmarks/loop_step_cost, medians); nan when not measured."""
-    cost = results.loop_step_cost.get(name)
-    if cost is None:
-        return math.nan
-    c = cost["ns_per_step"]
-    return float(statistics.median(c[key]) / statistics.median(c["bare"]))
-
-
-# --- figures -----------------------------------------------------------------------------------
-
-STYLE: dict[str, dict[str, Any]] = {
-    "kd_exact": dict(color="C0", ls="-", lw=2, label="KD, exact energy"),
-    "kd_simplified": dict(color="C0", ls="--", label="KD, simplified energy"),
-    "viscous_rule": dict(color="C1", ls="-", label="viscous, joint dampers (rule)"),
-    "viscous_best": dict(color="C1", ls="--", label="viscous, joint dampers (best)"),
-    "mass_damping_rule": dict(color="C2", ls="-", label="viscous, mass-proportional (rule)"),
-    "mass_damping_best": dict(color="C2", ls="--", label="viscous, mass-proportional (best)"),
-    "fire_rule": dict(color="C3", ls="-", label="FIRE (rule)"),
-    "fire_best": dict(color="C3", ls="--", label="FIRE (best)"),
-    "fire2_rule": dict(color="C6", ls="-", label="FIRE 2.0 (rule)"),
-    "fire2_best": dict(color="C6", ls="--", label="FIRE 2.0 (best)"),
-    "newton": dict(color="C4", ls=":", marker="o", ms=3, label="Newton (Python)"),
-    "newton_ls": dict(color="C5", ls=":", marker="s", ms=3, label="Newton + line search (Python)"),
-}
-
-
-def scene_figure(d: D.SceneData, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(11, 8), sharey="row")
-    for key, run in d.runs.items():
-        if run.curve is None or key not in STYLE:
-            continue
-        if key.endswith("_best") and run is d.runs.get(key[: -len("_best")] + "_rule"):
-            continue  # the rule was the best: drawn once
-        c = run.curve
-        style = STYLE[key]
-        for row, quantity in enumerate(("distance", "residual")):
-            y = np.maximum(getattr(c, quantity), FLOOR)
-            if run.method == "newton":
-                t = np.array(run.extra["times"])
-                axes[row, 0].plot(t[1:], y[1:], **style)
-                continue
-            keep = c.steps > 0
-            axes[row, 0].plot(run.setup + c.steps[keep] * run.per_step, y[keep], **style)
-            axes[row, 1].plot(c.steps[keep], y[keep], **style)
-    for ax in axes.flat:
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.grid(True, which="major", alpha=0.3)
-    for ax in axes[1]:
-        for level in D.RESIDUAL_LEVELS:
-            ax.axhline(level, color="grey", lw=0.8, ls=":")
-    axes[0, 0].set_ylim(FLOOR / 2, 1e2)
-    axes[1, 0].set_ylim(FLOOR / 2, 1e2)
-    axes[0, 0].set_ylabel("distance max|q - q*| (rad or m)")
-    axes[1, 0].set_ylabel("residual / force scale")
-    axes[1, 0].set_xlabel("wall time (s): set-up + steps x measured time per step")
-    axes[1, 1].set_xlabel(
-        "steps (constrained-dynamics evaluations)" if d.loops else "steps (ABA evaluations)"
-    )
-    axes[0, 0].set_title("against wall time")
-    axes[0, 1].set_title("against steps")
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
-    title = f"{d.bench_name}: {d.description}"
-    if d.loops:
-        title += f"\n(closed loops, mobility {d.mobility}: the baselines run on trees only)"
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.09, 1, 1))
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def scene_color(k: int) -> str | tuple[float, ...]:
-    """The k-th scene's colour in the figures with a line per scene: the ten of matplotlib's
-    cycle, then the light shades of tab20 (C10 would be C0 again)."""
-    if k < 10:
-        return f"C{k}"
-    import matplotlib
-
-    return matplotlib.colormaps["tab20"]((2 * (k - 10) + 1) % 20)
-
-
-def kt_figure(results: D.Results, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7.5, 4.8))
-    for k, (name, d) in enumerate(results.scenes.items()):
-        runs = d.sweeps["kt"]
-        times = {(r.settings["energy"], r.settings["kt"]): time_to(r) for r in runs}
-        best = min((t for t in times.values() if t is not None), default=None)
-        if best is None:
-            continue
-        for energy, ls in (("exact", "-"), ("simplified", "--")):
-            x = [kt for kt in results.config.kts]
-            y = [np.nan if (t := times[(energy, kt)]) is None else t / best for kt in x]
-            ax.plot(
-                x,
-                y,
-                ls=ls,
-                marker="s" if d.loops else "o",
-                ms=3,
-                color=scene_color(k),
-                label=name if energy == "exact" else None,
-            )
-    ax.set_yscale("log")
-    ax.set_xlabel("kt")
-    ax.set_ylabel(f"time to residual {LEVEL:g} / the scene's best")
-    ax.set_title("kt sweep: exact energy solid, simplified dashed (missing: not reached)")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def max_e_figure(results: D.Results, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7.5, 4.8))
-    for k, (name, d) in enumerate(results.scenes.items()):
-        runs = [r for r in d.sweeps["max_e"] if r.settings.get("energy") == "exact"]
-        x = [r.settings["max_e"] for r in runs]
-        y = [max(r.distance, FLOOR) for r in runs]
-        marker = "s" if d.loops else "o"
-        ax.plot(x, y, marker=marker, ms=3, color=scene_color(k), label=name)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("max_e (J, exact energy)")
-    ax.set_ylabel("final distance max|q - q*| (rad or m)")
-    ax.set_title("What the stopping rule leaves: final error against max_e")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def scaling_figure(results: D.Results, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = measured_chains(results)
-    n = np.array([row["n"] for row in rows], dtype=float)
-    fig, (a, b, c) = plt.subplots(1, 3, figsize=(14, 4.5))
-    per_step = [solve_time(row) / max(solve_steps(row), 1) for row in rows]
-    bare = [row["profile"]["median"]["bare_step"] for row in rows]
-    a.plot(n, per_step, marker="^", label="KD, whole solve / steps")
-    a.plot(n, bare, marker="o", label="bare aba + integrate")
-    a.plot(n, bare[0] * n / n[0], color="grey", ls=":", label="O(n) from the first")
-    a.set_ylabel("time per step (s)")
-    a.legend(fontsize=8)
-    done = [row["profile"]["status"] == "converged" for row in rows]
-    b.plot(n, [solve_steps(row) for row in rows], marker="o", label="steps (defaults)")
-    for k, ok in enumerate(done):
-        if not ok:
-            status, steps = rows[k]["profile"]["status"], solve_steps(rows[k])
-            b.annotate(status, (n[k], steps), fontsize=7)
-    b.set_ylabel("steps")
-    b.legend(fontsize=8)
-    times = [solve_time(row) for row in rows]
-    c.plot(n, times, marker="s", label="solve time (defaults)")
-    c.plot(n, times[0] * (n / n[0]) ** 2, color="grey", ls=":", label="n^2 from the first")
-    for k, ok in enumerate(done):
-        if not ok:
-            c.annotate(rows[k]["profile"]["status"], (n[k], times[k]), fontsize=7)
-    c.set_ylabel("wall time (s)")
-    c.legend(fontsize=8)
-    for ax in (a, b, c):
-        ax.set_xlabel("chain length (joints)")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.grid(True, alpha=0.3)
-    fig.suptitle(
-        "Chains of robots/make_chain.py (0.1 m, 0.1 kg links) released horizontal, default "
-        f"settings (max_time {results.config.scaling_max_time:g} s)"
-    )
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
 # --- the text ----------------------------------------------------------------------------------
-
-
-def table(header: Sequence[str], rows: Sequence[Sequence[str]], right: Sequence[int] = ()) -> str:
-    align = ["---:" if k in right else "---" for k in range(len(header))]
-    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
 
 
 def header(results: D.Results) -> str:
@@ -622,67 +395,6 @@ def summary_table(results: D.Results) -> str:
             right=(2, 3, 4, 5, 7, 8, 9),
         )
     )
-
-
-def _pairs(d: D.SceneData, kts: Sequence[float]) -> list[tuple[float, D.Run, D.Run]]:
-    by = {(r.settings["energy"], r.settings["kt"]): r for r in d.sweeps["kt"]}
-    return [(kt, by[("exact", kt)], by[("simplified", kt)]) for kt in kts]
-
-
-def energy_tally(results: D.Results, kts: Sequence[float]) -> D.Record:
-    """Steps to the level, simplified against exact, over the scenes and the given kt."""
-    ratios, fewer, more, equal, missing = [], 0, 0, 0, []
-    for name, d in results.scenes.items():
-        for kt, e, s in _pairs(d, kts):
-            a, b = steps_to(e), steps_to(s)
-            if a is None or b is None:
-                which = (
-                    "both" if a is None and b is None else "exact" if a is None else "simplified"
-                )
-                missing.append(f"{name} kt={kt:g} ({which})")
-                continue
-            ratios.append(b / a)
-            fewer += b < a
-            more += b > a
-            equal += b == a
-    return {
-        "ratios": ratios,
-        "fewer": fewer,
-        "more": more,
-        "equal": equal,
-        "missing": missing,
-        "geomean": geomean(ratios),
-    }
-
-
-def cost_ratio(results: D.Results, name: str = "ur5") -> float:
-    cost = results.step_cost.get(name)
-    if not cost:
-        return math.nan
-    c = cost["ns_per_step"]
-    return float(statistics.median(c["simplified"]) / statistics.median(c["exact"]))
-
-
-def kt_scores(results: D.Results, energy: str) -> dict[float, list[float]]:
-    """For each kt: steps to the level over the scene's best kt, per scene (inf: not reached)."""
-    score: dict[float, list[float]] = {kt: [] for kt in results.config.kts}
-    for d in results.scenes.values():
-        steps = {
-            r.settings["kt"]: steps_to(r) for r in d.sweeps["kt"] if r.settings["energy"] == energy
-        }
-        best = min((x for x in steps.values() if x is not None), default=None)
-        for kt in results.config.kts:
-            x = steps.get(kt)
-            score[kt].append(math.inf if x is None or best is None else max(x, 1) / max(best, 1))
-    return score
-
-
-def best_kt(score: dict[float, list[float]]) -> float:
-    def key(kt: float) -> tuple[int, float]:
-        ratios = score[kt]
-        return (sum(not math.isfinite(x) for x in ratios), geomean(ratios))
-
-    return min(score, key=key)
 
 
 #: The energy measures' verdict, by how the steps' and a step's ratios combine (simplified /
@@ -1350,49 +1062,6 @@ def cost_section(results: D.Results) -> str:
     )
 
 
-def solve_time(row: D.Record) -> float:
-    """A scaling chain's default solve, timed whole with its polish (median of the repeats; the
-    profile's parts are timed in the same solve without it)."""
-    return float(row["profile"]["median"]["polish_wall"])
-
-
-def solve_steps(row: D.Record) -> int:
-    """The steps of a scaling chain's default solve (solve_time's): with Newton's takeover they
-    may be fewer than the profile's plain solve took."""
-    p = row["profile"]
-    return int(p.get("polish_steps", p["steps"]))
-
-
-def measured_chains(results: D.Results) -> list[D.Record]:
-    """The chains of the scaling section that pinsettle took (not refused)."""
-    return [row for row in results.scaling if "refused" not in row]
-
-
-def refused_chains(results: D.Results) -> list[D.Record]:
-    """The chains of the scaling section that pinsettle refused (their rows hold its message)."""
-    return [row for row in results.scaling if "refused" in row]
-
-
-def unfinished_chains(results: D.Results) -> str:
-    """The chains of the scaling section that did not converge in time and those pinsettle
-    refused, in words ('' when every chain converged)."""
-    refused = [row["n"] for row in refused_chains(results)]
-    unconverged = [
-        row["n"]
-        for row in measured_chains(results)
-        if row.get("profile", {}).get("status") != "converged"
-    ]
-    parts = []
-    if unconverged:
-        parts.append(
-            f"{', '.join(map(str, unconverged))} links did not converge within "
-            f"{results.config.scaling_max_time:g} s"
-        )
-    if refused:
-        parts.append(f"{', '.join(map(str, refused))} links were refused")
-    return "; ".join(parts)
-
-
 def refusals(results: D.Results) -> str:
     refused = refused_chains(results)
     if not refused:
@@ -1403,11 +1072,6 @@ def refusals(results: D.Results) -> str:
         + str(refused[0]["refused"]).strip().splitlines()[-1]
         + "\n\n"
     )
-
-
-def pair_slope(a: D.Record, b: D.Record) -> float:
-    """The exponent of the solve time between two chain lengths."""
-    return slope([a["n"], b["n"]], [solve_time(a), solve_time(b)])
 
 
 def scaling_row(row: D.Record) -> list[str]:
@@ -1433,11 +1097,6 @@ def scaling_row(row: D.Record) -> list[str]:
         fmt_steps(steps_to(deep)) if deep else "-",
         fmt_time(time_to(deep)) if deep else "-",
     ]
-
-
-def converged_chains(results: D.Results) -> list[D.Record]:
-    """The chains whose default solve converged: the ones the growth is fitted over."""
-    return [r for r in measured_chains(results) if r["profile"]["status"] == "converged"]
 
 
 def scaling_fits(results: D.Results) -> str:
@@ -1580,95 +1239,6 @@ def write(results: D.Results, output: Path) -> None:
             png.unlink()
 
 
-# --- the README's summary ----------------------------------------------------------------------
-
-
-def kd_key() -> str:
-    """The main KD run: the default energy measure (its other settings are the defaults but
-    max_e, see How it is measured)."""
-    return f"kd_{pinsettle.Settings().energy}"
-
-
-def compared(results: D.Results) -> list[str]:
-    """The scenes of the baselines' comparison: trees, not reported apart."""
-    return [n for n, d in results.scenes.items() if d.baseline_sweep and not d.apart]
-
-
-def apart_scenes(results: D.Results) -> list[str]:
-    return [n for n, d in results.scenes.items() if d.baseline_sweep and d.apart]
-
-
-def kd_reach(d: D.SceneData) -> tuple[float, int] | None:
-    """KD's time (s) and steps to the level with the default settings: from the curve of the run
-    that goes on to round-off (the same trajectory as the default run up to where that stops), or
-    the whole default run when it ends below the level sooner (its polish, after the trajectory,
-    gets there)."""
-    hit = d.runs[kd_key()].reach("residual", LEVEL)
-    default = d.runs.get("kd_default")
-    if default is not None and default.residual <= LEVEL and (hit is None or default.time < hit[1]):
-        return default.time, default.steps
-    return None if hit is None else (hit[1], int(hit[0]))
-
-
-def kd_time(d: D.SceneData) -> float | None:
-    """KD's time to the level with the default settings (kd_reach)."""
-    reach = kd_reach(d)
-    return None if reach is None else reach[0]
-
-
-def ratio_to_kd(d: D.SceneData, key: str) -> float | None:
-    """A baseline's time to the level over KD's (defaults); None when either did not get
-    there."""
-    tb, tk = time_to(d.runs[key]), kd_time(d)
-    return None if tb is None or tk is None else tb / tk
-
-
-def median_with_failures(values: dict[str, float | None]) -> str:
-    """'median x over n scenes; k not reached (names)'."""
-    ok = [v for v in values.values() if v is not None]
-    failed = [n for n, v in values.items() if v is None]
-    scenes = "scene" if len(ok) == 1 else "scenes"
-    text = f"{statistics.median(ok):.2g} over {len(ok)} {scenes}" if ok else "no scene reached"
-    if ok and len(ok) > 1:
-        text += f" ({min(ok):.2g} to {max(ok):.2g})"
-    return text + (f"; **{len(failed)} not reached** ({', '.join(failed)})" if failed else "")
-
-
-def gallery_figure(results: D.Results, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = results.gallery
-    fig, ax = plt.subplots(figsize=(11, 4.8))
-    x = np.arange(len(rows))
-    kd = [statistics.median(r["seconds"]) for r in rows]
-    mj = [
-        statistics.median(r["mujoco"]["seconds"])
-        if r["mujoco"].get("status") == "settled"
-        else np.nan
-        for r in rows
-    ]
-    ax.bar(x - 0.2, kd, width=0.4, label="pinsettle, default settings", color="C0")
-    ax.bar(
-        x + 0.2,
-        mj,
-        width=0.4,
-        label="MuJoCo, damped settle (missing: not loaded or not settled)",
-        color="C1",
-    )
-    ax.set_xticks(x, [r["name"] for r in rows], rotation=60, ha="right", fontsize=8)
-    ax.set_yscale("log")
-    ax.set_ylabel("wall time (s)")
-    ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title("The robot gallery: root fixed, released from neutral")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
 def fmt_minutes(results: D.Results) -> str:
     if set(results.sections) == set(D.SECTIONS):
         return f"{results.seconds / 60:.1f} minutes"
@@ -1684,10 +1254,6 @@ def stamp(results: D.Results, section: str) -> str:
         f"{m['load_start'][0]:.2f} before the run and {m['load_end'][0]:.2f} at its end, its "
         "own single-threaded process included.*\n\n"
     )
-
-
-def fmt_list(values: Sequence[float]) -> str:
-    return ", ".join(f"{v:g}" for v in values)
 
 
 def defaults_section(results: D.Results) -> str:
@@ -1962,86 +1528,6 @@ def newton_section(results: D.Results) -> str:
     )
 
 
-def cost_median(results: D.Results, name: str, key: str) -> float:
-    c = results.step_cost[name]["ns_per_step"]
-    return statistics.median(c[key]) if c.get(key) else math.nan
-
-
-def stops_ratio(results: D.Results, name: str) -> float:
-    """A step with the model's joint stops over the same step without (step_cost medians)."""
-    return cost_median(results, name, "stops") / cost_median(results, name, "exact")
-
-
-#: The scenes of goal 4 of issue 20.
-GOAL4_SCENES = ("ur5", "chain20", "chain100")
-
-
-def overhead_rows(results: D.Results) -> list[D.Record]:
-    """The overhead split per scene, as fractions of the solve's wall time (medians): of the
-    plain solve (polish off), and of the default solve (its set-up, estimates, assessments and
-    Newton's stiffness matrices; Newton's static-force evaluations, O(n) each, are left out)."""
-    out = []
-    for name, p in results.overhead.items():
-        m = p["median"]
-        wall = m["wall"]
-        parts = {
-            "setup": m["setup"],
-            "estimates": m["estimates"],
-            "assessments": m["assessments"],
-        }
-        overhead = sum(parts.values())
-        # The default solve's own parts: with Newton's takeover it is not the plain run plus a
-        # polish, but a run that Newton may end at a damping event.
-        default_parts = (
-            m["polish_setup"]
-            + m["polish_estimates"]
-            + m["polish_assessments"]
-            + m["polish_stiffness"]
-        )
-        fraction_polish = default_parts / m["polish_wall"]
-        out.append(
-            {
-                "name": name,
-                "nv": p["nv"],
-                "steps": p["steps"],
-                "status": p["status"],
-                "wall": wall,
-                "parts": parts,
-                "estimate_count": p["estimate_count"],
-                "assessment_count": p["assessment_count"],
-                "polish_iterations": p.get("polish_iterations", 0),
-                "fraction": overhead / wall,
-                "fraction_polish": fraction_polish,
-                "default_wall": m["polish_wall"],
-                "default_steps": p["polish_steps"],
-                "bare": m["bare_step"] * p["steps"],
-            }
-        )
-    return out
-
-
-def goal4_verdict(rows: list[D.Record]) -> str:
-    """Goal 4's shares (the damping's own run, polish off, and the default solve), met or not,
-    and why not where the default solve's Newton is what passes the bound."""
-    text = ", ".join(
-        f"{r['name']} {r['fraction']:.1%} ({r['fraction_polish']:.1%} in the default solve)"
-        for r in rows
-    )
-    worst = max(max(r["fraction"], r["fraction_polish"]) for r in rows)
-    if worst <= 0.25:
-        return text + ": met."
-    newton = [r for r in rows if r["fraction"] <= 0.25 < r["fraction_polish"]]
-    why = "".join(
-        f" Why, on {r['name']} ({r['fraction_polish']:.2%}): the default solve's Newton (its "
-        "tries at damping events and the polish) counts as overhead, and it replaces steps: "
-        f"{r['default_steps']:,} steps and "
-        f"{fmt_time(r['default_wall'])} against {r['steps']:,} steps and "
-        f"{fmt_time(r['wall'])} with `polish = False`."
-        for r in newton
-    )
-    return text + ": **not met**." + why
-
-
 def overhead_row(r: D.Record) -> list[str]:
     w = r["wall"]
     p = r["parts"]
@@ -2109,19 +1595,6 @@ def overhead_section(results: D.Results) -> str:
         + table(OVERHEAD_COLUMNS, rows, right=tuple(range(1, 11)))
         + "\n"
     )
-
-
-def slope(x: Sequence[float], y: Sequence[float]) -> float:
-    """Least-squares exponent of y against x (log-log)."""
-    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
-
-
-def mujoco_ratio(row: D.Record) -> float | None:
-    """MuJoCo's wall time over KD's on a robot both settle; None otherwise."""
-    mj = row["mujoco"]
-    if mj.get("status") != "settled" or row["status"] != "converged":
-        return None
-    return float(statistics.median(mj["seconds"]) / statistics.median(row["seconds"]))
 
 
 MUJOCO_MEASURED = ("settled", "not settled", "diverged")
@@ -2219,56 +1692,6 @@ def gallery_intro(results: D.Results) -> str:
     )
 
 
-def mujoco_both(results: D.Results) -> dict[str, float]:
-    """MuJoCo's time over pinsettle's, on the robots both settle."""
-    ratios = {r["name"]: mujoco_ratio(r) for r in results.gallery}
-    return {n: x for n, x in ratios.items() if x is not None}
-
-
-def settled_inside(results: D.Results) -> list[str]:
-    """The robots pinsettle settled inside their limits, not on an unstable rest."""
-    return [
-        r["name"]
-        for r in results.gallery
-        if r["status"] == "converged" and r["outside"] <= 0 and r["stability"] != "unstable"
-    ]
-
-
-def saddle_note(results: D.Results, both: dict[str, float]) -> str:
-    """Where MuJoCo stopped on a saddle, and its ratio without those robots."""
-    unstable = mujoco_saddle_stops(results.gallery, both)
-    if not unstable:
-        return ""
-    text = (
-        f" MuJoCo's settle ends on an unstable rest (a saddle its damped motion did not "
-        f"leave) on {', '.join(unstable)}: there pinsettle pushes off and goes on to a "
-        "stable rest, so the two times are of different answers."
-    )
-    fair = [both[n] for n in both if n not in unstable]
-    if fair:
-        text += (
-            f" Without them, MuJoCo took {statistics.median(fair):.0f} times pinsettle's "
-            f"time (median over {len(fair)}; {min(fair):.1f} to {max(fair):.0f})."
-        )
-    return text
-
-
-def goal3_paragraph(both: dict[str, float]) -> str:
-    if not both:
-        return ""
-    values = sorted(both.values())
-    below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
-    met = not below and statistics.median(values) >= 300
-    return (
-        f"\n\n**Goal 3 of issue 20** (at least 100 times faster than MuJoCo on every robot "
-        f"both settle, median at least 300 times): over the {len(both)} robots both settle, "
-        f"MuJoCo took {statistics.median(values):.0f} times pinsettle's time (median; "
-        f"{values[0]:.1f} to {values[-1]:.0f})"
-        + (f"; below 100 on {', '.join(below)}" if below else "")
-        + (": met." if met else ": **not met**.")
-    )
-
-
 def floating_table(results: D.Results) -> str:
     if not results.floating:
         return ""
@@ -2311,393 +1734,6 @@ def gallery_section(results: D.Results, figures: str) -> str:
         text += " MuJoCo cannot load " + "; ".join(failed) + "."
     text += saddle_note(results, both) + goal3_paragraph(both)
     return text + f"\n\n![gallery]({figures}/gallery.png)\n\n" + floating_table(results)
-
-
-def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None, int] | None:
-    """A baseline at its best: the shortest time to LEVEL (s) among its rule run, the run at the
-    sweep's best setting and the sweep's own runs (each timed in its own repeats; a full run may
-    be slower than its sweep point when it stalled past the level and was retried with the steps
-    halved), with that run's velocity resets (None for the viscous baselines) and its steps to
-    the level; None when none got there."""
-    fire = family.startswith("fire")
-    found: list[tuple[float, int | None, int]] = []
-    for run in (d.runs[f"{family}_rule"], d.runs[f"{family}_best"]):
-        hit = run.reach("residual", LEVEL)  # (steps, time)
-        if hit is not None:
-            found.append((hit[1], run.extra.get("resets") if fire else None, int(hit[0])))
-    found += [
-        (p.seconds, p.resets if fire else None, p.steps)
-        for p in d.baseline_sweep.get(family, [])
-        if p.time_to is not None
-    ]
-    return min(found, key=lambda item: item[0], default=None)
-
-
-#: A behind scene (of more than one degree of freedom) whose KD run damps more often than once
-#: in this many steps, or whose set-up is more than this share of KD's time, gets the matching
-#: reason in the goal 1 line.
-FREQUENT_DAMPING = 15
-SETUP_HEAVY = 0.2
-
-
-def goal1_reasons(
-    frequent: list[str],
-    setup_heavy: list[str],
-    single: list[tuple[str, str, int, float, int, float]],
-) -> str:
-    """Why KD is behind where goal 1 is not met, in plain words, from what was measured.
-    ``single``: the one-degree-of-freedom scenes behind, each (name, the faster baseline, its
-    steps and time to the level, KD's steps and time to the level)."""
-    text = ""
-    if single:
-        fewer = all(steps_b <= steps_k for _, _, steps_b, _, steps_k, _ in single)
-        text += (
-            f" Why, on {', '.join(n for n, *_ in single)} (one degree of freedom): "
-            + "; ".join(
-                f"{n}: {label} {steps_b:,} steps in {fmt_time(t_b)} "
-                f"({fmt_time(t_b / steps_b)} a step, set-up included), KD {steps_k:,} in "
-                f"{fmt_time(t_k)} ({fmt_time(t_k / steps_k)})"
-                for n, label, steps_b, t_b, steps_k, t_k in single
-            )
-            + ". A single mode has no slower swing for KD's stops to save, and a damper tuned to "
-            "it (its sweep's best) brings it down "
-            + ("in as few steps or fewer" if fewer else "in about as many steps")
-            + "; each KD step also computes both energies, tests for a peak and controls the "
-            "step."
-        )
-    if frequent:
-        text += (
-            f" Why, on {', '.join(frequent)}: KD damps every few steps there, and each damping "
-            "event (kt = 0) stops the slow swing of the whole mechanism together with the fast "
-            "modes whose energy peaked, so the motion starts again from rest; viscous damping "
-            "removes energy without stopping the motion, and FIRE mixes its velocity toward "
-            "the force, which keeps its power positive for longer between resets."
-        )
-    if setup_heavy:
-        text += (
-            f" Why, on {', '.join(setup_heavy)}: the whole run takes microseconds, and KD's "
-            "set-up (the checks of the model and the start, the first estimate of the "
-            "stability limit and of the stiff modes) is a large share of it."
-        )
-    return text
-
-
-def goal3_reasons(gallery: list[D.Record], both: dict[str, float]) -> str:
-    """Why pinsettle is less than 100 times faster than MuJoCo on a robot, from what was
-    measured: MuJoCo stopped on a saddle (another answer), or pinsettle's run is a few steps
-    against MuJoCo's shortest settle (the still window it must pass)."""
-    rows = {r["name"]: r for r in gallery if r["name"] in both and both[r["name"]] < 100}
-    unstable = mujoco_saddle_stops(gallery, both)
-    saddle = [n for n in rows if n in unstable]
-    short = [n for n in rows if n not in saddle]
-    text = ""
-    if saddle:
-        fair = [x for n, x in both.items() if n not in unstable]
-        text += (
-            f" Why, on {', '.join(saddle)}: MuJoCo's settle ends on a saddle it did not leave and "
-            "pinsettle goes on to a stable rest, so the two times are of different answers"
-            + (
-                f" (over the {len(fair)} robots where both come to a rest that is not unstable "
-                f"the median is {statistics.median(fair):.0f})"
-                if fair
-                else ""
-            )
-            + "."
-        )
-    if short:
-        text += (
-            f" Why, on {', '.join(short)}: "
-            + "; ".join(
-                f"pinsettle's whole run is {rows[n]['steps']:,} steps in "
-                f"{fmt_time(statistics.median(rows[n]['seconds']))}, and MuJoCo's is the "
-                f"{rows[n]['mujoco']['sim_time']:g} s it simulates to see the robot stay still"
-                for n in short
-            )
-            + "."
-        )
-    return text
-
-
-def mujoco_saddle_stops(gallery: list[D.Record], both: dict[str, float]) -> list[str]:
-    """The robots both settle (``both``) where MuJoCo's settle ended on an unstable rest."""
-    return [
-        r["name"]
-        for r in gallery
-        if r["name"] in both and r["mujoco"].get("stability") == "unstable"
-    ]
-
-
-def goal5_reasons(
-    results: D.Results, n: list[int], steps: list[int], per: list[float], wall: list[float]
-) -> str:
-    """Why the chains' time grows faster than n^2, or why the longest are missing, from what
-    was measured: the growth of the steps and of a step, and the solver's own refusal."""
-    text = ""
-    if slope(n, wall) > 2:
-        text += (
-            f" Why: the steps grow as n^{slope(n, steps):.2f} (a longer chain's slowest swing "
-            f"takes more of them) and a step as n^{slope(n, per):.2f}."
-        )
-    refused = refused_chains(results)
-    if refused:
-        text += (
-            f" {', '.join(str(row['n']) for row in refused)} links are refused: "
-            + refused[0]["refused"].strip().splitlines()[-1]
-            + "."
-        )
-    return text + joint_inertia_growth(results)
-
-
-def joint_inertia_growth(results: D.Results) -> str:
-    """What the option scale_joint_inertia does to the same chains' growth, where all of them
-    converged with it, and why it is not the default."""
-    rows = [r for r in results.scaling if r.get("joint_inertia") is not None]
-    if len(rows) < 2 or any(r["joint_inertia"]["status"] != "converged" for r in rows):
-        return ""
-    n = [r["n"] for r in rows]
-    steps = [r["joint_inertia"]["steps"] for r in rows]
-    seconds = [r["joint_inertia"]["seconds"] for r in rows]
-    return (
-        f" With `scale_joint_inertia = True` the same chains ({n[0]} to {n[-1]} links) take "
-        f"{min(steps):,} to {max(steps):,} steps and their time grows as "
-        f"n^{slope(n, seconds):.2f} (the Scaling part); the option is not the default because "
-        "some robots lose with it and a run with no equilibrium is not always called one "
-        "(docs/method.md, Fictitious joint inertia)."
-    )
-
-
-@dataclasses.dataclass
-class Behind:
-    """The scenes where KD is slower than a baseline at its best, for goal 1's line: one entry
-    each, and the scenes each reason of goal1_reasons applies to."""
-
-    entries: list[str] = dataclasses.field(default_factory=list)
-    frequent: list[str] = dataclasses.field(default_factory=list)
-    setup_heavy: list[str] = dataclasses.field(default_factory=list)
-    single: list[tuple[str, str, int, float, int, float]] = dataclasses.field(default_factory=list)
-
-
-def behind_entry(
-    name: str, label: str, t_b: float, t_k: float, kd: D.Run, resets: int | None
-) -> str:
-    """'name (baseline time against KD's; how often KD damps; its set-up's share)'."""
-    every = kd.steps / kd.peaks if kd.peaks else math.inf
-    reset = f" ({kd.peaks:,} times), {label} resets {resets:,} times" if resets is not None else ""
-    return (
-        f"{name} ({label} {fmt_time(t_b)} against KD's {fmt_time(t_k)}; KD damps once every "
-        f"{every:.0f} steps" + reset + f"; KD's set-up {fmt_time(kd.setup)} is "
-        f"{kd.setup / t_k:.0%} of its time)"
-    )
-
-
-def note_behind(behind: Behind, name: str, d: D.SceneData) -> None:
-    """Add the scene to ``behind`` where KD did not reach the level or a baseline was faster."""
-    reach = kd_reach(d)
-    if reach is None:
-        behind.entries.append(f"{name} (KD did not reach it)")
-        return
-    tk, steps_k = reach
-    bests = {f: b for f in BASELINES if (b := fastest_baseline(d, f)) is not None}
-    faster = {f: b[0] for f, b in bests.items() if b[0] < tk}
-    if not faster:
-        return
-    f = min(faster, key=lambda family: faster[family])
-    kd = d.runs[kd_key()]
-    label = D.BASELINE_LABELS[f]
-    behind.entries.append(behind_entry(name, label, faster[f], tk, kd, bests[f][1]))
-    every = kd.steps / kd.peaks if kd.peaks else math.inf
-    if every < FREQUENT_DAMPING and d.nv > 1:  # one mode: no slow swing to stop
-        behind.frequent.append(name)
-    if d.nv == 1 and steps_k:
-        behind.single.append((name, label, bests[f][2], faster[f], steps_k, tk))
-    if kd.setup / tk > SETUP_HEAVY:  # of the time the line gives, set-up included
-        behind.setup_heavy.append(name)
-
-
-def fire_rule_failures(results: D.Results) -> str:
-    """Where FIRE at its rule did not reach the level, and how many of those KD settled."""
-    scenes = results.scenes
-    fails = [
-        n for n, d in scenes.items() if d.baseline_sweep and time_to(d.runs["fire_rule"]) is None
-    ]
-    if not fails:
-        return ". FIRE at its rule fails none"
-    kd_ok = [n for n in fails if kd_time(scenes[n]) is not None]
-    return f". FIRE at its rule fails {', '.join(fails)}; KD settles {len(kd_ok)} of them"
-
-
-def goal1_lines(results: D.Results) -> list[str]:
-    names = compared(results)
-    if not names:
-        return []
-    behind = Behind()
-    for name in names:
-        note_behind(behind, name, results.scenes[name])
-    done = len(names) - len(behind.entries)
-    verdict = (
-        f"met on {done} of {len(names)}; **not met** on " + "; ".join(behind.entries)
-        if behind.entries
-        else f"met on all {len(names)}"
-    )
-    return [
-        f"- **Goal 1** (KD with the default settings at least as fast to a residual of "
-        f"{LEVEL:g} as every baseline at its best, on every tree scene; a baseline's best is "
-        "its fastest run to that level: its rule, a point of its sweep or the sweep's best "
-        "setting run in full): "
-        + verdict
-        + fire_rule_failures(results)
-        + " (the whole comparison, per scene, in the Scenes part)."
-        + goal1_reasons(behind.frequent, behind.setup_heavy, behind.single)
-    ]
-
-
-def goal2_lines(results: D.Results) -> list[str]:
-    if not compared(results):
-        return []
-    defaults = [
-        (n, d.runs["kd_default"]) for n, d in results.scenes.items() if "kd_default" in d.runs
-    ]
-    worse = [f"{n} ({fmt_e(r.residual)})" for n, r in defaults if not r.residual <= LEVEL]
-    verdict = (
-        f"**not met** on {len(worse)} of {len(defaults)} scenes: " + ", ".join(worse)
-        if worse
-        else f"met on all {len(defaults)} scenes"
-    )
-    return [
-        f"- **Goal 2** (the default run ends at a relative residual of at most {LEVEL:g}): "
-        + verdict
-        + "."
-    ]
-
-
-def goal3_lines(results: D.Results) -> list[str]:
-    both = mujoco_both(results)
-    if not both:
-        return []
-    median = statistics.median(both.values())
-    below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
-    return [
-        f"- **Goal 3** (at least 100 times faster than MuJoCo's damped settle on every "
-        f"robot both settle, median at least 300): median {median:.0f} over {len(both)} robots"
-        + (f"; below 100: {', '.join(below)}" if below else "")
-        + (": met." if not below and median >= 300 else ": **not met**.")
-        + goal3_reasons(results.gallery, both)
-    ]
-
-
-def goal4_rows(results: D.Results) -> list[D.Record]:
-    """The overhead rows goal 4 names (a quick run: the scenes it has)."""
-    rows = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
-    return rows or overhead_rows(results)
-
-
-def goal4_lines(results: D.Results) -> list[str]:
-    rows = goal4_rows(results)
-    if not rows:
-        return []
-    return [
-        "- **Goal 4** (set-up, step estimates, stability assessments and polish at most 25% "
-        "of a solve on the UR5, chain20, chain100): " + goal4_verdict(rows)
-    ]
-
-
-@dataclasses.dataclass
-class ChainGrowth:
-    """The converged chains' lengths and, for each, the default solve's time, steps and time
-    per step: what goal 5 and the README's chains line fit."""
-
-    n: list[int]
-    wall: list[float]
-    steps: list[int]
-    per: list[float]
-
-    @classmethod
-    def of(cls, results: D.Results) -> ChainGrowth | None:
-        done = converged_chains(results)
-        if len(done) < 2:
-            return None
-        wall = [solve_time(r) for r in done]
-        per = [w / max(solve_steps(r), 1) for w, r in zip(wall, done, strict=True)]
-        return cls([r["n"] for r in done], wall, [solve_steps(r) for r in done], per)
-
-    def text(self) -> str:
-        return (
-            f"time grows as n^{slope(self.n, self.wall):.2f} and a step as "
-            f"n^{slope(self.n, self.per):.2f} over {self.n[0]} to {self.n[-1]} links"
-        )
-
-
-def goal5_lines(results: D.Results) -> list[str]:
-    growth = ChainGrowth.of(results)
-    if growth is None:
-        return []
-    unfinished = unfinished_chains(results)
-    if unfinished:
-        verdict = f"; {unfinished}: **not met**."
-    else:
-        verdict = ": met." if slope(growth.n, growth.wall) <= 2 else ": **not met**."
-    return [
-        "- **Goal 5** (time no faster than n^2 from 5 to 1,000 links, a step O(n)): "
-        + growth.text()
-        + verdict
-        + goal5_reasons(results, growth.n, growth.steps, growth.per, growth.wall)
-    ]
-
-
-def stop_ratios(results: D.Results) -> dict[str, float]:
-    """A step with joint stops over one without, on the UR5 and the Panda (where measured)."""
-    return {n: stops_ratio(results, n) for n in ("ur5", "panda") if n in results.step_cost}
-
-
-def step_cost_goal_lines(results: D.Results) -> list[str]:
-    ratios = stop_ratios(results)
-    if not ratios:
-        return []
-    return [
-        "- **Issue 18, step cost** (a step with joint stops at most 1.1 times one "
-        "without, UR5 and Panda): "
-        + ", ".join(f"{n} {x:.2f}" for n, x in ratios.items())
-        + (": met." if max(ratios.values()) <= 1.1 else ": **not met**.")
-    ]
-
-
-def gallery_tally(results: D.Results) -> str:
-    """'k of n robots converge inside their limits ...; floating bases: ...'."""
-    falls = [f"{r['name']} {r['status']} in {fmt_time(r['median'])}" for r in results.floating]
-    return (
-        f"{len(settled_inside(results))} of {len(results.gallery)} robots converge inside "
-        "their limits with the default settings (independent check)"
-        + (f"; floating bases: {', '.join(falls)}" if falls else "")
-    )
-
-
-def gallery_goal_lines(results: D.Results) -> list[str]:
-    if not results.gallery:
-        return []
-    return [f"- **Issue 18, gallery**: {gallery_tally(results)}."]
-
-
-#: The goals of issues 18 and 20, in the Goals part's order: each a function of the results
-#: giving its line (none when this run did not measure it).
-GOALS = (
-    goal1_lines,
-    goal2_lines,
-    goal3_lines,
-    goal4_lines,
-    goal5_lines,
-    step_cost_goal_lines,
-    gallery_goal_lines,
-)
-
-
-def goals_section(results: D.Results) -> str:
-    """The goals of issues 18 and 20, each measured in this run: met or not, in plain words."""
-    lines = [line for goal in GOALS for line in goal(results)]
-    return (
-        "## Goals\n\n"
-        "The figures issues 18 and 20 ask for, as measured in this run (details in the parts "
-        "below).\n\n" + "\n".join(lines) + "\n\n"
-    )
 
 
 REGION_TITLES = {
@@ -2816,149 +1852,3 @@ def merge(existing: str, new: dict[str, str]) -> str:
     # it no longer has: at the end.
     blocks += [block for anchor, block in foreign if anchor is None or anchor not in REGIONS]
     return "\n".join(block.rstrip("\n") + "\n" for block in blocks)
-
-
-README_BEGIN = "<!-- bench:summary (written by benchmarks/report.py) -->"
-README_END = "<!-- /bench:summary -->"
-
-
-def step_cost_line(results: D.Results) -> list[str]:
-    """One step over a bare step, per model and per kind of element, and the stops' cost."""
-    names = list(results.step_cost)
-    if not names:
-        return []
-
-    def ratio(name: str, key: str) -> float:
-        return cost_median(results, name, key) / cost_median(results, name, "bare")
-
-    def span(key: str) -> str:
-        values = [ratio(n, key) for n in names]
-        return f"{min(values):.2f}-{max(values):.2f}"
-
-    costs = ", ".join(f"{n} {ratio(n, 'exact'):.2f}" for n in names)
-    stops = ", ".join(f"{n} {stops_ratio(results, n):.2f}" for n in names)
-    return [
-        f"- **One step** costs {costs} times a bare `pinocchio::aba` + `pinocchio::integrate` "
-        f"step on the same model (median of interleaved repeats; `benchmarks/step_cost.cpp`). A "
-        f"scene without elements: {span('no_elements')}; a joint spring on every joint: "
-        f"{span('joint_springs')}; one point spring: {span('point_spring')} (a forward-kinematics "
-        f"pass per step to place its ends); the model's joint stops over no stops: {stops}."
-    ]
-
-
-def energy_line(results: D.Results) -> list[str]:
-    t = energy_tally(results, results.config.kts)
-    return [
-        f"- **Exact or simplified energy**: per step, simplified / exact "
-        f"{cost_ratio(results):.3f} (UR5); over {len(t['ratios'])} scene and kt pairs, "
-        f"{t['geomean']:.2f} times the steps to a residual of {LEVEL:g} (geometric mean; fewer "
-        f"in {t['fewer']}, more in {t['more']}, as many in {t['equal']})."
-    ]
-
-
-def kt_line(results: D.Results) -> list[str]:
-    score = kt_scores(results, "exact")
-    means = ", ".join(
-        f"{kt:g}: {geomean([x for x in r if math.isfinite(x)]):.2f}" for kt, r in score.items()
-    )
-    return [
-        f"- **kt**: the fewest steps to a residual of {LEVEL:g} came with kt = "
-        f"{best_kt(score):g} (geometric mean over the scenes of the steps over each scene's "
-        f"fewest: {means})."
-    ]
-
-
-def readme_baseline_lines(results: D.Results) -> list[str]:
-    lines = baseline_bullets(results, over_kd="KD's defaults")
-    if loop_scenes(results):
-        lines.append(f"- The {trees_only(results)}.")
-    return lines
-
-
-def mujoco_line(results: D.Results) -> list[str]:
-    both = mujoco_both(results)
-    if not both:
-        return []
-    values = sorted(both.values())
-    return [
-        f"- **MuJoCo**: its damped settle of the same URDF took {statistics.median(values):.0f} "
-        f"times pinsettle's time (median over the {len(values)} robots both settle; "
-        f"{values[0]:.1f} to {values[-1]:.0f})." + saddle_note(results, both)
-    ]
-
-
-def gallery_line(results: D.Results) -> list[str]:
-    if not results.gallery:
-        return []
-    return [f"- **Robot gallery**: {gallery_tally(results)}."]
-
-
-def overhead_line(results: D.Results) -> list[str]:
-    rows = goal4_rows(results)
-    if not rows:
-        return []
-    shares = ", ".join(
-        f"{r['name']} {r['fraction']:.1%} ({r['fraction_polish']:.1%} in the default solve)"
-        for r in rows
-    )
-    return [
-        "- **Where a solve's time goes**: the set-up, step estimates, stability assessments and "
-        f"(in the default solve) the polish's Newton take {shares} of a solve's time "
-        "(`benchmarks/kd_profile.cpp`)."
-    ]
-
-
-def chains_line(results: D.Results) -> list[str]:
-    growth = ChainGrowth.of(results)
-    if growth is None:
-        return []
-    unfinished = unfinished_chains(results)
-    return ["- **Chains**: " + growth.text() + (f"; {unfinished}" if unfinished else "") + "."]
-
-
-#: The README's speed section, in its order: what was measured, without the goals (those are
-#: in the report's Goals part). Each a function of the results giving its lines.
-README_LINES = (
-    step_cost_line,
-    energy_line,
-    kt_line,
-    readme_baseline_lines,
-    mujoco_line,
-    gallery_line,
-    overhead_line,
-    chains_line,
-)
-
-
-def wrap(line: str) -> str:
-    """A README line wrapped at 100 characters, a bullet's continuation indented."""
-    if not line or line.startswith("<!--"):
-        return line
-    return textwrap.fill(line, 100, subsequent_indent="  " if line.startswith("- ") else "")
-
-
-def readme_block(results: D.Results) -> str:
-    """The README's speed section: the main ratios of the report, as measured."""
-    m = results.machine
-    lines = [
-        README_BEGIN,
-        f"Measured by `python benchmarks/report.py` on this project's {m['cores']}-core machine "
-        f"({m['date']}, shared with other jobs: ratios within one run, medians of repeats); the "
-        "whole report, with plots of error against wall time and steps for each scene and the "
-        "goals this project set itself, is [docs/benchmarks.md](docs/benchmarks.md).",
-        "",
-    ]
-    lines += [line for part in README_LINES for line in part(results)]
-    lines.append(README_END)
-    return "\n".join(wrap(line) for line in lines)
-
-
-def update_readme(results: D.Results, readme: Path) -> bool:
-    """Replace the block between the markers; False when the README has none."""
-    text = readme.read_text(encoding="utf-8")
-    start, end = text.find(README_BEGIN), text.find(README_END)
-    if start < 0 or end < 0:
-        return False
-    text = text[:start] + readme_block(results) + text[end + len(README_END) :]
-    readme.write_text(text, encoding="utf-8")
-    return True

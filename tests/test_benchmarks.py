@@ -27,6 +27,10 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
 import report  # noqa: E402  (benchmarks/report.py)
 import report_data  # noqa: E402  (benchmarks/report_data.py)
+import report_format  # noqa: E402  (benchmarks/report_format.py)
+import report_goals  # noqa: E402  (benchmarks/report_goals.py)
+import report_measures  # noqa: E402  (benchmarks/report_measures.py)
+import report_readme  # noqa: E402  (benchmarks/report_readme.py)
 import report_writer  # noqa: E402  (benchmarks/report_writer.py)
 from scene_statics import Statics  # noqa: E402  (benchmarks/scene_statics.py)
 
@@ -111,7 +115,7 @@ def test_goal_1_says_which_baseline_is_faster_and_why(quick):
     # time (its rule run or a sweep point, not the slowed best run) and give the measured
     # reasons.
     results, _, _ = quick
-    name = report_writer.compared(results)[0]
+    name = report_measures.compared(results)[0]
     d = dataclasses.replace(results.scenes[name], runs=dict(results.scenes[name].runs))
     slowed = dataclasses.replace(results, scenes={**results.scenes, name: d})
 
@@ -120,41 +124,41 @@ def test_goal_1_says_which_baseline_is_faster_and_why(quick):
             run, seconds=[s * factor for s in run.seconds], setup=run.setup * factor
         )
 
-    for key in (report_writer.kd_key(), "kd_default"):
+    for key in (report_measures.kd_key(), "kd_default"):
         d.runs[key] = slower(d.runs[key], 1000.0)
     for family in report_data.BASELINES:
         d.runs[f"{family}_best"] = slower(d.runs[f"{family}_rule"], 10.0)
     fastest = {}
     for f in report_data.BASELINES:
-        times = [report_writer.time_to(d.runs[f"{f}_rule"])]
+        times = [report_measures.time_to(d.runs[f"{f}_rule"])]
         times += [p.time_to for p in d.baseline_sweep[f]]
         times = [t for t in times if t is not None]
         if times:
             fastest[f] = min(times)
-            assert report_writer.fastest_baseline(d, f)[0] == fastest[f]
+            assert report_measures.fastest_baseline(d, f)[0] == fastest[f]
     assert fastest
     family = min(fastest, key=fastest.get)
-    line = next(x for x in report_writer.goals_section(slowed).splitlines() if "**Goal 1**" in x)
+    line = next(x for x in report_goals.goals_section(slowed).splitlines() if "**Goal 1**" in x)
     assert "**not met**" in line
     assert (
         f"{name} ({report_data.BASELINE_LABELS[family]} "
-        f"{report_writer.fmt_time(fastest[family])} against KD's"
+        f"{report_format.fmt_time(fastest[family])} against KD's"
     ) in line
     assert "KD damps once every" in line and "set-up" in line
-    kd = d.runs[report_writer.kd_key()]
-    tk = report_writer.kd_reach(d)[0]  # the KD time the line gives
+    kd = d.runs[report_measures.kd_key()]
+    tk = report_measures.kd_reach(d)[0]  # the KD time the line gives
     assert (
-        f"KD's set-up {report_writer.fmt_time(kd.setup)} is {kd.setup / tk:.0%} of its time" in line
+        f"KD's set-up {report_format.fmt_time(kd.setup)} is {kd.setup / tk:.0%} of its time" in line
     )
-    if kd.setup / tk > report_writer.SETUP_HEAVY:
+    if kd.setup / tk > report_goals.SETUP_HEAVY:
         assert f"Why, on {name}" in line
     if d.nv == 1:  # one mode: the line compares the steps and a step's time, as measured
-        reach = report_writer.kd_reach(d)
-        best = report_writer.fastest_baseline(d, family)
+        reach = report_measures.kd_reach(d)
+        best = report_measures.fastest_baseline(d, family)
         assert reach is not None and reach[1] and best is not None
         steps = reach[1]
         assert f"Why, on {name} (one degree of freedom): {name}: " in line
-        assert f"{best[2]:,} steps in {report_writer.fmt_time(best[0])}" in line
+        assert f"{best[2]:,} steps in {report_format.fmt_time(best[0])}" in line
         assert f"KD {steps:,} in" in line
 
 
@@ -164,23 +168,23 @@ GOAL_WORDS = re.compile(r"\bissue\b|\bgoal\b|\bmet\b|#\d", re.IGNORECASE)
 
 
 def summary_block(text: str) -> str:
-    start = text.index(report_writer.README_BEGIN)
-    return text[start : text.index(report_writer.README_END, start)]
+    start = text.index(report_readme.README_BEGIN)
+    return text[start : text.index(report_readme.README_END, start)]
 
 
 def test_the_readme_block_says_what_was_measured_and_no_goals(quick):
     results, _, _ = quick
-    block = report_writer.readme_block(results)
-    assert block.startswith(report_writer.README_BEGIN)
-    assert block.endswith(report_writer.README_END)
+    block = report_readme.readme_block(results)
+    assert block.startswith(report_readme.README_BEGIN)
+    assert block.endswith(report_readme.README_END)
     assert not GOAL_WORDS.search(block), GOAL_WORDS.search(block)
     flat = " ".join(block.split())  # unwrapped
     for start in ("- **One step**", "- **Robot gallery**", "- **Where a solve's time goes**"):
         assert start in flat, start
     # The same measurements as the report's Goals part, without the verdicts.
-    assert report_writer.gallery_tally(results) in flat
-    goals = report_writer.goals_section(results)
-    assert report_writer.gallery_tally(results) in goals and "**Goal 4**" in goals
+    assert report_goals.gallery_tally(results) in flat
+    goals = report_goals.goals_section(results)
+    assert report_goals.gallery_tally(results) in goals and "**Goal 4**" in goals
     for line in block.splitlines():
         assert len(line) <= 100, line
 
@@ -201,11 +205,11 @@ def test_goal_5_says_why_from_the_measured_growth():
     per = [1e-6 * k for k in n]
     wall = [s * p for s, p in zip(steps, per, strict=True)]
     results = types.SimpleNamespace(scaling=[{"n": 400, "refused": "model: nv = 400 is too big"}])
-    text = report_writer.goal5_reasons(results, n, steps, per, wall)
+    text = report_goals.goal5_reasons(results, n, steps, per, wall)
     assert "the steps grow as n^1.50" in text and "a step as n^1.00" in text
     assert "400 links are refused: model: nv = 400 is too big." in text
     quadratic = [s / k**0.5 for s, k in zip(wall, n, strict=True)]
-    assert "Why" not in report_writer.goal5_reasons(
+    assert "Why" not in report_goals.goal5_reasons(
         types.SimpleNamespace(scaling=[]), n, steps, per, quadratic
     )
 
@@ -217,12 +221,12 @@ def test_goal_5_gives_the_growth_with_joint_inertia_only_where_every_chain_conve
 
     # Time as n^1.5 with the option: the line gives its fit and the steps' range.
     rows = [row(k, "converged", 30 + k, 1e-6 * k**1.5) for k in (5, 20, 80)]
-    text = report_writer.joint_inertia_growth(types.SimpleNamespace(scaling=rows))
+    text = report_goals.joint_inertia_growth(types.SimpleNamespace(scaling=rows))
     assert "(5 to 80 links) take 35 to 110 steps" in text
     assert "grows as n^1.50" in text and "not the default" in text
     rows[1]["joint_inertia"]["status"] = "max_steps"
-    assert report_writer.joint_inertia_growth(types.SimpleNamespace(scaling=rows)) == ""
-    assert report_writer.joint_inertia_growth(types.SimpleNamespace(scaling=rows[:1])) == ""
+    assert report_goals.joint_inertia_growth(types.SimpleNamespace(scaling=rows)) == ""
+    assert report_goals.joint_inertia_growth(types.SimpleNamespace(scaling=rows[:1])) == ""
 
 
 def test_the_report_keeps_what_it_did_not_write(quick):
@@ -581,8 +585,8 @@ def test_unfinished_chains_tell_a_refusal_from_a_run_out_of_time():
         {"n": 1000, "refused": "model: nv = 1000 is too big"},
     ]
     results = types.SimpleNamespace(scaling=rows, config=config)
-    assert report_writer.unfinished_chains(results) == (
+    assert report_goals.unfinished_chains(results) == (
         "300 links did not converge within 150 s; 400, 1000 links were refused"
     )
     results.scaling = rows[:1]
-    assert report_writer.unfinished_chains(results) == ""
+    assert report_goals.unfinished_chains(results) == ""

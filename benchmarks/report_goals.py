@@ -1,0 +1,436 @@
+"""The Goals part of the benchmark report: the goals of issues 18 and 20, each measured in
+the run, met or not, and why not, from what was measured."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import statistics
+
+import report_data as D
+from report_format import fmt_e, fmt_time, slope
+from report_measures import (
+    BASELINES,
+    GOAL4_SCENES,
+    LEVEL,
+    ChainGrowth,
+    compared,
+    fastest_baseline,
+    kd_key,
+    kd_reach,
+    kd_time,
+    measured_chains,
+    mujoco_both,
+    mujoco_saddle_stops,
+    overhead_rows,
+    refused_chains,
+    settled_inside,
+    stop_ratios,
+    time_to,
+)
+
+
+def unfinished_chains(results: D.Results) -> str:
+    """The chains of the scaling section that did not converge in time and those pinsettle
+    refused, in words ('' when every chain converged)."""
+    refused = [row["n"] for row in refused_chains(results)]
+    unconverged = [
+        row["n"]
+        for row in measured_chains(results)
+        if row.get("profile", {}).get("status") != "converged"
+    ]
+    parts = []
+    if unconverged:
+        parts.append(
+            f"{', '.join(map(str, unconverged))} links did not converge within "
+            f"{results.config.scaling_max_time:g} s"
+        )
+    if refused:
+        parts.append(f"{', '.join(map(str, refused))} links were refused")
+    return "; ".join(parts)
+
+
+def goal4_verdict(rows: list[D.Record]) -> str:
+    """Goal 4's shares (the damping's own run, polish off, and the default solve), met or not,
+    and why not where the default solve's Newton is what passes the bound."""
+    text = ", ".join(
+        f"{r['name']} {r['fraction']:.1%} ({r['fraction_polish']:.1%} in the default solve)"
+        for r in rows
+    )
+    worst = max(max(r["fraction"], r["fraction_polish"]) for r in rows)
+    if worst <= 0.25:
+        return text + ": met."
+    newton = [r for r in rows if r["fraction"] <= 0.25 < r["fraction_polish"]]
+    why = "".join(
+        f" Why, on {r['name']} ({r['fraction_polish']:.2%}): the default solve's Newton (its "
+        "tries at damping events and the polish) counts as overhead, and it replaces steps: "
+        f"{r['default_steps']:,} steps and "
+        f"{fmt_time(r['default_wall'])} against {r['steps']:,} steps and "
+        f"{fmt_time(r['wall'])} with `polish = False`."
+        for r in newton
+    )
+    return text + ": **not met**." + why
+
+
+def saddle_note(results: D.Results, both: dict[str, float]) -> str:
+    """Where MuJoCo stopped on a saddle, and its ratio without those robots."""
+    unstable = mujoco_saddle_stops(results.gallery, both)
+    if not unstable:
+        return ""
+    text = (
+        f" MuJoCo's settle ends on an unstable rest (a saddle its damped motion did not "
+        f"leave) on {', '.join(unstable)}: there pinsettle pushes off and goes on to a "
+        "stable rest, so the two times are of different answers."
+    )
+    fair = [both[n] for n in both if n not in unstable]
+    if fair:
+        text += (
+            f" Without them, MuJoCo took {statistics.median(fair):.0f} times pinsettle's "
+            f"time (median over {len(fair)}; {min(fair):.1f} to {max(fair):.0f})."
+        )
+    return text
+
+
+def goal3_paragraph(both: dict[str, float]) -> str:
+    if not both:
+        return ""
+    values = sorted(both.values())
+    below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
+    met = not below and statistics.median(values) >= 300
+    return (
+        f"\n\n**Goal 3 of issue 20** (at least 100 times faster than MuJoCo on every robot "
+        f"both settle, median at least 300 times): over the {len(both)} robots both settle, "
+        f"MuJoCo took {statistics.median(values):.0f} times pinsettle's time (median; "
+        f"{values[0]:.1f} to {values[-1]:.0f})"
+        + (f"; below 100 on {', '.join(below)}" if below else "")
+        + (": met." if met else ": **not met**.")
+    )
+
+
+def gallery_tally(results: D.Results) -> str:
+    """'k of n robots converge inside their limits ...; floating bases: ...'."""
+    falls = [f"{r['name']} {r['status']} in {fmt_time(r['median'])}" for r in results.floating]
+    return (
+        f"{len(settled_inside(results))} of {len(results.gallery)} robots converge inside "
+        "their limits with the default settings (independent check)"
+        + (f"; floating bases: {', '.join(falls)}" if falls else "")
+    )
+
+
+#: A behind scene (of more than one degree of freedom) whose KD run damps more often than once
+#: in this many steps, or whose set-up is more than this share of KD's time, gets the matching
+#: reason in the goal 1 line.
+FREQUENT_DAMPING = 15
+
+
+SETUP_HEAVY = 0.2
+
+
+def goal1_reasons(
+    frequent: list[str],
+    setup_heavy: list[str],
+    single: list[tuple[str, str, int, float, int, float]],
+) -> str:
+    """Why KD is behind where goal 1 is not met, in plain words, from what was measured.
+    ``single``: the one-degree-of-freedom scenes behind, each (name, the faster baseline, its
+    steps and time to the level, KD's steps and time to the level)."""
+    text = ""
+    if single:
+        fewer = all(steps_b <= steps_k for _, _, steps_b, _, steps_k, _ in single)
+        text += (
+            f" Why, on {', '.join(n for n, *_ in single)} (one degree of freedom): "
+            + "; ".join(
+                f"{n}: {label} {steps_b:,} steps in {fmt_time(t_b)} "
+                f"({fmt_time(t_b / steps_b)} a step, set-up included), KD {steps_k:,} in "
+                f"{fmt_time(t_k)} ({fmt_time(t_k / steps_k)})"
+                for n, label, steps_b, t_b, steps_k, t_k in single
+            )
+            + ". A single mode has no slower swing for KD's stops to save, and a damper tuned to "
+            "it (its sweep's best) brings it down "
+            + ("in as few steps or fewer" if fewer else "in about as many steps")
+            + "; each KD step also computes both energies, tests for a peak and controls the "
+            "step."
+        )
+    if frequent:
+        text += (
+            f" Why, on {', '.join(frequent)}: KD damps every few steps there, and each damping "
+            "event (kt = 0) stops the slow swing of the whole mechanism together with the fast "
+            "modes whose energy peaked, so the motion starts again from rest; viscous damping "
+            "removes energy without stopping the motion, and FIRE mixes its velocity toward "
+            "the force, which keeps its power positive for longer between resets."
+        )
+    if setup_heavy:
+        text += (
+            f" Why, on {', '.join(setup_heavy)}: the whole run takes microseconds, and KD's "
+            "set-up (the checks of the model and the start, the first estimate of the "
+            "stability limit and of the stiff modes) is a large share of it."
+        )
+    return text
+
+
+def goal3_reasons(gallery: list[D.Record], both: dict[str, float]) -> str:
+    """Why pinsettle is less than 100 times faster than MuJoCo on a robot, from what was
+    measured: MuJoCo stopped on a saddle (another answer), or pinsettle's run is a few steps
+    against MuJoCo's shortest settle (the still window it must pass)."""
+    rows = {r["name"]: r for r in gallery if r["name"] in both and both[r["name"]] < 100}
+    unstable = mujoco_saddle_stops(gallery, both)
+    saddle = [n for n in rows if n in unstable]
+    short = [n for n in rows if n not in saddle]
+    text = ""
+    if saddle:
+        fair = [x for n, x in both.items() if n not in unstable]
+        text += (
+            f" Why, on {', '.join(saddle)}: MuJoCo's settle ends on a saddle it did not leave and "
+            "pinsettle goes on to a stable rest, so the two times are of different answers"
+            + (
+                f" (over the {len(fair)} robots where both come to a rest that is not unstable "
+                f"the median is {statistics.median(fair):.0f})"
+                if fair
+                else ""
+            )
+            + "."
+        )
+    if short:
+        text += (
+            f" Why, on {', '.join(short)}: "
+            + "; ".join(
+                f"pinsettle's whole run is {rows[n]['steps']:,} steps in "
+                f"{fmt_time(statistics.median(rows[n]['seconds']))}, and MuJoCo's is the "
+                f"{rows[n]['mujoco']['sim_time']:g} s it simulates to see the robot stay still"
+                for n in short
+            )
+            + "."
+        )
+    return text
+
+
+def goal5_reasons(
+    results: D.Results, n: list[int], steps: list[int], per: list[float], wall: list[float]
+) -> str:
+    """Why the chains' time grows faster than n^2, or why the longest are missing, from what
+    was measured: the growth of the steps and of a step, and the solver's own refusal."""
+    text = ""
+    if slope(n, wall) > 2:
+        text += (
+            f" Why: the steps grow as n^{slope(n, steps):.2f} (a longer chain's slowest swing "
+            f"takes more of them) and a step as n^{slope(n, per):.2f}."
+        )
+    refused = refused_chains(results)
+    if refused:
+        text += (
+            f" {', '.join(str(row['n']) for row in refused)} links are refused: "
+            + refused[0]["refused"].strip().splitlines()[-1]
+            + "."
+        )
+    return text + joint_inertia_growth(results)
+
+
+def joint_inertia_growth(results: D.Results) -> str:
+    """What the option scale_joint_inertia does to the same chains' growth, where all of them
+    converged with it, and why it is not the default."""
+    rows = [r for r in results.scaling if r.get("joint_inertia") is not None]
+    if len(rows) < 2 or any(r["joint_inertia"]["status"] != "converged" for r in rows):
+        return ""
+    n = [r["n"] for r in rows]
+    steps = [r["joint_inertia"]["steps"] for r in rows]
+    seconds = [r["joint_inertia"]["seconds"] for r in rows]
+    return (
+        f" With `scale_joint_inertia = True` the same chains ({n[0]} to {n[-1]} links) take "
+        f"{min(steps):,} to {max(steps):,} steps and their time grows as "
+        f"n^{slope(n, seconds):.2f} (the Scaling part); the option is not the default because "
+        "some robots lose with it and a run with no equilibrium is not always called one "
+        "(docs/method.md, Fictitious joint inertia)."
+    )
+
+
+@dataclasses.dataclass
+class Behind:
+    """The scenes where KD is slower than a baseline at its best, for goal 1's line: one entry
+    each, and the scenes each reason of goal1_reasons applies to."""
+
+    entries: list[str] = dataclasses.field(default_factory=list)
+    frequent: list[str] = dataclasses.field(default_factory=list)
+    setup_heavy: list[str] = dataclasses.field(default_factory=list)
+    single: list[tuple[str, str, int, float, int, float]] = dataclasses.field(default_factory=list)
+
+
+def behind_entry(
+    name: str, label: str, t_b: float, t_k: float, kd: D.Run, resets: int | None
+) -> str:
+    """'name (baseline time against KD's; how often KD damps; its set-up's share)'."""
+    every = kd.steps / kd.peaks if kd.peaks else math.inf
+    reset = f" ({kd.peaks:,} times), {label} resets {resets:,} times" if resets is not None else ""
+    return (
+        f"{name} ({label} {fmt_time(t_b)} against KD's {fmt_time(t_k)}; KD damps once every "
+        f"{every:.0f} steps" + reset + f"; KD's set-up {fmt_time(kd.setup)} is "
+        f"{kd.setup / t_k:.0%} of its time)"
+    )
+
+
+def note_behind(behind: Behind, name: str, d: D.SceneData) -> None:
+    """Add the scene to ``behind`` where KD did not reach the level or a baseline was faster."""
+    reach = kd_reach(d)
+    if reach is None:
+        behind.entries.append(f"{name} (KD did not reach it)")
+        return
+    tk, steps_k = reach
+    bests = {f: b for f in BASELINES if (b := fastest_baseline(d, f)) is not None}
+    faster = {f: b[0] for f, b in bests.items() if b[0] < tk}
+    if not faster:
+        return
+    f = min(faster, key=lambda family: faster[family])
+    kd = d.runs[kd_key()]
+    label = D.BASELINE_LABELS[f]
+    behind.entries.append(behind_entry(name, label, faster[f], tk, kd, bests[f][1]))
+    every = kd.steps / kd.peaks if kd.peaks else math.inf
+    if every < FREQUENT_DAMPING and d.nv > 1:  # one mode: no slow swing to stop
+        behind.frequent.append(name)
+    if d.nv == 1 and steps_k:
+        behind.single.append((name, label, bests[f][2], faster[f], steps_k, tk))
+    if kd.setup / tk > SETUP_HEAVY:  # of the time the line gives, set-up included
+        behind.setup_heavy.append(name)
+
+
+def fire_rule_failures(results: D.Results) -> str:
+    """Where FIRE at its rule did not reach the level, and how many of those KD settled."""
+    scenes = results.scenes
+    fails = [
+        n for n, d in scenes.items() if d.baseline_sweep and time_to(d.runs["fire_rule"]) is None
+    ]
+    if not fails:
+        return ". FIRE at its rule fails none"
+    kd_ok = [n for n in fails if kd_time(scenes[n]) is not None]
+    return f". FIRE at its rule fails {', '.join(fails)}; KD settles {len(kd_ok)} of them"
+
+
+def goal1_lines(results: D.Results) -> list[str]:
+    names = compared(results)
+    if not names:
+        return []
+    behind = Behind()
+    for name in names:
+        note_behind(behind, name, results.scenes[name])
+    done = len(names) - len(behind.entries)
+    verdict = (
+        f"met on {done} of {len(names)}; **not met** on " + "; ".join(behind.entries)
+        if behind.entries
+        else f"met on all {len(names)}"
+    )
+    return [
+        f"- **Goal 1** (KD with the default settings at least as fast to a residual of "
+        f"{LEVEL:g} as every baseline at its best, on every tree scene; a baseline's best is "
+        "its fastest run to that level: its rule, a point of its sweep or the sweep's best "
+        "setting run in full): "
+        + verdict
+        + fire_rule_failures(results)
+        + " (the whole comparison, per scene, in the Scenes part)."
+        + goal1_reasons(behind.frequent, behind.setup_heavy, behind.single)
+    ]
+
+
+def goal2_lines(results: D.Results) -> list[str]:
+    if not compared(results):
+        return []
+    defaults = [
+        (n, d.runs["kd_default"]) for n, d in results.scenes.items() if "kd_default" in d.runs
+    ]
+    worse = [f"{n} ({fmt_e(r.residual)})" for n, r in defaults if not r.residual <= LEVEL]
+    verdict = (
+        f"**not met** on {len(worse)} of {len(defaults)} scenes: " + ", ".join(worse)
+        if worse
+        else f"met on all {len(defaults)} scenes"
+    )
+    return [
+        f"- **Goal 2** (the default run ends at a relative residual of at most {LEVEL:g}): "
+        + verdict
+        + "."
+    ]
+
+
+def goal3_lines(results: D.Results) -> list[str]:
+    both = mujoco_both(results)
+    if not both:
+        return []
+    median = statistics.median(both.values())
+    below = [f"{n} ({x:.1f})" for n, x in both.items() if x < 100]
+    return [
+        f"- **Goal 3** (at least 100 times faster than MuJoCo's damped settle on every "
+        f"robot both settle, median at least 300): median {median:.0f} over {len(both)} robots"
+        + (f"; below 100: {', '.join(below)}" if below else "")
+        + (": met." if not below and median >= 300 else ": **not met**.")
+        + goal3_reasons(results.gallery, both)
+    ]
+
+
+def goal4_rows(results: D.Results) -> list[D.Record]:
+    """The overhead rows goal 4 names (a quick run: the scenes it has)."""
+    rows = [r for r in overhead_rows(results) if r["name"] in GOAL4_SCENES]
+    return rows or overhead_rows(results)
+
+
+def goal4_lines(results: D.Results) -> list[str]:
+    rows = goal4_rows(results)
+    if not rows:
+        return []
+    return [
+        "- **Goal 4** (set-up, step estimates, stability assessments and polish at most 25% "
+        "of a solve on the UR5, chain20, chain100): " + goal4_verdict(rows)
+    ]
+
+
+def goal5_lines(results: D.Results) -> list[str]:
+    growth = ChainGrowth.of(results)
+    if growth is None:
+        return []
+    unfinished = unfinished_chains(results)
+    if unfinished:
+        verdict = f"; {unfinished}: **not met**."
+    else:
+        verdict = ": met." if slope(growth.n, growth.wall) <= 2 else ": **not met**."
+    return [
+        "- **Goal 5** (time no faster than n^2 from 5 to 1,000 links, a step O(n)): "
+        + growth.text()
+        + verdict
+        + goal5_reasons(results, growth.n, growth.steps, growth.per, growth.wall)
+    ]
+
+
+def step_cost_goal_lines(results: D.Results) -> list[str]:
+    ratios = stop_ratios(results)
+    if not ratios:
+        return []
+    return [
+        "- **Issue 18, step cost** (a step with joint stops at most 1.1 times one "
+        "without, UR5 and Panda): "
+        + ", ".join(f"{n} {x:.2f}" for n, x in ratios.items())
+        + (": met." if max(ratios.values()) <= 1.1 else ": **not met**.")
+    ]
+
+
+def gallery_goal_lines(results: D.Results) -> list[str]:
+    if not results.gallery:
+        return []
+    return [f"- **Issue 18, gallery**: {gallery_tally(results)}."]
+
+
+#: The goals of issues 18 and 20, in the Goals part's order: each a function of the results
+#: giving its line (none when this run did not measure it).
+GOALS = (
+    goal1_lines,
+    goal2_lines,
+    goal3_lines,
+    goal4_lines,
+    goal5_lines,
+    step_cost_goal_lines,
+    gallery_goal_lines,
+)
+
+
+def goals_section(results: D.Results) -> str:
+    """The goals of issues 18 and 20, each measured in this run: met or not, in plain words."""
+    lines = [line for goal in GOALS for line in goal(results)]
+    return (
+        "## Goals\n\n"
+        "The figures issues 18 and 20 ask for, as measured in this run (details in the parts "
+        "below).\n\n" + "\n".join(lines) + "\n\n"
+    )

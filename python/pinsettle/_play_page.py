@@ -1,0 +1,133 @@
+"""The static page of a playback: meshcat's viewer inline, the scene's commands, the animation
+and an overlay (scene, status, simulated time, event counts).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from pathlib import Path
+from typing import Any
+
+_OVERLAY_CSS = """
+body { margin: 0; }
+#meshcat-pane { width: 100vw; height: 100vh; overflow: hidden; }
+#pinsettle-overlay {
+  position: fixed; left: 12px; top: 12px; padding: 8px 12px; border-radius: 6px;
+  font: 13px/1.45 system-ui, sans-serif; color: #212529;
+  background: rgba(255, 255, 255, 0.82); pointer-events: none;
+  transition: background-color 0.15s;
+}
+#pinsettle-overlay.flash { background: rgba(255, 176, 0, 0.85); }
+#pinsettle-overlay b { font-weight: 600; }
+"""
+
+_OVERLAY_JS = """
+(function () {
+  const info = JSON.parse(document.getElementById("pinsettle-info").textContent);
+  const box = document.getElementById("pinsettle-overlay");
+  const title = document.createElement("div");
+  const clock = document.createElement("div");
+  const counter = document.createElement("div");
+  title.innerHTML = "<b></b> <span></span>";
+  title.firstChild.textContent = info.scene;
+  title.lastChild.textContent = info.status;
+  box.append(title, clock, counter);
+  function upto(times, t) {
+    let lo = 0, hi = times.length;
+    while (lo < hi) {
+      const mid = (lo + hi) >> 1;
+      if (times[mid] <= t) lo = mid + 1; else hi = mid;
+    }
+    return lo;
+  }
+  let shown = -1;
+  function tick() {
+    const now = (viewer.animator && viewer.animator.time) || 0;
+    const t = Math.min(now, info.duration);
+    const held = now >= info.duration && info.duration > 0;
+    clock.textContent = "t = " + (t * info.speed).toFixed(3) + " s simulated (x" +
+      info.speed.toPrecision(3) + ")" + (held ? ", final pose held" : "");
+    const parts = [];
+    let total = 0;
+    for (const kind of ["damping", "push", "rollback", "impact"]) {
+      const times = info.events[kind];
+      if (!times.length && kind !== "damping") continue;
+      const k = upto(times, t);
+      total += k;
+      parts.push(kind + " events " + k + " / " + times.length);
+    }
+    counter.textContent = parts.join(", ");
+    if (shown >= 0 && total > shown) {
+      box.classList.add("flash");
+      setTimeout(() => box.classList.remove("flash"), 120);
+    }
+    shown = total;
+    requestAnimationFrame(tick);
+  }
+  tick();
+})();
+"""
+
+# page.html#end opens on the final pose, paused (for a quick look, a screenshot or a test);
+# page.html#t=1.5 on the frame 1.5 s into the playback, paused.
+_END_JS = """
+(function () {
+  const animator = viewer.animator;
+  const at = location.hash === "#end" ? animator.duration
+    : location.hash.startsWith("#t=") ? parseFloat(location.hash.slice(3)) : NaN;
+  if (isFinite(at)) {
+    const t = Math.min(Math.max(at, 0), animator.duration);
+    animator.playing = false;
+    animator.seek(t);
+    animator.time = t;
+  }
+})();
+"""
+
+_APPLY_JS = """
+function pinsettle_apply(b64) {
+  const text = atob(b64);
+  const bytes = new Uint8Array(text.length);
+  for (let i = 0; i < text.length; i++) bytes[i] = text.charCodeAt(i);
+  viewer.handle_command_bytearray(bytes);
+}
+"""
+
+
+def _script_json(value: Any) -> str:
+    """JSON safe inside a <script> element."""
+    return json.dumps(value).replace("<", "\\u003c").replace(">", "\\u003e")
+
+
+def _html(commands: list[bytes], animation: bytes | None, overlay: dict[str, Any] | None) -> str:
+    """A self-contained page: meshcat's viewer (inline), the scene's commands applied in
+    order, the animation in its own <script id="pinsettle-animation">, an optional overlay."""
+    import meshcat
+
+    viewer_js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text(
+        encoding="utf-8"
+    )
+    encoded = [base64.b64encode(c).decode("ascii") for c in commands]
+    parts = [
+        '<!DOCTYPE html>\n<html>\n<head>\n<meta charset="utf-8">\n',
+        "<title>pinsettle playback</title>\n",
+        f'<style>{_OVERLAY_CSS}</style>\n</head>\n<body>\n<div id="meshcat-pane"></div>\n',
+        f"<script>{viewer_js}</script>\n",
+        '<script>\nvar viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));\n',
+        _APPLY_JS,
+        f"{_script_json(encoded)}.forEach(pinsettle_apply);\n</script>\n",
+    ]
+    if animation is not None:
+        b64 = base64.b64encode(animation).decode("ascii")
+        parts.append(f'<script id="pinsettle-animation">pinsettle_apply("{b64}");</script>\n')
+        parts.append(f"<script>{_END_JS}</script>\n")
+    if overlay is not None:
+        parts.append('<div id="pinsettle-overlay"></div>\n')
+        parts.append(
+            f'<script type="application/json" id="pinsettle-info">{_script_json(overlay)}'
+            "</script>\n"
+        )
+        parts.append(f"<script>{_OVERLAY_JS}</script>\n")
+    parts.append("</body>\n</html>\n")
+    return "".join(parts)

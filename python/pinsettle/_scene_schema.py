@@ -1,12 +1,12 @@
 """The scene file's schema: one dataclass per TOML table, read by one generic loader.
 
-Each table is declared once, as a dataclass: its keys are the fields (in the order the README
-lists them, which is the order unknown-key messages list them and the loader checks them), with
-their defaults; ``key()`` adds what a given value must be (``expect``, the words of the error
-message, and ``check``) and which other key it goes with. ``read_table`` checks a TOML table
-against its declaration and gives the dataclass; ``read_scene_file`` reads every table of a
-scene file into a ``SceneFile``. Nothing here looks at the model: joint and frame names, numbers
-and shapes are checked when the scene is built (``_scene``), with the same ``where`` in front.
+Each table is declared once, as a dataclass: its keys are the fields (in the order that
+unknown-key messages list them and the loader checks them), with their defaults; ``key()``
+adds what a given value must be (``expect``, the words of the error message, and ``check``)
+and which other key it goes with. ``read_table`` checks a TOML table against its declaration
+and gives the dataclass; ``read_scene_file`` reads every table of a scene file into a
+``SceneFile``. Nothing here looks at the model: joint and frame names, numbers and shapes are
+checked when the scene is built (``_scene``), with the same ``where`` in front.
 """
 
 from __future__ import annotations
@@ -36,8 +36,13 @@ def key(
     """A key of a table: its default (none: the key is required), ``expect`` / ``check``: what
     a given value must be, ``needs`` / ``clashes``: a key it is only for, or never with (the
     message then says what it ``is for``, ``purpose``)."""
-    meta = {"expect": expect, "check": check, "needs": needs, "clashes": clashes}
-    meta["purpose"] = purpose
+    meta = {
+        "expect": expect,
+        "check": check,
+        "needs": needs,
+        "clashes": clashes,
+        "purpose": purpose,
+    }
     if isinstance(default, list):
         return field(default_factory=lambda: list(default), metadata=meta)
     return field(default=default, metadata=meta)

@@ -32,7 +32,8 @@ from ._play_animation import build_animation
 from ._play_extra import VIZ_INSTALL, MissingDependencyError, require
 from ._play_meshes import _normal_mesh_class, _stick_figure, _visual_model, read_stl
 from ._play_page import _html
-from ._play_plot import _impact_names, plot_energy
+from ._play_plot import _impact_names as _impact_names  # the legend's names, tested here
+from ._play_plot import plot_energy
 from ._play_server import SERVER_TIMEOUT, _LiveServer, _Window
 from ._play_timeline import (
     EVENT_KINDS,
@@ -60,7 +61,6 @@ __all__ = [
     "VIZ_INSTALL",
     "MissingDependencyError",
     "Timeline",
-    "_impact_names",
     "auto_speed",
     "check_speed",
     "make_timeline",

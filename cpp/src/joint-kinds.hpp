@@ -1,13 +1,16 @@
 //
 // Copyright (c) 2026 pinsettle contributors
 //
-// Private to the library: which joints' motion subspaces turn with their own configuration.
+// Private to the library: which joints' motion subspaces turn with their own configuration,
+// subtrees, and the joint that owns a coordinate.
 //
 
 #ifndef __pinsettle_joint_kinds_hpp__
 #define __pinsettle_joint_kinds_hpp__
 
 #include <pinocchio/multibody/model.hpp>
+
+#include <string>
 
 namespace pinsettle
 {
@@ -79,6 +82,16 @@ namespace pinsettle
       if (joint == root)
         return true;
     return false;
+  }
+
+  /// \brief "joint 'name'" of the joint that owns tangent coordinate iv (index in model.nv), for
+  /// error messages.
+  inline std::string describeCoordinate(const pinocchio::Model & model, Eigen::Index iv)
+  {
+    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+      if (iv >= model.idx_vs[j] && iv < model.idx_vs[j] + model.nvs[j])
+        return "joint '" + model.names[j] + "'";
+    return "coordinate " + std::to_string(iv);
   }
 
 } // namespace pinsettle

@@ -7,7 +7,6 @@
 #include "pinsettle/model-checks.hpp"
 #include "pinsettle/stability.hpp"
 #include "joint-kinds.hpp"
-#include "loop-stepper.hpp"
 #include "unit-norm.hpp"
 
 #include "pinsettle/prebuilt.hpp"
@@ -24,30 +23,6 @@
 
 namespace pinsettle
 {
-
-  namespace
-  {
-    // "joint 'name'" of the joint that owns tangent coordinate iv (index in model.nv).
-    std::string jointOfCoordinate(const pinocchio::Model & model, Eigen::Index iv)
-    {
-      for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
-        if (iv >= model.idx_vs[j] && iv < model.idx_vs[j] + model.nvs[j])
-          return "joint '" + model.names[j] + "'";
-      return "coordinate " + std::to_string(iv);
-    }
-
-    // Whether q closes the loops (if any) to LoopStepper::kLoopTolerance: open, it is no rest.
-    bool areLoopsClosed(
-      const pinocchio::Model & model,
-      pinocchio::Data & data,
-      const LoopConstraints * loops,
-      const Eigen::VectorXd & q)
-    {
-      return loops == nullptr
-             || computeLoopError(model, data, *loops, q).lpNorm<Eigen::Infinity>()
-                  <= LoopStepper::kLoopTolerance;
-    }
-  } // namespace
 
   void checkConfiguration(
     const pinocchio::Model & model, const Eigen::VectorXd & q, const char * name)
@@ -137,23 +112,6 @@ namespace pinsettle
     throw std::invalid_argument(msg.str());
   }
 
-  Eigen::VectorXd computeStaticForce(
-    const pinocchio::Model & model,
-    pinocchio::Data & data,
-    const Eigen::VectorXd & q,
-    const ForceModel * forces)
-  {
-    if (!forces || forces->empty())
-      return pinocchio::computeGeneralizedGravity(model, data, q);
-    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nv);
-    Eigen::VectorXd tau = Eigen::VectorXd::Zero(model.nv);
-    ForceVector fext(model.joints.size(), pinocchio::Force::Zero());
-    forces->computeForces(model, data, q, zero, tau, fext);
-    if (forces->hasExternalForces())
-      return pinocchio::rnea(model, data, q, zero, zero, fext) - tau;
-    return pinocchio::computeGeneralizedGravity(model, data, q) - tau;
-  }
-
   namespace
   {
     // Tangent coordinates (first index, count) along which a root joint moves its whole subtree
@@ -188,6 +146,41 @@ namespace pinsettle
           return true;
       return false;
     }
+
+    // Whether anything ties root's subtree to the world: an element (ForceModel::tiesToWorld),
+    // a loop or coupling, or a stop on root itself.
+    bool isTied(
+      const pinocchio::Model & model,
+      pinocchio::JointIndex root,
+      const ForceModel * forces,
+      const LoopConstraints * loops,
+      const JointStops * stops)
+    {
+      if (forces != nullptr && !forces->empty() && forces->tiesToWorld(model, root))
+        return true;
+      if (loops != nullptr && loopsTie(model, *loops, root))
+        return true;
+      if (stops != nullptr)
+        for (const JointStops::Stop & stop : stops->stops())
+          if (stop.joint == root)
+            return true;
+      return false;
+    }
+
+    // The mass (kg) and the number of bodies of root's subtree.
+    std::pair<double, int> weighSubtree(const pinocchio::Model & model, pinocchio::JointIndex root)
+    {
+      double mass = 0.;
+      int bodies = 0;
+      for (pinocchio::JointIndex j = root; j < static_cast<pinocchio::JointIndex>(model.njoints);
+           ++j)
+        if (isInSubtree(model, j, root))
+        {
+          mass += model.inertias[j].mass();
+          ++bodies;
+        }
+      return {mass, bodies};
+    }
   } // namespace
 
   std::string explainFreeFall(
@@ -205,15 +198,7 @@ namespace pinsettle
       const std::pair<int, int> along = rootTranslation(model, root);
       if (model.parents[root] != 0 || along.second == 0)
         continue;
-      if (forces != nullptr && !forces->empty() && forces->tiesToWorld(model, root))
-        continue;
-      if (loops != nullptr && loopsTie(model, *loops, root))
-        continue;
-      bool stopped = false;
-      if (stops != nullptr)
-        for (const JointStops::Stop & stop : stops->stops())
-          stopped = stopped || stop.joint == root;
-      if (stopped)
+      if (isTied(model, root, forces, loops, stops))
         continue;
       // Nothing ties the subtree to the world: the net force on it (its weight and the loads)
       // is the same in every pose, and its component along the root's translation is the
@@ -221,15 +206,7 @@ namespace pinsettle
       if (tau.size() == 0)
         tau = computeStaticForce(model, data, q, forces);
       const double pull = tau.segment(along.first, along.second).norm();
-      double mass = 0.;
-      int bodies = 0;
-      for (pinocchio::JointIndex j = root; j < static_cast<pinocchio::JointIndex>(model.njoints);
-           ++j)
-        if (isInSubtree(model, j, root))
-        {
-          mass += model.inertias[j].mass();
-          ++bodies;
-        }
+      const auto [mass, bodies] = weighSubtree(model, root);
       if (!(pull > 1e-9 * mass * model.gravity.linear().norm()) || pull == 0.)
         continue;
       std::ostringstream msg;
@@ -253,21 +230,11 @@ namespace pinsettle
       kRestEnergyFactor * settings.max_e, 1e-24 * computeGravityScale(model) + 1e-300);
   }
 
-  double computeStaticResidual(
-    const pinocchio::Model & model,
-    pinocchio::Data & data,
-    const Eigen::VectorXd & q,
-    const ForceModel * forces)
-  {
-    return computeStaticForce(model, data, q, forces).lpNorm<Eigen::Infinity>();
-  }
-
   Solver::Solver(
     const pinocchio::Model & model, const LoopConstraints * loops, const JointStops * stops)
   : data(model)
   , model_(model)
-  , loops_(loops != nullptr && !loops->empty() ? loops : nullptr)
-  , stops_(stops != nullptr && !stops->empty() ? stops : nullptr)
+  , constraints_(model, loops, stops)
   , q_(model.nq)
   , v_(model.nv)
   , dq_(model.nv)
@@ -277,48 +244,20 @@ namespace pinsettle
   , tau_(Eigen::VectorXd::Zero(model.nv))
   , fext_(model.joints.size(), pinocchio::Force::Zero())
   , window_(1, 0.)
-  , step_control_(model, loops_)
+  , step_control_(model, constraints_.loops())
   {
-    if (loops_ != nullptr)
-    {
-      if (&loops_->model() != &model)
-        throw std::invalid_argument("loops: they were made for another model than the solver's");
-      stepper_.reset(new LoopStepper(model, *loops_));
-    }
-    if (stops_ != nullptr)
-    {
-      if (&stops_->model() != &model)
-        throw std::invalid_argument("stops: they were made for another model than the solver's");
-      hold_.reset(new StopHold(*stops_, loops_));
-      if (stepper_)
-        stepper_->useStops(stops_);
-    }
   }
 
   Solver::~Solver() = default;
 
   Eigen::VectorXd Solver::staticForce(const Eigen::VectorXd & q, const ForceModel * forces)
   {
-    return staticForceIn(data, q, forces);
-  }
-
-  Eigen::VectorXd Solver::staticForceIn(
-    pinocchio::Data & scratch, const Eigen::VectorXd & q, const ForceModel * forces) const
-  {
-    if (loops_ != nullptr)
-      return computeStaticForce(model_, scratch, *loops_, q, forces);
-    return computeStaticForce(model_, scratch, q, forces);
+    return constraints_.computeStaticForce(data, q, forces);
   }
 
   StabilityReport Solver::assess(const Eigen::VectorXd & q, const ForceModel * forces)
   {
-    if (loops_ != nullptr && stops_ != nullptr)
-      return assessStability(model_, data, *loops_, *stops_, q, forces);
-    if (loops_ != nullptr)
-      return assessStability(model_, data, *loops_, q, forces);
-    if (stops_ != nullptr)
-      return assessStability(model_, data, *stops_, q, forces);
-    return assessStability(model_, data, q, forces);
+    return constraints_.assessStability(data, q, forces);
   }
 
   Result Solver::solve(
@@ -340,7 +279,8 @@ namespace pinsettle
     RunClock clock; // the wall time includes the checks and the set-up
     Result result;
     start(q0, v0, settings, forces, result);
-    result.reason = explainFreeFall(model_, data, q_, forces_, loops_, stops_);
+    result.reason =
+      explainFreeFall(model_, data, q_, forces_, constraints_.loops(), constraints_.stops());
     if (!result.reason.empty())
     {
       // The trace holds the one state of the run, so that playback shows where it would fall.
@@ -367,57 +307,10 @@ namespace pinsettle
           break;
         reestimateStep();
       }
-      const StepEnergies e = evaluateDynamics();
-      energy = e.exact;
-      if (guard_.isDiverging(e.exact, e.simplified, data.ddq, peaks_.hasPrevious()))
+      if (const std::optional<Status> end = takeStep(result, energy))
       {
-        if (rollBack(result))
-          continue;
-        status = Status::Diverged;
-        ++step_;
-        break;
-      }
-      trace_.sample(step_, time_, e.exact, e.simplified, q_);
-      if (isRunaway(e, result))
-      {
-        status = Status::NoEquilibrium;
-        ++step_;
-        break;
-      }
-      if (isAssessedAtRest(e))
-      {
-        if (rest_.accepts())
-        {
-          status = Status::Converged;
-          ++step_;
-          break;
-        }
-        if (rest_.isUnstable())
-        {
-          pushOff(result);
-          continue;
-        }
-      }
-      if (peaks_.isPeak(e.signal))
-      {
-        damp(e, result);
-        if (isSettledByNewton(result))
-        {
-          status = Status::Converged;
-          ++step_;
-          break;
-        }
-        continue; // re-evaluate the dynamics at the damped state
-      }
-      peaks_.record(e.signal);
-      if (settings.backtrack)
-        keepConfiguration(e.exact + e.added);
-      if (!integrate())
-      {
-        if (rollBack(result))
-          continue;
-        status = Status::Diverged;
-        ++step_;
+        status = *end;
+        ++step_; // the step that ended the run counts
         break;
       }
     }
@@ -426,21 +319,38 @@ namespace pinsettle
     return result;
   }
 
-  void Solver::closeLoopsOnStops()
+  std::optional<Status> Solver::takeStep(Result & result, double & energy)
   {
-    findJointsOnStops(*stops_, q_, on_stops_);
-    const double left = projectOntoLoops(model_, data, *loops_, q_, 1e-13, 100, &on_stops_);
-    if (!(left <= LoopStepper::kLoopTolerance))
+    const StepEnergies e = evaluateDynamics();
+    energy = e.exact;
+    if (guard_.isDiverging(e.exact, e.simplified, data.ddq, peaks_.hasPrevious()))
+      return rollBack(result) ? std::nullopt : std::optional<Status>(Status::Diverged);
+    trace_.sample(step_, time_, e.exact, e.simplified, q_);
+    if (isRunaway(e, result))
+      return Status::NoEquilibrium;
+    if (isAssessedAtRest(e))
     {
-      std::ostringstream msg;
-      msg << "cannot close the loops with the joints moved onto their stops held there (";
-      for (std::size_t k = 0; k < on_stops_.size(); ++k)
-        msg << (k > 0 ? ", " : "") << jointOfCoordinate(model_, on_stops_[k]);
-      msg << "): they stay " << left
-          << " (m or rad) open; give a start inside the limits from which the loops close";
-      throw std::invalid_argument(msg.str());
+      if (rest_.accepts())
+        return Status::Converged;
+      if (rest_.isUnstable())
+      {
+        pushOff(result);
+        return std::nullopt;
+      }
     }
-    stepper_->project(data, q_, v_, &on_stops_); // and a velocity they allow
+    if (peaks_.isPeak(e.signal))
+    {
+      damp(e, result);
+      if (isSettledByNewton(result))
+        return Status::Converged;
+      return std::nullopt; // the next pass evaluates the dynamics at the damped state
+    }
+    peaks_.record(e.signal);
+    if (settings_->backtrack)
+      keepConfiguration(e.exact + e.added);
+    if (!integrate() && !rollBack(result))
+      return Status::Diverged;
+    return std::nullopt;
   }
 
   void Solver::measureProgress(double energy, const Result & result, RunProgress & progress)
@@ -456,7 +366,7 @@ namespace pinsettle
     // In a Data of its own: the run's scratch carries state between steps.
     if (!progress_data_)
       progress_data_ = std::make_unique<pinocchio::Data>(model_);
-    return residualOf(q_, staticForceIn(*progress_data_, q_, forces_));
+    return residualOf(q_, constraints_.computeStaticForce(*progress_data_, q_, forces_));
   }
 
   void Solver::start(
@@ -486,22 +396,11 @@ namespace pinsettle
     pinocchio::normalize(model_, q_); // q0 is normalised within 1e-6; make it exact
     v_ = v0;
     tau_.setZero();
-    result.mobility = model_.nv;
-    if (loops_ != nullptr)
-      assemble(result);
+    constraints_.start(data, q_, v_, result);
     impacts_ = 0;
     stationary_ = false;
     newton_tried_at_ = 0;
     settled_by_newton_ = false;
-    if (stops_ != nullptr)
-    {
-      hits_.reserve(stops_->stops().size());
-      on_stops_.reserve(stops_->stops().size());
-      clampToStops(*stops_, q_, &result.start_clamped);
-      enforceStops(*stops_, q_, v_);
-      if (loops_ != nullptr && !result.start_clamped.empty())
-        closeLoopsOnStops();
-    }
 
     peaks_ = PeakDetector(settings.err);
     window_ = StoppingWindow(settings.ds, settings.max_e);
@@ -514,24 +413,6 @@ namespace pinsettle
     if (step_control_.isAutomatic())
       runaway_.addRemoved(step_control_.estimate(data, q_, v_, step_));
     guard_.start(q_, v_, time_);
-  }
-
-  void Solver::assemble(Result & result)
-  {
-    // Closed mechanism: start assembled, with a velocity the loops allow.
-    result.assembly_distance = assembleLoops(model_, data, *loops_, q_);
-    const LoopMotion motion = computeLoopMotion(model_, data, *loops_, q_);
-    result.mobility = static_cast<int>(motion.basis.cols());
-    if (result.mobility == 0)
-    {
-      std::ostringstream msg;
-      msg << "the loops leave the mechanism no degree of freedom (" << motion.rank
-          << " independent loop equations on model.nv = " << model_.nv
-          << " joint velocities): it is a structure, with nothing to settle";
-      throw std::invalid_argument(msg.str());
-    }
-    v_ = motion.basis * (motion.basis.transpose() * v_);
-    stepper_->init(data, q_);
   }
 
   void Solver::reestimateStep()
@@ -556,16 +437,13 @@ namespace pinsettle
           f.setZero();
       forces_->computeForces(model_, data, q_, v_, tau_, fext_);
     }
-    // Joints held on their stops at the last step stay locked while they rest: one ABA.
-    if (hold_ != nullptr)
-      hold_->useDynamicsModel(step_control_.dynamicsModel(), step_control_.dynamicsVersion());
-    locked_ = hold_ != nullptr ? hold_->lockedModel(q_, v_, &step_control_.timeScale()) : nullptr;
+    locked_ = constraints_.lockedModel(step_control_, q_, v_);
     computeAcceleration(locked_ != nullptr ? *locked_ : step_control_.dynamicsModel());
     // Both measures every step, from the body velocities the dynamics just computed. With stiff
     // modes scaled, the exact signal includes their added inertia: it is the energy the scaled
     // system exchanges with its potential.
     StepEnergies e;
-    const pinocchio::Convention convention = dynamicsConvention();
+    const pinocchio::Convention convention = constraints_.dynamicsConvention();
     e.exact = computeBodyKineticEnergy(model_, data, convention);
     e.simplified = computeSimplifiedKineticEnergy(model_, data, convention);
     e.added = step_control_.addedEnergy(v_);
@@ -575,19 +453,7 @@ namespace pinsettle
 
   void Solver::computeAcceleration(const pinocchio::Model & model)
   {
-    if (loops_ != nullptr)
-      stepper_->dynamics(data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
-    else if (use_fext_)
-      prebuilt::aba(model, data, q_, v_, tau_, fext_, dynamicsConvention());
-    else
-      prebuilt::aba(model, data, q_, v_, tau_, dynamicsConvention());
-  }
-
-  pinocchio::Convention Solver::dynamicsConvention() const
-  {
-    // ABA in the world convention is the faster (6 to 8 % on 6 to 9 joint arms); the loops'
-    // dynamics leave the body velocities in local frames.
-    return loops_ != nullptr ? pinocchio::Convention::LOCAL : pinocchio::Convention::WORLD;
+    constraints_.computeAcceleration(model, data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
   }
 
   void Solver::correctAcceleration()
@@ -597,13 +463,13 @@ namespace pinsettle
       // Stiff modes scaled at this step's peak would need the free model's dynamics.
       if (step_control_.stiffModes() == 0)
       {
-        if (hold_->acceptLocked(data, q_, v_))
+        if (constraints_.acceptLocked(data, q_, v_))
           return;
         // Joints pulled off their stops leave them: once more with those free.
-        if (const pinocchio::Model * unlocked = hold_->unlockPulled(data, q_, v_))
+        if (const pinocchio::Model * unlocked = constraints_.unlockPulled(data, q_, v_))
         {
           computeAcceleration(*unlocked);
-          if (hold_->acceptLocked(data, q_, v_))
+          if (constraints_.acceptLocked(data, q_, v_))
             return;
         }
       }
@@ -611,8 +477,7 @@ namespace pinsettle
     }
     // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
     step_control_.correctAcceleration(data, q_);
-    if (stops_ != nullptr)
-      hold_->hold(data, q_, v_, &step_control_.timeScale());
+    constraints_.hold(data, q_, v_, step_control_.timeScale());
   }
 
   void Solver::restartStretch()
@@ -658,7 +523,7 @@ namespace pinsettle
     msg.precision(3);
     msg << "the potential energy falls without bound: " << runaway_.released() << " J released and "
         << runaway_.drift() << " (rad or m) travelled by "
-        << jointOfCoordinate(model_, runaway_.furthestCoordinate()) << " in "
+        << describeCoordinate(model_, runaway_.furthestCoordinate()) << " in "
         << runaway_.stepsSinceReset(step_)
         << " steps with kt = 0, the energy released per doubling of the run and the distance both "
            "growing at least "
@@ -682,7 +547,7 @@ namespace pinsettle
     StabilityReport report = assess(q_, forces_);
     // Unstable, or loops left open, is no rest.
     const double energy =
-      report.verdict == Stability::Unstable || !areLoopsClosed(model_, data, loops_, q_)
+      report.verdict == Stability::Unstable || !constraints_.isSatisfied(data, q_)
         ? std::numeric_limits<double>::infinity()
         : computeRestEnergy(report, staticForce(q_, forces_));
     rest_.record(std::move(report), q_, step_, energy);
@@ -744,8 +609,7 @@ namespace pinsettle
     // configurations kept before this one (1 to 2 steps back).
     const double back = std::clamp(peaks_.stepsPastPeak(e) + 0.5, 1., 2.);
     pinocchio::interpolate(model_, q_before_, q_before2_, back - 1., q_);
-    if (loops_ != nullptr)
-      stepper_->project(data, q_, v_);
+    constraints_.projectState(data, q_, v_);
     // The clock is not moved back: it counts the time integrated, and the trace, the progress
     // reports and playback (keyframes in time order) need it to run forward.
     return true;
@@ -760,36 +624,19 @@ namespace pinsettle
     if (!q_next_.allFinite() || !v_.allFinite())
       return false;
     q_.swap(q_next_);
-    if (loops_ != nullptr && stops_ == nullptr) // back onto the loops, and a velocity they allow
-      stepper_->project(data, q_, v_);
-    if (stops_ != nullptr)
+    // A joint past a stop at every step is not motion but chatter (each step crosses the range,
+    // and the impacts keep the energy at zero): roll back with the step halved, as for a
+    // blow-up.
+    const bool hit = constraints_.enforceStops(q_, v_, trace_.isTracing());
+    impacts_ = hit ? impacts_ + 1 : 0;
+    for (const pinocchio::JointIndex joint : constraints_.hits())
+      trace_.event(step_, time_ + h, EventKind::Impact, joint);
+    if (impacts_ >= DivergenceGuard::kBlowUpSteps)
     {
-      // A joint past a stop at every step is not motion but chatter (each step crosses the
-      // range, and the impacts keep the energy at zero): roll back with the step halved, as
-      // for a blow-up.
-      hits_.clear(); // traced as impacts
-      if (loops_ != nullptr)
-        stepper_->arrive(v_);
-      const bool hit = enforceStops(*stops_, q_, v_, trace_.isTracing() ? &hits_ : nullptr);
-      impacts_ = hit ? impacts_ + 1 : 0;
-      for (const pinocchio::JointIndex joint : hits_)
-        trace_.event(step_, time_ + h, EventKind::Impact, joint);
-      if (impacts_ >= DivergenceGuard::kBlowUpSteps)
-      {
-        impacts_ = 0;
-        return false;
-      }
-      if (loops_ != nullptr) // back onto the loops with the joints on a stop kept there
-      {
-        findJointsOnStops(*stops_, q_, on_stops_);
-        // Zeroing a joint's speed and projecting in joint coordinates handed the impact's
-        // energy to the rest of the loop: Fetch's weld-hung arm rang at its stops for ever.
-        if (hit)
-          stepper_->impact(data, q_, v_, on_stops_);
-        else
-          stepper_->project(data, q_, v_, &on_stops_);
-      }
+      impacts_ = 0;
+      return false;
     }
+    constraints_.projectStep(data, q_, v_, hit); // back onto the loops, the stops kept
     runaway_.addMotion(dq_);
     time_ += h;
     // At rest before and after, and not moved to the bit: the next step starts from the same
@@ -824,24 +671,14 @@ namespace pinsettle
     result.stability = report.verdict;
     result.min_stiffness_eigenvalue = report.min_eigenvalue;
     result.neutral_directions = report.neutral_directions;
-    if (loops_ != nullptr)
-      result.constraint_error =
-        computeLoopError(model_, data, *loops_, result.q).lpNorm<Eigen::Infinity>();
-    if (stops_ != nullptr && loops_ != nullptr)
-      result.stop_contacts = balanceStops(model_, data, *loops_, *stops_, result.q, tau).contacts;
-    else if (stops_ != nullptr)
-      result.stop_contacts = computeStopContacts(*stops_, result.q, tau);
+    constraints_.describeRest(data, result.q, tau, result);
     settings_ = nullptr;
     forces_ = nullptr;
   }
 
   double Solver::residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau)
   {
-    if (stops_ != nullptr && loops_ != nullptr)
-      return balanceStops(model_, data, *loops_, *stops_, q, tau).residual;
-    if (stops_ != nullptr)
-      return computeStopResidual(*stops_, q, tau);
-    return tau.lpNorm<Eigen::Infinity>();
+    return constraints_.computeResidual(data, q, tau);
   }
 
   bool Solver::isAtRoundOff(double step, double last_step, const Eigen::VectorXd & q)
@@ -864,6 +701,37 @@ namespace pinsettle
     return -1.;
   }
 
+  Eigen::VectorXd Solver::newtonStep(
+    const StabilityReport & here, const StabilityReport & report, const Eigen::VectorXd & tau)
+  {
+    // Least squares with a rank cut: neutral directions (K singular there) are left alone.
+    const double cut =
+      std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12);
+    if (constraints_.empty())
+      return -solveWithRankCut(here.stiffness, tau, cut);
+    return -here.basis * solveWithRankCut(here.stiffness, here.basis.transpose() * tau, cut);
+  }
+
+  bool Solver::takeNewtonStep(
+    NewtonRun & run,
+    const Eigen::VectorXd & dq,
+    const ForceModel * forces,
+    Eigen::VectorXd & q_next)
+  {
+    pinocchio::integrate(model_, run.q, dq, q_next);
+    // A step the constraints cannot follow (loops held open by the stops) is no step to a rest.
+    if (!constraints_.projectConfiguration(data, q_next))
+      return false;
+    const Eigen::VectorXd tau_next = staticForce(q_next, forces);
+    const double residual_next = residualOf(q_next, tau_next);
+    if (!(residual_next < run.residual))
+      return false;
+    run.q.swap(q_next);
+    run.tau = tau_next;
+    run.residual = residual_next;
+    return true;
+  }
+
   Solver::NewtonRun Solver::iterateNewton(
     const Eigen::VectorXd & q0,
     const Eigen::VectorXd & tau0,
@@ -872,70 +740,41 @@ namespace pinsettle
     const ForceModel * forces,
     double max_move)
   {
-    const pinocchio::Model & model = model_;
     NewtonRun run{q0, tau0, residual0, 0, false};
-    Eigen::VectorXd & q = run.q;
-    Eigen::VectorXd q_next(model.nq);
-    // Loops and stops restrict the motions Newton may take (the report's basis).
-    const bool restricted = loops_ != nullptr || stops_ != nullptr;
+    Eigen::VectorXd q_next(model_.nq);
+    // Constraints restrict the motions Newton may take (the report's basis).
+    const bool restricted = !constraints_.empty();
     double last_step = 0.; // |dq|_inf of the step taken before
-    StabilityReport at;    // the stiffness (and with loops or stops the basis) at q
+    StabilityReport at;    // the stiffness (and with constraints the basis) at q
     for (; run.iterations < 10 && run.residual > 0.; ++run.iterations)
     {
-      // Newton on the allowed motions (all of them without loops or stops): K ds = -B^T tau,
-      // dq = B ds. The first iteration starts where the report was drawn: its K and B.
+      // The first iteration starts where the report was drawn: its K and B.
       if (run.iterations > 0 && restricted)
-        at = assess(q, forces);
+        at = assess(run.q, forces);
       else if (run.iterations > 0)
-        at.stiffness = computeStiffnessMatrix(model, data, q, forces);
+        at.stiffness = computeStiffnessMatrix(model_, data, run.q, forces);
       const StabilityReport & here = run.iterations == 0 ? report : at;
       if (restricted && here.basis.cols() == 0)
       {
-        // The loops and stops hold every motion (the rocker of a four-bar pressed on its stop):
+        // The constraints hold every motion (the rocker of a four-bar pressed on its stop):
         // nothing is left to move, a zero step would only be counted a stall, and their forces
         // balance the rest to round-off.
         run.at_round_off = here.verdict == Stability::Stable
                            && run.residual <= kHeldResidual * run.tau.lpNorm<Eigen::Infinity>();
         break;
       }
-      // Least squares with a rank cut: neutral directions (K singular there) are left alone.
-      const double cut =
-        std::max(report.tolerance / std::max(report.max_abs_eigenvalue, 1e-300), 1e-12);
-      const Eigen::VectorXd dq =
-        restricted
-          ? Eigen::VectorXd(
-              -here.basis * solveWithRankCut(here.stiffness, here.basis.transpose() * run.tau, cut))
-          : Eigen::VectorXd(-solveWithRankCut(here.stiffness, run.tau, cut));
-      pinocchio::integrate(model, q, dq, q_next);
-      double open = 0.; // the loops' error left at q_next
-      if (loops_ != nullptr)
-        open = projectOntoLoops(model, data, *loops_, q_next);
-      if (stops_ != nullptr)
-        clampToStops(*stops_, q_next);
-      if (loops_ != nullptr && stops_ != nullptr)
-      {
-        findJointsOnStops(*stops_, q_next, on_stops_);
-        open = projectOntoLoops(model, data, *loops_, q_next, 1e-13, 50, &on_stops_);
-      }
-      // A step the loops cannot follow (held open by the stops) is no step to a rest.
-      if (!(open <= LoopStepper::kLoopTolerance))
+      const Eigen::VectorXd dq = newtonStep(here, report, run.tau);
+      if (!takeNewtonStep(run, dq, forces, q_next))
         break;
-      const Eigen::VectorXd tau_next = staticForce(q_next, forces);
-      const double residual_next = residualOf(q_next, tau_next);
-      if (!(residual_next < run.residual))
-        break;
-      q.swap(q_next);
-      run.tau = tau_next;
-      run.residual = residual_next;
       if (
         max_move < std::numeric_limits<double>::infinity()
-        && pinocchio::difference(model, q0, q).lpNorm<Eigen::Infinity>() > max_move)
+        && pinocchio::difference(model_, q0, run.q).lpNorm<Eigen::Infinity>() > max_move)
       {
         ++run.iterations;
         return run; // out of reach: not at round-off, whatever the residual
       }
       const double step = dq.lpNorm<Eigen::Infinity>();
-      if (isAtRoundOff(step, last_step, q))
+      if (isAtRoundOff(step, last_step, run.q))
       {
         ++run.iterations;
         run.at_round_off = true;
@@ -985,7 +824,7 @@ namespace pinsettle
     // reach (residual over the softest stiffness) is long, and Newton, clamped onto a stop,
     // found a 'rest' 2.8 rad away and 3.7 J above the start of a bistable pendulum's release.
     // With every motion held there is no stiffness to tell a reach: iterateNewton decides.
-    const bool held = (loops_ != nullptr || stops_ != nullptr) && report.basis.cols() == 0;
+    const bool held = !constraints_.empty() && report.basis.cols() == 0;
     const double reach =
       held ? kTakeoverReach : std::min(newtonReach(report, residual), kTakeoverReach);
     if (reach < 0.)

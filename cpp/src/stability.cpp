@@ -3,7 +3,7 @@
 //
 
 #include "pinsettle/stability.hpp"
-#include "pinsettle/solver.hpp"
+#include "pinsettle/statics.hpp"
 #include "joint-kinds.hpp"
 
 #include "pinsettle/prebuilt.hpp"

@@ -3,7 +3,7 @@
 //
 
 #include "pinsettle/step-control.hpp"
-#include "pinsettle/solver.hpp" // computeStaticForce
+#include "pinsettle/statics.hpp"
 
 #include <pinocchio/algorithm/aba.hpp>
 #include "pinsettle/prebuilt.hpp"

@@ -3,7 +3,8 @@
 //
 
 #include "pinsettle/stops.hpp"
-#include "pinsettle/solver.hpp"
+#include "pinsettle/loops.hpp"
+#include "pinsettle/statics.hpp"
 #include "unit-norm.hpp"
 
 #include "pinsettle/prebuilt.hpp"

@@ -5,6 +5,7 @@
 #ifndef __pinsettle_pinsettle_hpp__
 #define __pinsettle_pinsettle_hpp__
 
+#include "pinsettle/constraint-set.hpp"
 #include "pinsettle/damping.hpp"
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
@@ -17,6 +18,7 @@
 #include "pinsettle/settings.hpp"
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"
+#include "pinsettle/statics.hpp"
 #include "pinsettle/step-control.hpp"
 #include "pinsettle/stops.hpp"
 #include "pinsettle/urdf.hpp"

@@ -5,6 +5,7 @@
 #ifndef __pinsettle_solver_hpp__
 #define __pinsettle_solver_hpp__
 
+#include "pinsettle/constraint-set.hpp"
 #include "pinsettle/damping.hpp"
 #include "pinsettle/forces.hpp"
 #include "pinsettle/loops.hpp"
@@ -12,17 +13,17 @@
 #include "pinsettle/result.hpp"
 #include "pinsettle/settings.hpp"
 #include "pinsettle/stability.hpp"
+#include "pinsettle/statics.hpp"
 #include "pinsettle/step-control.hpp"
 #include "pinsettle/stops.hpp"
 
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 
 namespace pinsettle
 {
-
-  class LoopStepper;
 
   ///
   /// \brief Check a configuration given by a user.
@@ -58,20 +59,6 @@ namespace pinsettle
     const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q);
 
   ///
-  /// \brief Net static generalized force: rnea(q, 0, 0) minus the applied efforts at (q, 0),
-  /// i.e. gravity minus springs and loads. Zero at an equilibrium.
-  ///
-  /// \param[in] q The joint configuration (dim model.nq).
-  /// \param[in] forces Applied efforts, or nullptr for gravity alone.
-  /// \return The net static generalized force (dim model.nv, N m or N).
-  ///
-  Eigen::VectorXd computeStaticForce(
-    const pinocchio::Model & model,
-    pinocchio::Data & data,
-    const Eigen::VectorXd & q,
-    const ForceModel * forces = nullptr);
-
-  ///
   /// \brief Why the mechanism can have no rest because a root joint translates freely: a free
   /// flyer, planar, translation or prismatic joint at the root that nothing ties to the world
   /// (no stop on it, no loop, coupling or element from its subtree to the world or another
@@ -104,19 +91,6 @@ namespace pinsettle
   double restEnergyLimit(const pinocchio::Model & model, const Settings & settings);
 
   ///
-  /// \brief Static residual: max |rnea(q, 0, 0) - applied generalized forces at (q, 0)|.
-  ///
-  /// \param[in] q The joint configuration (dim model.nq).
-  /// \param[in] forces Applied efforts, or nullptr for gravity alone.
-  /// \return The largest absolute net static generalized force (N m or N).
-  ///
-  double computeStaticResidual(
-    const pinocchio::Model & model,
-    pinocchio::Data & data,
-    const Eigen::VectorXd & q,
-    const ForceModel * forces = nullptr);
-
-  ///
   /// \brief Kinetic-damping equilibrium solver.
   ///
   /// Simulates the mechanism with pinocchio::aba and semi-implicit Euler (pinocchio::integrate, so
@@ -130,16 +104,16 @@ namespace pinsettle
   /// (DivergenceGuard), the no-equilibrium test (RunawayMonitor), the stability check at rest
   /// (RestCheck), the trace (TraceRecorder) and the clock (RunClock).
   ///
-  /// With joint stops (JointStops) the start is moved into their ranges, a joint resting on a
-  /// stop is held there while its stop pushes (StopHold), a joint that crosses a stop is put on
-  /// it with its velocity into the stop removed (an inelastic impact), and the residual and the
-  /// stability verdict are those of a rest against stops. Without stops none of this runs.
-  ///
-  /// With loop closures (LoopConstraints) each step runs Pinocchio's constrained forward dynamics
-  /// (pinocchio::constraintDynamics) instead of aba, then projects q onto the loops (Gauss-Newton
-  /// to 1e-13) and the velocity onto the motions they allow; the residual, the stability verdict,
-  /// the automatic step and the Newton polish are those of the closed mechanism. Without loops
-  /// none of this runs.
+  /// What restricts the motion (loop closures, joint stops) is one ConstraintSet: the loop asks
+  /// it for the static force, residual and stability of a rest, the dynamics of a step and the
+  /// impacts and projections after it, and never which kinds are present. With joint stops
+  /// (JointStops) the start is moved into their ranges, a joint resting on a stop is held there
+  /// while its stop pushes (StopHold), a joint that crosses a stop is put on it with its velocity
+  /// into the stop removed (an inelastic impact), and the residual and the stability verdict are
+  /// those of a rest against stops. With loop closures (LoopConstraints) each step runs
+  /// Pinocchio's constrained forward dynamics (pinocchio::constraintDynamics) instead of aba,
+  /// then projects q onto the loops (Gauss-Newton to 1e-13) and the velocity onto the motions
+  /// they allow. Without constraints none of this runs.
   ///
   class Solver
   {
@@ -210,14 +184,14 @@ namespace pinsettle
       const Settings & settings,
       const ForceModel * forces,
       Result & result);
-    void assemble(Result & result);
-    void closeLoopsOnStops();
+    // One pass of the loop at step_: the dynamics evaluated and, as the parts decide, a roll
+    // back, a push off an unstable rest, a damping event or a step; the status when it ends the
+    // run. energy: the exact kinetic energy of the pass (for the progress).
+    std::optional<Status> takeStep(Result & result, double & energy);
     void reestimateStep();
     StepEnergies evaluateDynamics();
-    // pinocchio::aba (or the loops' dynamics) at the current state, on model or a copy of it.
+    // The constrained dynamics at the current state, on model or a copy of it.
     void computeAcceleration(const pinocchio::Model & model);
-    // The convention computeAcceleration runs ABA in (its body velocities: data.v or data.ov).
-    pinocchio::Convention dynamicsConvention() const;
     // The acceleration the step integrates: with the scaled stiff modes' inertia and the joints
     // resting on their stops held (StopHold).
     void correctAcceleration();
@@ -253,6 +227,17 @@ namespace pinsettle
       int iterations;
       bool at_round_off; // ended at round-off (or a zero residual), not by a stall or the count
     };
+    // Newton's step on the motions here's basis spans (every motion without constraints):
+    // K ds = -B^T tau, dq = B ds, by least squares with report's rank cut.
+    Eigen::VectorXd newtonStep(
+      const StabilityReport & here, const StabilityReport & report, const Eigen::VectorXd & tau);
+    // The step dq from run.q moved back onto the constraints (into q_next, scratch) and taken
+    // into run only if the constraints hold there and the residual falls.
+    bool takeNewtonStep(
+      NewtonRun & run,
+      const Eigen::VectorXd & dq,
+      const ForceModel * forces,
+      Eigen::VectorXd & q_next);
     NewtonRun iterateNewton(
       const Eigen::VectorXd & q0,
       const Eigen::VectorXd & tau0,
@@ -279,21 +264,14 @@ namespace pinsettle
     // A held rest's residual relative to the static force (|tau|_inf): round-off.
     static constexpr double kHeldResidual = 1e-12;
 
-    // Static force, stiffness report and projections of the closed mechanism (loops or not).
+    // Static force and stiffness report of the constrained mechanism (ConstraintSet).
     Eigen::VectorXd staticForce(const Eigen::VectorXd & q, const ForceModel * forces);
-    Eigen::VectorXd staticForceIn(
-      pinocchio::Data & scratch, const Eigen::VectorXd & q, const ForceModel * forces) const;
     StabilityReport assess(const Eigen::VectorXd & q, const ForceModel * forces);
 
     const pinocchio::Model & model_;
-    const LoopConstraints * loops_;
-    std::unique_ptr<LoopStepper> stepper_;
-    const JointStops * stops_;
-    std::unique_ptr<StopHold> hold_;
+    ConstraintSet constraints_;                 // loops and stops: the loop never asks which
     const pinocchio::Model * locked_ = nullptr; // the model this step's dynamics ran on, if locked
     std::unique_ptr<pinocchio::Data> progress_data_; // made on the first progress report
-    std::vector<pinocchio::JointIndex> hits_;        // joints that hit a stop in a step
-    std::vector<Eigen::Index> on_stops_;             // indices in v of joints on a stop
 
     // The run in progress: its inputs and where it is.
     const Settings * settings_ = nullptr;

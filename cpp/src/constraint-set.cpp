@@ -1,0 +1,247 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#include "pinsettle/constraint-set.hpp"
+#include "pinsettle/statics.hpp"
+#include "pinsettle/step-control.hpp"
+#include "joint-kinds.hpp"
+#include "loop-stepper.hpp"
+
+#include "pinsettle/prebuilt.hpp"
+
+#include <sstream>
+#include <stdexcept>
+
+namespace pinsettle
+{
+
+  ConstraintSet::ConstraintSet(
+    const pinocchio::Model & model, const LoopConstraints * loops, const JointStops * stops)
+  : model_(model)
+  , loops_(loops != nullptr && !loops->empty() ? loops : nullptr)
+  , stops_(stops != nullptr && !stops->empty() ? stops : nullptr)
+  {
+    if (loops_ != nullptr)
+    {
+      if (&loops_->model() != &model)
+        throw std::invalid_argument("loops: they were made for another model than the solver's");
+      stepper_.reset(new LoopStepper(model, *loops_));
+    }
+    if (stops_ != nullptr)
+    {
+      if (&stops_->model() != &model)
+        throw std::invalid_argument("stops: they were made for another model than the solver's");
+      hold_.reset(new StopHold(*stops_, loops_));
+      if (stepper_)
+        stepper_->useStops(stops_);
+      hits_.reserve(stops_->stops().size());
+      on_stops_.reserve(stops_->stops().size());
+    }
+  }
+
+  ConstraintSet::~ConstraintSet() = default;
+
+  void ConstraintSet::start(
+    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Result & result)
+  {
+    result.mobility = model_.nv;
+    if (loops_ != nullptr)
+      assemble(data, q, v, result);
+    if (stops_ == nullptr)
+      return;
+    clampToStops(*stops_, q, &result.start_clamped);
+    pinsettle::enforceStops(*stops_, q, v);
+    if (loops_ != nullptr && !result.start_clamped.empty())
+      closeLoopsOnStops(data, q, v);
+  }
+
+  void ConstraintSet::assemble(
+    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Result & result)
+  {
+    // Closed mechanism: start assembled, with a velocity the loops allow.
+    result.assembly_distance = assembleLoops(model_, data, *loops_, q);
+    const LoopMotion motion = computeLoopMotion(model_, data, *loops_, q);
+    result.mobility = static_cast<int>(motion.basis.cols());
+    if (result.mobility == 0)
+    {
+      std::ostringstream msg;
+      msg << "the loops leave the mechanism no degree of freedom (" << motion.rank
+          << " independent loop equations on model.nv = " << model_.nv
+          << " joint velocities): it is a structure, with nothing to settle";
+      throw std::invalid_argument(msg.str());
+    }
+    v = motion.basis * (motion.basis.transpose() * v);
+    stepper_->init(data, q);
+  }
+
+  void ConstraintSet::closeLoopsOnStops(
+    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v)
+  {
+    findJointsOnStops(*stops_, q, on_stops_);
+    const double left = projectOntoLoops(model_, data, *loops_, q, 1e-13, 100, &on_stops_);
+    if (!(left <= LoopStepper::kLoopTolerance))
+    {
+      std::ostringstream msg;
+      msg << "cannot close the loops with the joints moved onto their stops held there (";
+      for (std::size_t k = 0; k < on_stops_.size(); ++k)
+        msg << (k > 0 ? ", " : "") << describeCoordinate(model_, on_stops_[k]);
+      msg << "): they stay " << left
+          << " (m or rad) open; give a start inside the limits from which the loops close";
+      throw std::invalid_argument(msg.str());
+    }
+    stepper_->project(data, q, v, &on_stops_); // and a velocity they allow
+  }
+
+  Eigen::VectorXd ConstraintSet::computeStaticForce(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const
+  {
+    if (loops_ != nullptr)
+      return pinsettle::computeStaticForce(model_, data, *loops_, q, forces);
+    return pinsettle::computeStaticForce(model_, data, q, forces);
+  }
+
+  double ConstraintSet::computeResidual(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & tau) const
+  {
+    if (stops_ != nullptr && loops_ != nullptr)
+      return balanceStops(model_, data, *loops_, *stops_, q, tau).residual;
+    if (stops_ != nullptr)
+      return computeStopResidual(*stops_, q, tau);
+    return tau.lpNorm<Eigen::Infinity>();
+  }
+
+  StabilityReport ConstraintSet::assessStability(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const
+  {
+    if (loops_ != nullptr && stops_ != nullptr)
+      return pinsettle::assessStability(model_, data, *loops_, *stops_, q, forces);
+    if (loops_ != nullptr)
+      return pinsettle::assessStability(model_, data, *loops_, q, forces);
+    if (stops_ != nullptr)
+      return pinsettle::assessStability(model_, data, *stops_, q, forces);
+    return pinsettle::assessStability(model_, data, q, forces);
+  }
+
+  bool ConstraintSet::isSatisfied(pinocchio::Data & data, const Eigen::VectorXd & q) const
+  {
+    return loops_ == nullptr
+           || computeLoopError(model_, data, *loops_, q).lpNorm<Eigen::Infinity>()
+                <= LoopStepper::kLoopTolerance;
+  }
+
+  void ConstraintSet::describeRest(
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau,
+    Result & result) const
+  {
+    if (loops_ != nullptr)
+      result.constraint_error =
+        computeLoopError(model_, data, *loops_, q).lpNorm<Eigen::Infinity>();
+    if (stops_ != nullptr && loops_ != nullptr)
+      result.stop_contacts = balanceStops(model_, data, *loops_, *stops_, q, tau).contacts;
+    else if (stops_ != nullptr)
+      result.stop_contacts = computeStopContacts(*stops_, q, tau);
+  }
+
+  bool ConstraintSet::projectConfiguration(pinocchio::Data & data, Eigen::VectorXd & q)
+  {
+    double open = 0.; // the loops' error left at q
+    if (loops_ != nullptr)
+      open = projectOntoLoops(model_, data, *loops_, q);
+    if (stops_ != nullptr)
+      clampToStops(*stops_, q);
+    if (loops_ != nullptr && stops_ != nullptr)
+    {
+      findJointsOnStops(*stops_, q, on_stops_);
+      open = projectOntoLoops(model_, data, *loops_, q, 1e-13, 50, &on_stops_);
+    }
+    return open <= LoopStepper::kLoopTolerance;
+  }
+
+  const pinocchio::Model * ConstraintSet::lockedModel(
+    const StepController & step_control, const Eigen::VectorXd & q, const Eigen::VectorXd & v)
+  {
+    // Joints held on their stops at the last step stay locked while they rest: one ABA.
+    if (hold_ == nullptr)
+      return nullptr;
+    hold_->useDynamicsModel(step_control.dynamicsModel(), step_control.dynamicsVersion());
+    return hold_->lockedModel(q, v, &step_control.timeScale());
+  }
+
+  void ConstraintSet::computeAcceleration(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & v,
+    const Eigen::VectorXd & tau,
+    const ForceVector * fext)
+  {
+    if (loops_ != nullptr)
+      stepper_->dynamics(data, q, v, tau, fext);
+    else if (fext != nullptr)
+      prebuilt::aba(model, data, q, v, tau, *fext, dynamicsConvention());
+    else
+      prebuilt::aba(model, data, q, v, tau, dynamicsConvention());
+  }
+
+  bool ConstraintSet::acceptLocked(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v)
+  {
+    return hold_->acceptLocked(data, q, v);
+  }
+
+  const pinocchio::Model * ConstraintSet::unlockPulled(
+    const pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v)
+  {
+    return hold_->unlockPulled(data, q, v);
+  }
+
+  void ConstraintSet::hold(
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & v,
+    const TimeScale & added)
+  {
+    if (hold_ != nullptr)
+      hold_->hold(data, q, v, &added);
+  }
+
+  bool ConstraintSet::enforceStops(Eigen::VectorXd & q, Eigen::VectorXd & v, bool record)
+  {
+    if (stops_ == nullptr)
+      return false;
+    hits_.clear();
+    if (loops_ != nullptr) // the impact in the loops starts from the arriving velocity
+      stepper_->arrive(v);
+    return pinsettle::enforceStops(*stops_, q, v, record ? &hits_ : nullptr);
+  }
+
+  void ConstraintSet::projectStep(
+    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, bool hit)
+  {
+    if (loops_ == nullptr)
+      return;
+    if (stops_ == nullptr)
+    {
+      stepper_->project(data, q, v);
+      return;
+    }
+    // Back onto the loops with the joints on a stop kept there. Zeroing a joint's speed and
+    // projecting in joint coordinates handed the impact's energy to the rest of the loop:
+    // Fetch's weld-hung arm rang at its stops for ever.
+    findJointsOnStops(*stops_, q, on_stops_);
+    if (hit)
+      stepper_->impact(data, q, v, on_stops_);
+    else
+      stepper_->project(data, q, v, &on_stops_);
+  }
+
+  void ConstraintSet::projectState(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v)
+  {
+    if (loops_ != nullptr)
+      stepper_->project(data, q, v);
+  }
+
+} // namespace pinsettle

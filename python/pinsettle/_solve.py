@@ -176,63 +176,82 @@ class Result:
         neutral = f", {self.neutral_directions} neutral" if self.neutral_directions else ""
         lines = [
             f"status           {self.status}",
-            f"steps            {self.steps} ({self.peaks} damping events, "
-            + (
-                f"{self.pushes} push{'es' if self.pushes > 1 else ''} off an unstable rest, "
-                if self.pushes
-                else ""
-            )
-            + f"{self.sim_time:.4g} s simulated)",
+            self._steps_line(),
             f"wall time        {self.wall_time * 1e3:.3f} ms",
-            f"residual         {self.residual:.3e} (max |net static generalized force|"
-            + (
-                ", along the motions the loops allow)"
-                if self.loops
-                else " off the stops, max pull asked of a stop)"
-                if self.limits
-                else ")"
-            )
-            + (
-                f", {self.residual_before_polish:.3e} before the Newton polish"
-                if self.polished
-                else ""
-            ),
-            f"time step        {self.dt:.4g} s"
-            + (f" ({self.dt_estimates} automatic estimates)" if self.dt_estimates else "")
-            + (f", halved {self.dt_reductions} times" if self.dt_reductions else "")
-            + (
-                f", {self.scaled_modes} stiff mode{'s' if self.scaled_modes > 1 else ''} slowed"
-                if self.scaled_modes
-                else ""
-            )
-            + (
-                f", {self.scaled_joints} joint{'s' if self.scaled_joints > 1 else ''} given"
-                " a fictitious inertia"
-                if self.scaled_joints
-                else ""
-            ),
+            self._residual_line(),
+            self._time_step_line(),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
-            *(
-                [
-                    f"loops            {self.mobility} degree{'s' if self.mobility != 1 else ''}"
-                    f" of freedom, constraint error {self.constraint_error:.1e}, start moved "
-                    f"{self.assembly_distance:.3g} to assemble"
-                ]
-                if self.loops
-                else []
-            ),
+            *self._loops_lines(),
             f"stability        {self.stability} (smallest stiffness eigenvalue "
             f"{self.min_stiffness_eigenvalue:.4g}{neutral}"
             + (", on the joints off their stops)" if self.at_limit else ")"),
+            *self._note_lines(),
         ]
+        if self.reason:
+            lines.append(f"reason           {self.reason}")
+        if self.joints:
+            lines.append("joints")
+            lines += [self._joint_line(name, value) for name, value in self.joints.items()]
+        return "\n".join(lines)
+
+    def _steps_line(self) -> str:
+        pushes = (
+            f"{self.pushes} push{'es' if self.pushes > 1 else ''} off an unstable rest, "
+            if self.pushes
+            else ""
+        )
+        return (
+            f"steps            {self.steps} ({self.peaks} damping events, {pushes}"
+            f"{self.sim_time:.4g} s simulated)"
+        )
+
+    def _residual_line(self) -> str:
+        if self.loops:
+            along = ", along the motions the loops allow)"
+        elif self.limits:
+            along = " off the stops, max pull asked of a stop)"
+        else:
+            along = ")"
+        polish = (
+            f", {self.residual_before_polish:.3e} before the Newton polish" if self.polished else ""
+        )
+        return (
+            f"residual         {self.residual:.3e} (max |net static generalized force|"
+            f"{along}{polish}"
+        )
+
+    def _time_step_line(self) -> str:
+        parts = [f"time step        {self.dt:.4g} s"]
+        if self.dt_estimates:
+            parts.append(f" ({self.dt_estimates} automatic estimates)")
+        if self.dt_reductions:
+            parts.append(f", halved {self.dt_reductions} times")
+        if self.scaled_modes:
+            plural = "s" if self.scaled_modes > 1 else ""
+            parts.append(f", {self.scaled_modes} stiff mode{plural} slowed")
+        if self.scaled_joints:
+            plural = "s" if self.scaled_joints > 1 else ""
+            parts.append(f", {self.scaled_joints} joint{plural} given a fictitious inertia")
+        return "".join(parts)
+
+    def _loops_lines(self) -> list[str]:
+        if not self.loops:
+            return []
+        plural = "s" if self.mobility != 1 else ""
+        return [
+            f"loops            {self.mobility} degree{plural} of freedom, constraint error "
+            f"{self.constraint_error:.1e}, start moved {self.assembly_distance:.3g} to assemble"
+        ]
+
+    def _note_lines(self) -> list[str]:
+        lines = []
         if self.start_clamped:
+            moved = ", ".join(
+                f"{name} moved {distance:.4g} {self.units.get(name, 'rad')}"
+                for name, distance in self.start_clamped.items()
+            )
             lines.append(
-                "start clamped    "
-                + ", ".join(
-                    f"{name} moved {distance:.4g} {self.units.get(name, 'rad')}"
-                    for name, distance in self.start_clamped.items()
-                )
-                + " onto the nearest stop (the start was outside its limits)"
+                f"start clamped    {moved} onto the nearest stop (the start was outside its limits)"
             )
         if self.equal_limits:
             lines.append(
@@ -248,21 +267,18 @@ class Result:
                 + ": position limits in the model not applied (stops act on revolute, "
                 "prismatic and helical joints only)"
             )
-        if self.reason:
-            lines.append(f"reason           {self.reason}")
-        if self.joints:
-            lines.append("joints")
-            for name, value in self.joints.items():
-                values = value if isinstance(value, list) else [value]
-                line = f"  {name:<28} " + " ".join(f"{x: .9f}" for x in values)
-                if name in self.at_limit:
-                    unit = "N" if self.units.get(name) == "m" else "N m"
-                    line += (
-                        f"  at {self.at_limit[name]} stop, reaction "
-                        f"{self.limit_reactions.get(name, 0.0):.3g} {unit}"
-                    )
-                lines.append(line)
-        return "\n".join(lines)
+        return lines
+
+    def _joint_line(self, name: str, value: float | list[float]) -> str:
+        values = value if isinstance(value, list) else [value]
+        line = f"  {name:<28} " + " ".join(f"{x: .9f}" for x in values)
+        if name in self.at_limit:
+            unit = "N" if self.units.get(name) == "m" else "N m"
+            line += (
+                f"  at {self.at_limit[name]} stop, reaction "
+                f"{self.limit_reactions.get(name, 0.0):.3g} {unit}"
+            )
+        return line
 
     def to_dict(self) -> dict[str, Any]:
         """The result as plain JSON-ready values (the ``pinsettle solve --json`` object)."""
@@ -448,110 +464,172 @@ def solve(
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
     if isinstance(model, pinocchio.Model) and has_mimic_joints(model):
-        # Each follower coupled to its leader (a constraint, as loops are); the answer in the
-        # model's own coordinates.
-        scene = Scene(model)
-        result = solve(
-            scene,
-            None if q0 is None else scene.from_mimic_q(as_vector(q0, "q0", model.nq, "model.nq")),
-            settings,
-            v0=None
-            if v0 is None
-            else scene.from_mimic_v(as_vector(v0, "v0", model.nv, "model.nv")),
-            callback=callback,
-            limits=limits,
-            progress=progress,
-            **overrides,
-        )
-        trace = result.trace
-        if trace is not None and trace.q is not None:
-            trace = dataclasses.replace(trace, q=scene.to_mimic_q(trace.q))
-        return dataclasses.replace(
-            result, q=scene.to_mimic_q(result.q), v=scene.to_mimic_v(result.v), trace=trace
-        )
+        return _solve_coupled(model, q0, settings, v0, callback, limits, progress, overrides)
     report = _progress_reporter(progress)
-    stops: tuple[bool, list[tuple[int, float, float]]] | None
     if isinstance(model, Scene):
-        scene = model
-        full = scene.model
-        s = make_settings(scene.settings if settings is None else settings, overrides)
-        s.check()
-        q_full = scene.q0() if q0 is None else as_vector(q0, "q0", full.nq, "model.nq")
-        compiled = scene.compile(None if q0 is None else q_full)
-        v_full = np.zeros(full.nv) if v0 is None else as_vector(v0, "v0", full.nv, "model.nv")
-        locked_v = np.delete(v_full, compiled.v_index)
-        if np.any(locked_v != 0.0):
-            raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
-        stops = compiled.stops_for(_limits_flag(limits, scene.limits))
-        equal, unapplied = compiled.limit_notes(stops)
-        solved = compiled.model
-        raw = _core.solve(
-            compiled.model,
-            q_full[compiled.q_index],
-            v_full[compiled.v_index],
-            s,
-            callback,
-            compiled.elements,
-            compiled.loops,
-            stops,
-            progress=report,
-        )
-        raw["q"] = compiled.full_q(raw["q"])
-        raw["loops"] = len(scene.loops)
-        raw["v"] = compiled.full_v(raw["v"], full.nv)
-        if raw["trace"] is not None:
-            if raw["trace"]["q"] is not None:
-                raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
-            raw["trace"]["event_joint"] = _full_joints(
-                compiled.model, full, raw["trace"]["event_joint"]
-            )
-        naming = full
+        run = _run_scene(model, q0, settings, v0, callback, limits, report, overrides)
     else:
-        _check_model(model)
-        if model.nv == 0:
-            raise ValueError("model has no degree of freedom: nothing to settle")
-        s = make_settings(settings, overrides)
-        s.check()
-        q = pinocchio.neutral(model) if q0 is None else as_vector(q0, "q0", model.nq, "model.nq")
-        v = np.zeros(model.nv) if v0 is None else as_vector(v0, "v0", model.nv, "model.nv")
-        stops = (True, []) if _limits_flag(limits, True) else None
-        equal, unapplied = [], []
-        if stops is not None:
-            found = _core.joint_stops(model, stops)
-            equal = [str(name) for name in found["equal_limits"]]
-            unapplied = [str(name) for name in found["unapplied_limits"]]
-        solved = model
-        raw = _core.solve(model, q, v, s, callback, None, None, stops, progress=report)
-        raw["loops"] = 0
-        naming = model
-    if unapplied:
-        warnings.warn(
-            "position limits of "
-            + ", ".join(repr(name) for name in unapplied)
-            + " are not applied: stops act on joints of one configuration entry (revolute, "
-            "prismatic, helical), not on planar, spherical, free-flyer or continuous joints; "
-            "pass limits=False to solve without the model's limits",
-            UserWarning,
-            stacklevel=2,
+        run = _run_model(model, q0, settings, v0, callback, limits, report, overrides)
+    if run.unapplied:
+        _warn_unapplied(run.unapplied)
+    return run.result()
+
+
+def _solve_coupled(
+    model: pinocchio.Model,
+    q0: Any,
+    settings: Settings | Mapping[str, Any] | None,
+    v0: Any,
+    callback: Callable[[], bool] | None,
+    limits: bool | None,
+    progress: Callable[[Progress], object] | None,
+    overrides: dict[str, Any],
+) -> Result:
+    """A model with mimic joints: each follower coupled to its leader (a constraint, as loops
+    are), solved as a Scene; the answer in the model's own coordinates."""
+    scene = Scene(model)
+    result = solve(
+        scene,
+        None if q0 is None else scene.from_mimic_q(as_vector(q0, "q0", model.nq, "model.nq")),
+        settings,
+        v0=None if v0 is None else scene.from_mimic_v(as_vector(v0, "v0", model.nv, "model.nv")),
+        callback=callback,
+        limits=limits,
+        progress=progress,
+        **overrides,
+    )
+    trace = result.trace
+    if trace is not None and trace.q is not None:
+        trace = dataclasses.replace(trace, q=scene.to_mimic_q(trace.q))
+    return dataclasses.replace(
+        result, q=scene.to_mimic_q(result.q), v=scene.to_mimic_v(result.v), trace=trace
+    )
+
+
+@dataclass
+class _Run:
+    """What the core returned for a run, with what the Result needs besides: the settings,
+    the stops given, the limit notes, the model solved and the one that names the joints."""
+
+    raw: dict[str, Any]
+    settings: Settings
+    stops: tuple[bool, list[tuple[int, float, float]]] | None
+    equal: list[str]
+    unapplied: list[str]
+    solved: Any
+    naming: Any
+
+    def result(self) -> Result:
+        raw = self.raw
+        trace = raw.pop("trace")
+        if trace is not None:
+            trace["event_kind"] = tuple(trace["event_kind"])
+        contacts = raw.pop("stop_contacts")
+        clamped = {str(name): float(distance) for name, distance in raw.pop("start_clamped")}
+        named = {str(name) for name, _, _ in contacts} | set(clamped)
+        return Result(
+            **raw,
+            trace=None if trace is None else Trace(**trace),
+            settings=self.settings,
+            joints=joint_values(self.naming, raw["q"]),
+            limits=self.stops is not None,
+            at_limit={str(name): str(side) for name, side, _ in contacts},
+            limit_reactions={str(name): float(reaction) for name, _, reaction in contacts},
+            start_clamped=clamped,
+            equal_limits=tuple(self.equal),
+            unapplied_limits=tuple(self.unapplied),
+            units={name: _unit(self.solved, name) for name in named},
         )
-    trace = raw.pop("trace")
-    if trace is not None:
-        trace["event_kind"] = tuple(trace["event_kind"])
-    contacts = raw.pop("stop_contacts")
-    clamped = {str(name): float(distance) for name, distance in raw.pop("start_clamped")}
-    named = {str(name) for name, _, _ in contacts} | set(clamped)
-    return Result(
-        **raw,
-        trace=None if trace is None else Trace(**trace),
-        settings=s,
-        joints=joint_values(naming, raw["q"]),
-        limits=stops is not None,
-        at_limit={str(name): str(side) for name, side, _ in contacts},
-        limit_reactions={str(name): float(reaction) for name, _, reaction in contacts},
-        start_clamped=clamped,
-        equal_limits=tuple(equal),
-        unapplied_limits=tuple(unapplied),
-        units={name: _unit(solved, name) for name in named},
+
+
+def _run_scene(
+    scene: Scene,
+    q0: Any,
+    settings: Settings | Mapping[str, Any] | None,
+    v0: Any,
+    callback: Callable[[], bool] | None,
+    limits: bool | None,
+    report: Callable[[Mapping[str, Any]], None] | None,
+    overrides: dict[str, Any],
+) -> _Run:
+    """A scene solved on its compiled model (locked joints removed), the answer back in the
+    scene's full model."""
+    full = scene.model
+    s = make_settings(scene.settings if settings is None else settings, overrides)
+    s.check()
+    q_full = scene.q0() if q0 is None else as_vector(q0, "q0", full.nq, "model.nq")
+    compiled = scene.compile(None if q0 is None else q_full)
+    v_full = np.zeros(full.nv) if v0 is None else as_vector(v0, "v0", full.nv, "model.nv")
+    locked_v = np.delete(v_full, compiled.v_index)
+    if np.any(locked_v != 0.0):
+        raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
+    stops = compiled.stops_for(_limits_flag(limits, scene.limits))
+    equal, unapplied = compiled.limit_notes(stops)
+    raw = _core.solve(
+        compiled.model,
+        q_full[compiled.q_index],
+        v_full[compiled.v_index],
+        s,
+        callback,
+        compiled.elements,
+        compiled.loops,
+        stops,
+        progress=report,
+    )
+    raw["q"] = compiled.full_q(raw["q"])
+    raw["loops"] = len(scene.loops)
+    raw["v"] = compiled.full_v(raw["v"], full.nv)
+    if raw["trace"] is not None:
+        if raw["trace"]["q"] is not None:
+            raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
+        raw["trace"]["event_joint"] = _full_joints(
+            compiled.model, full, raw["trace"]["event_joint"]
+        )
+    return _Run(raw, s, stops, equal, unapplied, compiled.model, full)
+
+
+def _run_model(
+    model: Any,
+    q0: Any,
+    settings: Settings | Mapping[str, Any] | None,
+    v0: Any,
+    callback: Callable[[], bool] | None,
+    limits: bool | None,
+    report: Callable[[Mapping[str, Any]], None] | None,
+    overrides: dict[str, Any],
+) -> _Run:
+    """A pinocchio.Model solved as it is, its position limits as stops unless limits=False."""
+    _check_model(model)
+    if model.nv == 0:
+        raise ValueError("model has no degree of freedom: nothing to settle")
+    s = make_settings(settings, overrides)
+    s.check()
+    q = pinocchio.neutral(model) if q0 is None else as_vector(q0, "q0", model.nq, "model.nq")
+    v = np.zeros(model.nv) if v0 is None else as_vector(v0, "v0", model.nv, "model.nv")
+    stops: tuple[bool, list[tuple[int, float, float]]] | None = (
+        (True, []) if _limits_flag(limits, True) else None
+    )
+    equal: list[str] = []
+    unapplied: list[str] = []
+    if stops is not None:
+        found = _core.joint_stops(model, stops)
+        equal = [str(name) for name in found["equal_limits"]]
+        unapplied = [str(name) for name in found["unapplied_limits"]]
+    raw = _core.solve(model, q, v, s, callback, None, None, stops, progress=report)
+    raw["loops"] = 0
+    return _Run(raw, s, stops, equal, unapplied, model, model)
+
+
+def _warn_unapplied(unapplied: list[str]) -> None:
+    """The model's limits that no stop applies (joints of several configuration entries)."""
+    warnings.warn(
+        "position limits of "
+        + ", ".join(repr(name) for name in unapplied)
+        + " are not applied: stops act on joints of one configuration entry (revolute, "
+        "prismatic, helical), not on planar, spherical, free-flyer or continuous joints; "
+        "pass limits=False to solve without the model's limits",
+        UserWarning,
+        stacklevel=3,  # the caller of solve
     )
 
 

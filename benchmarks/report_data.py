@@ -81,7 +81,7 @@ BASELINES = tuple(BASELINE_LABELS)
 #: Each baseline's rule setting: the viscous ones at KD's own step safety and the c that damps
 #: the softest mode at the start critically; FIRE and FIRE 2.0 with dt_max twice the stability
 #: limit (dt0 = dt_max / 10, the classic ratio), mixing in joint coordinates.
-BASELINE_RULES = {
+BASELINE_RULES: dict[str, Record] = {
     "viscous": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
     "mass_damping": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
     "fire": {"dt_max": 2.0, "metric": "euclid"},

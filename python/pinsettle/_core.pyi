@@ -17,7 +17,8 @@ _Stops = tuple[bool, list[tuple[int, float, float]]]
 
 class Settings:
     dt: float | str
-    dt_safety: float
+    dt_safety: float | str
+    dt_growth: float | str
     kt: float
     err: float
     ds: int
@@ -34,6 +35,10 @@ class Settings:
     trace_capacity: int
     trace_configurations: bool
     check_every: int
+    @property
+    def effective_dt_safety(self) -> float: ...
+    @property
+    def effective_dt_growth(self) -> float: ...
     def __init__(self, other: Settings | None = ...) -> None: ...
     def check(self) -> None: ...
 

@@ -52,7 +52,6 @@
 
 #include <pinsettle/prebuilt.hpp>
 #include <pinocchio/algorithm/energy.hpp>
-#include <pinocchio/serialization.hpp>
 
 #include <Eigen/Eigenvalues>
 
@@ -195,6 +194,202 @@ namespace
       w.v = (1. - alpha) * w.v + (alpha * v_norm / d_norm) * w.data.ddq;
   }
 
+  // One run of a baseline from the spec's start (see the top of the file): the state its steps
+  // carry from one to the next, and the parts of a step.
+  class BaselineRun
+  {
+  public:
+    // The workspace at the start and the set-up (timed apart from the run).
+    BaselineRun(
+      const pinocchio::Model & model,
+      const pinsettle::ForceElements * elements,
+      const Spec & spec,
+      double scale)
+    : model_(model)
+    , elements_(elements)
+    , spec_(spec)
+    , w_(model)
+    , fire_(spec.method == "fire")
+    , fire2_(spec.method == "fire2")
+    , viscous_(spec.method == "viscous")
+    , mass_damping_(spec.method == "mass_damping")
+    , mass_metric_(spec.metric == "mass")
+    {
+      w_.q = spec.q0;
+      w_.v.setZero();
+      const Clock::time_point setup_start = Clock::now();
+      setUp(model, elements, spec, scale, w_, out_);
+      out_.setup_seconds = since(setup_start);
+      dt_ = out_.dt;
+      alpha_ = fire2_ ? kFire2AlphaStart : kFireAlphaStart;
+      dt_min_ = kFire2DtMinFactor * out_.dt;
+      start_residual_ = residual();
+      progress_ = start_residual_;
+    }
+
+    Outcome run(Recorder & recorder)
+    {
+      start_ = Clock::now();
+      long step = 0;
+      for (; step < spec_.max_steps; ++step)
+      {
+        recorder.record(step, w_.q);
+        if (checksResidual(step) && residualEnds(step))
+          break;
+        if ((fire_ || fire2_) && powerEnds(step))
+          break;
+        if (!advance())
+        {
+          out_.status = "diverged";
+          ++step;
+          break;
+        }
+      }
+      out_.seconds = since(start_);
+      out_.steps = step;
+      out_.dt_end = dt_;
+      out_.q = w_.q;
+      out_.residual = residual();
+      return out_;
+    }
+
+  private:
+    // max |tau_static(q)|, leaving tau_static in w_.force.
+    double residual()
+    {
+      bench::staticForce(model_, elements_, w_);
+      return w_.force.lpNorm<Eigen::Infinity>();
+    }
+
+    // FIRE needs the static force at every step; viscous damping checks every check_every.
+    bool checksResidual(long step) const
+    {
+      return fire_ || fire2_ || step % spec_.check_every == 0;
+    }
+
+    bool end(const char * status)
+    {
+      out_.status = status;
+      return true;
+    }
+
+    // The residual check: true when it ends the run (diverged, converged or out of time).
+    bool residualEnds(long step)
+    {
+      const double residual = this->residual();
+      if (!(residual <= kBlowUp * start_residual_)) // also catches NaN
+        return end("diverged");
+      if (residual <= spec_.target)
+        return end("converged");
+      if (residual <= 0.1 * progress_)
+      {
+        progress_ = residual;
+        stall_resets_ = 0;
+      }
+      if (step % 1024 == 0 && since(start_) > spec_.max_time)
+        return end("time_limit");
+      return false;
+    }
+
+    // FIRE's power test: true when it ends the run (stalled).
+    bool powerEnds(long step)
+    {
+      // w_.force is tau_static; the force driving the mechanism toward rest is its opposite.
+      const double power = -w_.force.dot(w_.v);
+      if (power > 0.)
+      {
+        goingDownhill();
+        return false;
+      }
+      return goingUphill(step);
+    }
+
+    void goingDownhill()
+    {
+      uphill_ = 0;
+      ++positive_;
+      if (positive_ > (fire2_ ? kFire2NDelay : kFireNMin))
+      {
+        dt_ = std::min(dt_ * kFireFInc, out_.dt_max);
+        alpha_ *= kFireFAlpha;
+      }
+      if (fire_) // classic FIRE mixes before the step; FIRE 2.0 after the velocity update
+        mix(model_, elements_, mass_metric_, alpha_, w_);
+    }
+
+    // The velocity reset; true when the run has stalled instead.
+    bool goingUphill(long step)
+    {
+      ++out_.resets;
+      positive_ = 0;
+      if (stalls())
+        return end("stalled");
+      if (fire_)
+      {
+        dt_ *= kFireFDec;
+        alpha_ = kFireAlphaStart;
+      }
+      else
+        fire2StepBack(step);
+      w_.v.setZero();
+      return false;
+    }
+
+    // One more reset without progress; FIRE 2.0 also counts the uphill steps in a row.
+    bool stalls()
+    {
+      if (++stall_resets_ >= kStallResets)
+        return true;
+      return fire2_ && ++uphill_ > kFire2MaxUphill;
+    }
+
+    void fire2StepBack(long step)
+    {
+      if (step >= kFire2NDelay) // the initial delay: no shrinking in the first steps
+      {
+        if (dt_ * kFireFDec >= dt_min_)
+          dt_ *= kFireFDec;
+        alpha_ = kFire2AlphaStart;
+      }
+      bench::moveBy(model_, -0.5 * dt_, w_); // half a step back
+    }
+
+    // One semi-implicit Euler step with the method's damping; false when a value turned
+    // non-finite.
+    bool advance()
+    {
+      bench::appliedForces(model_, elements_, w_.q, w_.v, w_);
+      if (viscous_)
+        w_.tau.noalias() -= out_.damping * w_.v;
+      bench::forwardDynamics(model_, elements_, w_.q, w_.v, w_);
+      if (mass_damping_)
+        w_.data.ddq.noalias() -= out_.damping * w_.v;
+      w_.v.noalias() += dt_ * w_.data.ddq;
+      if (fire2_ && w_.v.squaredNorm() > 0.)
+      {
+        // The mixing's F is the step's (w_.force, from the check above); its metric needs the
+        // applied efforts at zero velocity.
+        if (mass_metric_)
+          bench::appliedForces(model_, elements_, w_.q, w_.zero, w_);
+        mix(model_, elements_, mass_metric_, alpha_, w_);
+      }
+      return bench::moveBy(model_, dt_, w_);
+    }
+
+    const pinocchio::Model & model_;
+    const pinsettle::ForceElements * elements_;
+    const Spec & spec_;
+    Workspace w_;
+    Outcome out_;
+    const bool fire_, fire2_, viscous_, mass_damping_, mass_metric_;
+    double dt_ = 0., alpha_ = 0., dt_min_ = 0.;
+    int positive_ = 0, uphill_ = 0;
+    long stall_resets_ = 0;
+    double start_residual_ = 0.;
+    double progress_ = 0.; // FIRE's stall test: resets since a tenfold fall
+    Clock::time_point start_;
+  };
+
   Outcome run(
     const pinocchio::Model & model,
     const pinsettle::ForceElements * elements,
@@ -202,126 +397,109 @@ namespace
     double scale,
     Recorder & recorder)
   {
-    Workspace w(model);
-    w.q = spec.q0;
-    w.v.setZero();
-    Outcome out;
-    const Clock::time_point setup_start = Clock::now();
-    setUp(model, elements, spec, scale, w, out);
-    out.setup_seconds = since(setup_start);
+    return BaselineRun(model, elements, spec, scale).run(recorder);
+  }
 
-    const bool fire = spec.method == "fire", fire2 = spec.method == "fire2",
-               viscous = spec.method == "viscous", mass_damping = spec.method == "mass_damping",
-               mass_metric = spec.metric == "mass";
-    double dt = out.dt, alpha = fire2 ? kFire2AlphaStart : kFireAlphaStart;
-    const double dt_min = kFire2DtMinFactor * out.dt;
-    int positive = 0, uphill = 0;
-    long stall_resets = 0;
-    bench::staticForce(model, elements, w);
-    const double start_residual = w.force.lpNorm<Eigen::Infinity>();
-    double progress = start_residual; // FIRE's stall test: resets since a tenfold fall
-    const Clock::time_point start = Clock::now();
-    long step = 0;
-    for (; step < spec.max_steps; ++step)
+  void checkMethod(const Spec & spec)
+  {
+    const char * const methods[] = {"viscous", "mass_damping", "fire", "fire2"};
+    if (std::find(std::begin(methods), std::end(methods), spec.method) == std::end(methods))
+      throw std::runtime_error(
+        "method must be viscous, mass_damping, fire or fire2, got '" + spec.method + "'");
+  }
+
+  bool blewUpOrStalled(const Outcome & out)
+  {
+    return out.status == "diverged" || out.status == "stalled";
+  }
+
+  // The timed runs: the last one's outcome, the step scale they took, the halvings and why, and
+  // each run's loop and set-up times.
+  struct TimedRuns
+  {
+    Outcome out;
+    double scale = 1.;
+    int halvings = 0;
+    std::vector<std::string> reasons;
+    std::vector<double> seconds, setup;
+  };
+
+  TimedRuns timeRuns(
+    const pinocchio::Model & model, const pinsettle::ForceElements * forces, const Spec & spec)
+  {
+    TimedRuns t;
+    // A run that blows up or stalls is tried again with every step halved.
+    Recorder none;
+    t.out = run(model, forces, spec, t.scale, none);
+    for (; blewUpOrStalled(t.out) && t.halvings < kMaxHalvings; ++t.halvings)
     {
-      recorder.record(step, w.q);
-      if (fire || fire2 || step % spec.check_every == 0)
-      {
-        bench::staticForce(model, elements, w);
-        const double residual = w.force.lpNorm<Eigen::Infinity>();
-        if (!(residual <= kBlowUp * start_residual)) // also catches NaN
-        {
-          out.status = "diverged";
-          break;
-        }
-        if (residual <= spec.target)
-        {
-          out.status = "converged";
-          break;
-        }
-        if (residual <= 0.1 * progress)
-        {
-          progress = residual;
-          stall_resets = 0;
-        }
-        if (step % 1024 == 0 && since(start) > spec.max_time)
-        {
-          out.status = "time_limit";
-          break;
-        }
-      }
-      if (fire || fire2)
-      {
-        // w.force is tau_static; the force driving the mechanism toward rest is its opposite.
-        const double power = -w.force.dot(w.v);
-        if (power > 0.)
-        {
-          uphill = 0;
-          ++positive;
-          if (positive > (fire2 ? kFire2NDelay : kFireNMin))
-          {
-            dt = std::min(dt * kFireFInc, out.dt_max);
-            alpha *= kFireFAlpha;
-          }
-          if (fire) // classic FIRE mixes before the step; FIRE 2.0 after the velocity update
-            mix(model, elements, mass_metric, alpha, w);
-        }
-        else
-        {
-          ++out.resets;
-          positive = 0;
-          if (++stall_resets >= kStallResets || (fire2 && ++uphill > kFire2MaxUphill))
-          {
-            out.status = "stalled";
-            break;
-          }
-          if (fire)
-          {
-            dt *= kFireFDec;
-            alpha = kFireAlphaStart;
-          }
-          else
-          {
-            if (step >= kFire2NDelay) // the initial delay: no shrinking in the first steps
-            {
-              if (dt * kFireFDec >= dt_min)
-                dt *= kFireFDec;
-              alpha = kFire2AlphaStart;
-            }
-            bench::moveBy(model, -0.5 * dt, w); // half a step back
-          }
-          w.v.setZero();
-        }
-      }
-      bench::appliedForces(model, elements, w.q, w.v, w);
-      if (viscous)
-        w.tau.noalias() -= out.damping * w.v;
-      bench::forwardDynamics(model, elements, w.q, w.v, w);
-      if (mass_damping)
-        w.data.ddq.noalias() -= out.damping * w.v;
-      w.v.noalias() += dt * w.data.ddq;
-      if (fire2 && w.v.squaredNorm() > 0.)
-      {
-        // The mixing's F is the step's (w.force, from the check above); its metric needs the
-        // applied efforts at zero velocity.
-        if (mass_metric)
-          bench::appliedForces(model, elements, w.q, w.zero, w);
-        mix(model, elements, mass_metric, alpha, w);
-      }
-      if (!bench::moveBy(model, dt, w))
-      {
-        out.status = "diverged";
-        ++step;
-        break;
-      }
+      t.reasons.push_back(t.out.status);
+      t.scale *= 0.5;
+      t.out = run(model, forces, spec, t.scale, none);
     }
-    out.seconds = since(start);
-    out.steps = step;
-    out.dt_end = dt;
-    out.q = w.q;
-    bench::staticForce(model, elements, w);
-    out.residual = w.force.lpNorm<Eigen::Infinity>();
-    return out;
+    t.seconds = {t.out.seconds};
+    t.setup = {t.out.setup_seconds};
+    double spent = t.out.seconds;
+    for (int r = 1; r < spec.repeats && spent < spec.repeat_budget; ++r)
+    {
+      t.out = run(model, forces, spec, t.scale, none);
+      t.seconds.push_back(t.out.seconds);
+      t.setup.push_back(t.out.setup_seconds);
+      spent += t.out.seconds;
+    }
+    return t;
+  }
+
+  // The final state, unless it is the last sample already (a run that stops on the residual
+  // check stops right after recording).
+  void recordFinalState(Recorder & recorder, const Outcome & recorded)
+  {
+    const std::size_t row = static_cast<std::size_t>(recorded.q.size()) + 1;
+    std::vector<double> & rows = recorder.rows;
+    if (rows.size() >= row && rows[rows.size() - row] == static_cast<double>(recorded.steps))
+      return;
+    rows.push_back(static_cast<double>(recorded.steps));
+    rows.insert(rows.end(), recorded.q.data(), recorded.q.data() + recorded.q.size());
+  }
+
+  // The same run as the timed ones again, recording its samples into spec.samples_path.
+  void writeSamples(
+    const pinocchio::Model & model,
+    const pinsettle::ForceElements * forces,
+    const Spec & spec,
+    const TimedRuns & timed)
+  {
+    Recorder recorder;
+    recorder.every = std::max<long>(1, (timed.out.steps + spec.max_samples - 1) / spec.max_samples);
+    const Outcome recorded = run(model, forces, spec, timed.scale, recorder);
+    recordFinalState(recorder, recorded);
+    std::ofstream file(spec.samples_path, std::ios::binary);
+    file.write(
+      reinterpret_cast<const char *>(recorder.rows.data()),
+      static_cast<std::streamsize>(recorder.rows.size() * sizeof(double)));
+    if (recorded.steps != timed.out.steps && timed.out.status != "time_limit")
+      throw std::runtime_error("the recorded run took another path than the timed runs");
+  }
+
+  void printJson(const Spec & spec, const TimedRuns & timed)
+  {
+    const Outcome & out = timed.out;
+    std::cout << "{\"method\": \"" << spec.method << "\", \"metric\": \"" << spec.metric
+              << "\", \"status\": \"" << out.status << "\", \"steps\": " << out.steps
+              << ", \"wall_times\": " << bench::jsonVector(timed.seconds)
+              << ", \"setup_times\": " << bench::jsonVector(timed.setup)
+              << ", \"residual\": " << bench::number(out.residual)
+              << ", \"dt\": " << bench::number(out.dt)
+              << ", \"dt_max\": " << bench::number(out.dt_max)
+              << ", \"dt_end\": " << bench::number(out.dt_end)
+              << ", \"limit\": " << bench::number(out.limit)
+              << ", \"damping\": " << bench::number(out.damping)
+              << ", \"omega_rule\": " << bench::number(out.omega_rule)
+              << ", \"halvings\": " << timed.halvings << ", \"retries\": [";
+    for (std::size_t k = 0; k < timed.reasons.size(); ++k)
+      std::cout << (k ? ", " : "") << "\"" << timed.reasons[k] << "\"";
+    std::cout << "], \"resets\": " << out.resets << ", \"q\": " << bench::jsonVector(out.q)
+              << "}\n";
   }
 } // namespace
 
@@ -335,82 +513,15 @@ int main(int argc, char ** argv)
   try
   {
     const Spec spec = bench::readSpec(argv[1]);
-    pinocchio::Model model;
-    model.loadFromBinary(spec.model_path);
-    if (spec.q0.size() != model.nq)
-      throw std::runtime_error("q0 does not match the model's nq");
-    if (
-      spec.method != "viscous" && spec.method != "mass_damping" && spec.method != "fire"
-      && spec.method != "fire2")
-      throw std::runtime_error(
-        "method must be viscous, mass_damping, fire or fire2, got '" + spec.method + "'");
+    const pinocchio::Model model = bench::loadModel(spec);
+    checkMethod(spec);
     pinsettle::ForceElements elements(model);
-    for (const std::string & line : spec.elements)
-      bench::addElement(elements, line);
+    bench::addElements(elements, spec);
     const pinsettle::ForceElements * forces = elements.empty() ? nullptr : &elements;
-
-    // A run that blows up or stalls is tried again with every step halved.
-    double scale = 1.;
-    Recorder none;
-    Outcome out = run(model, forces, spec, scale, none);
-    int halvings = 0;
-    std::vector<std::string> reasons;
-    for (; (out.status == "diverged" || out.status == "stalled") && halvings < kMaxHalvings;
-         ++halvings)
-    {
-      reasons.push_back(out.status);
-      scale *= 0.5;
-      out = run(model, forces, spec, scale, none);
-    }
-    std::vector<double> seconds{out.seconds}, setup{out.setup_seconds};
-    double spent = out.seconds;
-    for (int r = 1; r < spec.repeats && spent < spec.repeat_budget; ++r)
-    {
-      out = run(model, forces, spec, scale, none);
-      seconds.push_back(out.seconds);
-      setup.push_back(out.setup_seconds);
-      spent += out.seconds;
-    }
+    const TimedRuns timed = timeRuns(model, forces, spec);
     if (!spec.samples_path.empty())
-    {
-      // The same run again, recording: its trajectory is the one timed above.
-      Recorder recorder;
-      recorder.every = std::max<long>(1, (out.steps + spec.max_samples - 1) / spec.max_samples);
-      const Outcome recorded = run(model, forces, spec, scale, recorder);
-      // The final state, unless it is the last sample already (a run that stops on the
-      // residual check stops right after recording).
-      const std::size_t row = static_cast<std::size_t>(model.nq) + 1;
-      if (
-        recorder.rows.size() < row
-        || recorder.rows[recorder.rows.size() - row] != static_cast<double>(recorded.steps))
-      {
-        recorder.rows.push_back(static_cast<double>(recorded.steps));
-        recorder.rows.insert(recorder.rows.end(), recorded.q.data(), recorded.q.data() + model.nq);
-      }
-      std::ofstream file(spec.samples_path, std::ios::binary);
-      file.write(
-        reinterpret_cast<const char *>(recorder.rows.data()),
-        static_cast<std::streamsize>(recorder.rows.size() * sizeof(double)));
-      if (recorded.steps != out.steps && out.status != "time_limit")
-        throw std::runtime_error("the recorded run took another path than the timed runs");
-    }
-
-    std::cout << "{\"method\": \"" << spec.method << "\", \"metric\": \"" << spec.metric
-              << "\", \"status\": \"" << out.status << "\", \"steps\": " << out.steps
-              << ", \"wall_times\": " << bench::jsonVector(seconds)
-              << ", \"setup_times\": " << bench::jsonVector(setup)
-              << ", \"residual\": " << bench::number(out.residual)
-              << ", \"dt\": " << bench::number(out.dt)
-              << ", \"dt_max\": " << bench::number(out.dt_max)
-              << ", \"dt_end\": " << bench::number(out.dt_end)
-              << ", \"limit\": " << bench::number(out.limit)
-              << ", \"damping\": " << bench::number(out.damping)
-              << ", \"omega_rule\": " << bench::number(out.omega_rule)
-              << ", \"halvings\": " << halvings << ", \"retries\": [";
-    for (std::size_t k = 0; k < reasons.size(); ++k)
-      std::cout << (k ? ", " : "") << "\"" << reasons[k] << "\"";
-    std::cout << "], \"resets\": " << out.resets << ", \"q\": " << bench::jsonVector(out.q)
-              << "}\n";
+      writeSamples(model, forces, spec, timed);
+    printJson(spec, timed);
   }
   catch (const std::exception & e)
   {

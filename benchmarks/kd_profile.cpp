@@ -31,11 +31,10 @@
 #include "bare-step.hpp"
 #include "spec.hpp"
 
-#include <pinocchio/serialization.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <iostream>
+#include <utility>
 
 namespace
 {
@@ -197,6 +196,114 @@ namespace
   {
     return bench::jsonVector(x);
   }
+
+  // Whether to make repeat r, `spent` seconds into the repeats: the first always.
+  bool repeatAgain(const bench::Spec & spec, int r, double spent)
+  {
+    return r < spec.repeats && (r == 0 || spent < spec.repeat_budget);
+  }
+
+  // The plain solves (polish = false), per repeat: the wall time, its parts (s) and a bare
+  // step's time (s); and the last solve.
+  struct PlainSolves
+  {
+    std::vector<double> wall, setup, estimates, assess, bare;
+    Solve last;
+  };
+
+  PlainSolves timePlainSolves(
+    const Model & model, const bench::Spec & spec, const ForceModel * forces)
+  {
+    PlainSolves out;
+    // With repeats, one solve first, untimed: the first in a process pays for cold caches and
+    // first allocations, which a solve in a running program does not.
+    if (spec.repeats > 1)
+      profiledSolve(model, spec.q0, forces, false, spec.max_time);
+    double spent = 0.;
+    for (int r = 0; repeatAgain(spec, r, spent); ++r)
+    {
+      Solve plain = profiledSolve(model, spec.q0, forces, false, spec.max_time);
+      out.wall.push_back(plain.result.wall_time);
+      out.setup.push_back(plain.profile.setup);
+      out.estimates.push_back(plain.profile.estimate_seconds);
+      out.assess.push_back(plain.profile.assess_seconds);
+      spent += plain.result.wall_time;
+      // A bare step (aba + integrate) from the start, at a tenth of the solver's final step (a
+      // fixed step that large may blow up; ABA costs the same whatever the step), timed over
+      // the solve's steps, at least kMinBareSteps and at most kBareSteps.
+      const long steps =
+        std::clamp<long>(static_cast<long>(plain.result.steps), kMinBareSteps, kBareSteps);
+      out.bare.push_back(
+        bench::timeBareAbaStep(model, spec.q0, steps, 0.1 * plain.result.dt, "bare step"));
+      out.last = std::move(plain);
+    }
+    return out;
+  }
+
+  // The default solves (polish = true), per repeat: the wall time and its parts (s); and the
+  // last solve. None without spec.polish.
+  struct PolishedSolves
+  {
+    std::vector<double> wall, setup, estimates, assess, stiffness;
+    Solve last;
+  };
+
+  PolishedSolves timePolishedSolves(
+    const Model & model, const bench::Spec & spec, const ForceModel * forces)
+  {
+    PolishedSolves out;
+    if (!spec.polish)
+      return out;
+    // One after the other, as benchmarks/baselines.cpp repeats a baseline's run (a fresh solver
+    // each, as it makes a fresh workspace): interleaved with the plain solves and the bare
+    // steps, each would start from caches those left to it.
+    if (spec.repeats > 1)
+      profiledSolve(model, spec.q0, forces, true, spec.max_time);
+    double spent = 0.;
+    for (int r = 0; repeatAgain(spec, r, spent); ++r)
+    {
+      Solve polished = profiledSolve(model, spec.q0, forces, true, spec.max_time);
+      out.wall.push_back(polished.result.wall_time);
+      out.setup.push_back(polished.profile.setup);
+      out.estimates.push_back(polished.profile.estimate_seconds);
+      out.assess.push_back(polished.profile.assess_seconds);
+      out.stiffness.push_back(polished.profile.stiffness_seconds);
+      spent += polished.result.wall_time;
+      out.last = std::move(polished);
+    }
+    return out;
+  }
+
+  void printPlain(const PlainSolves & plain)
+  {
+    const pinsettle::Result & r = plain.last.result;
+    std::cout << "{\"status\": \"" << pinsettle::toString(r.status) << "\", \"steps\": " << r.steps
+              << ", \"dt_estimates\": " << r.dt_estimates
+              << ", \"residual\": " << bench::number(r.residual)
+              << ", \"wall\": " << list(plain.wall) << ", \"setup\": " << list(plain.setup)
+              << ", \"estimates\": " << list(plain.estimates)
+              << ", \"estimate_count\": " << plain.last.profile.estimates
+              << ", \"assessments\": " << list(plain.assess)
+              << ", \"assessment_count\": " << plain.last.profile.assessments
+              << ", \"bare_step\": " << list(plain.bare) << ", \"q\": " << bench::jsonVector(r.q);
+  }
+
+  void printPolished(const PolishedSolves & polish)
+  {
+    const Solve & polished = polish.last;
+    std::cout << ", \"polish_wall\": " << list(polish.wall)
+              << ", \"polish_setup\": " << list(polish.setup)
+              << ", \"polish_estimates\": " << list(polish.estimates)
+              << ", \"polish_assessments\": " << list(polish.assess)
+              << ", \"polish_assessment_count\": " << polished.profile.assessments
+              << ", \"polish_stiffness\": " << list(polish.stiffness)
+              << ", \"polish_stiffness_count\": " << polished.profile.stiffness
+              << ", \"polish_iterations\": " << polished.result.polish_iterations
+              << ", \"polished\": " << (polished.result.polished ? "true" : "false")
+              << ", \"polish_steps\": " << polished.result.steps
+              << ", \"polish_residual\": " << bench::number(polished.result.residual)
+              << ", \"polish_q\": " << bench::jsonVector(polished.result.q);
+  }
 } // namespace
 
 int main(int argc, char ** argv)
@@ -209,77 +316,15 @@ int main(int argc, char ** argv)
   try
   {
     const bench::Spec spec = bench::readSpec(argv[1]);
-    Model model;
-    model.loadFromBinary(spec.model_path);
-    if (spec.q0.size() != model.nq)
-      throw std::runtime_error("q0 does not match the model's nq");
+    const Model model = bench::loadModel(spec);
     pinsettle::ForceElements elements(model);
-    for (const std::string & line : spec.elements)
-      bench::addElement(elements, line);
+    bench::addElements(elements, spec);
     const ForceModel * forces = elements.empty() ? nullptr : &elements;
-
-    std::vector<double> wall, setup, estimates, assess, polish_wall, polish_setup, polish_estimates,
-      polish_assess, polish_stiffness, bare;
-    Solve plain, polished;
-    // With repeats, one solve first, untimed: the first in a process pays for cold caches and
-    // first allocations, which a solve in a running program does not.
-    if (spec.repeats > 1)
-      profiledSolve(model, spec.q0, forces, false, spec.max_time);
-    double spent = 0.;
-    for (int r = 0; r < spec.repeats && (r == 0 || spent < spec.repeat_budget); ++r)
-    {
-      plain = profiledSolve(model, spec.q0, forces, false, spec.max_time);
-      wall.push_back(plain.result.wall_time);
-      setup.push_back(plain.profile.setup);
-      estimates.push_back(plain.profile.estimate_seconds);
-      assess.push_back(plain.profile.assess_seconds);
-      spent += plain.result.wall_time;
-      // A bare step (aba + integrate) from the start, at a tenth of the solver's final step (a
-      // fixed step that large may blow up; ABA costs the same whatever the step), timed over
-      // the solve's steps, at least kMinBareSteps and at most kBareSteps.
-      const long steps =
-        std::clamp<long>(static_cast<long>(plain.result.steps), kMinBareSteps, kBareSteps);
-      bare.push_back(
-        bench::timeBareAbaStep(model, spec.q0, steps, 0.1 * plain.result.dt, "bare step"));
-    }
-    // The polished solves one after the other, as benchmarks/baselines.cpp repeats a baseline's
-    // run (a fresh solver each, as it makes a fresh workspace): interleaved with the plain
-    // solves and the bare steps above, each would start from caches those left to it.
-    if (spec.polish && spec.repeats > 1)
-      profiledSolve(model, spec.q0, forces, true, spec.max_time);
-    spent = 0.;
-    for (int r = 0; spec.polish && r < spec.repeats && (r == 0 || spent < spec.repeat_budget); ++r)
-    {
-      polished = profiledSolve(model, spec.q0, forces, true, spec.max_time);
-      polish_wall.push_back(polished.result.wall_time);
-      polish_setup.push_back(polished.profile.setup);
-      polish_estimates.push_back(polished.profile.estimate_seconds);
-      polish_assess.push_back(polished.profile.assess_seconds);
-      polish_stiffness.push_back(polished.profile.stiffness_seconds);
-      spent += polished.result.wall_time;
-    }
-    const pinsettle::Result & r = plain.result;
-    std::cout << "{\"status\": \"" << pinsettle::toString(r.status) << "\", \"steps\": " << r.steps
-              << ", \"dt_estimates\": " << r.dt_estimates
-              << ", \"residual\": " << bench::number(r.residual) << ", \"wall\": " << list(wall)
-              << ", \"setup\": " << list(setup) << ", \"estimates\": " << list(estimates)
-              << ", \"estimate_count\": " << plain.profile.estimates
-              << ", \"assessments\": " << list(assess)
-              << ", \"assessment_count\": " << plain.profile.assessments
-              << ", \"bare_step\": " << list(bare) << ", \"q\": " << bench::jsonVector(r.q);
+    const PlainSolves plain = timePlainSolves(model, spec, forces);
+    const PolishedSolves polished = timePolishedSolves(model, spec, forces);
+    printPlain(plain);
     if (spec.polish)
-      std::cout << ", \"polish_wall\": " << list(polish_wall)
-                << ", \"polish_setup\": " << list(polish_setup)
-                << ", \"polish_estimates\": " << list(polish_estimates)
-                << ", \"polish_assessments\": " << list(polish_assess)
-                << ", \"polish_assessment_count\": " << polished.profile.assessments
-                << ", \"polish_stiffness\": " << list(polish_stiffness)
-                << ", \"polish_stiffness_count\": " << polished.profile.stiffness
-                << ", \"polish_iterations\": " << polished.result.polish_iterations
-                << ", \"polished\": " << (polished.result.polished ? "true" : "false")
-                << ", \"polish_steps\": " << polished.result.steps
-                << ", \"polish_residual\": " << bench::number(polished.result.residual)
-                << ", \"polish_q\": " << bench::jsonVector(polished.result.q);
+      printPolished(polished);
     std::cout << "}\n";
   }
   catch (const std::exception & e)

@@ -37,6 +37,7 @@
 
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/serialization.hpp>
 
 #include <cmath>
 #include <fstream>
@@ -61,6 +62,81 @@ namespace bench
     std::vector<std::string> elements; // element lines, applied once the model is loaded
   };
 
+  // A value of a spec line into its field of the spec.
+  template<typename T, T Spec::* field>
+  void readValue(std::istream & words, const std::string &, Spec & spec)
+  {
+    words >> spec.*field;
+  }
+
+  // q0 nq x...
+  inline void readStart(std::istream & words, const std::string &, Spec & spec)
+  {
+    long n;
+    words >> n;
+    spec.q0.resize(n);
+    for (long k = 0; k < n; ++k)
+      words >> spec.q0[k];
+  }
+
+  // A force element's line, applied once the model is loaded (addElement).
+  inline void keepElement(std::istream &, const std::string & line, Spec & spec)
+  {
+    spec.elements.push_back(line);
+  }
+
+  struct SpecKey
+  {
+    const char * key;
+    void (*read)(std::istream & words, const std::string & line, Spec & spec);
+  };
+
+  // The keys of a spec file and how each line's values are read (see the top of the file).
+  inline const SpecKey * findSpecKey(const std::string & key)
+  {
+    static const SpecKey keys[] = {
+      {"model", readValue<std::string, &Spec::model_path>},
+      {"method", readValue<std::string, &Spec::method>},
+      {"metric", readValue<std::string, &Spec::metric>},
+      {"samples", readValue<std::string, &Spec::samples_path>},
+      {"q0", readStart},
+      {"dt_safety", readValue<double, &Spec::dt_safety>},
+      {"dt_max", readValue<double, &Spec::dt_max>},
+      {"damping_factor", readValue<double, &Spec::damping_factor>},
+      {"target", readValue<double, &Spec::target>},
+      {"max_time", readValue<double, &Spec::max_time>},
+      {"repeat_budget", readValue<double, &Spec::repeat_budget>},
+      {"check_every", readValue<long, &Spec::check_every>},
+      {"max_steps", readValue<long, &Spec::max_steps>},
+      {"max_samples", readValue<long, &Spec::max_samples>},
+      {"repeats", readValue<int, &Spec::repeats>},
+      {"polish", readValue<bool, &Spec::polish>},
+      {"joint_spring", keepElement},
+      {"point_spring", keepElement},
+      {"joint_load", keepElement},
+      {"point_load", keepElement},
+    };
+    for (const SpecKey & entry : keys)
+      if (key == entry.key)
+        return &entry;
+    return nullptr;
+  }
+
+  // One line of the spec file at path (blank lines are skipped).
+  inline void readSpecLine(const std::string & line, const std::string & path, Spec & spec)
+  {
+    std::istringstream words(line);
+    std::string key;
+    if (!(words >> key))
+      return;
+    const SpecKey * entry = findSpecKey(key);
+    if (entry == nullptr)
+      throw std::runtime_error("unknown key '" + key + "' in " + path);
+    entry->read(words, line, spec);
+    if (words.fail())
+      throw std::runtime_error("bad line in " + path + ": " + line);
+  }
+
   inline Spec readSpec(const std::string & path)
   {
     std::ifstream in(path);
@@ -69,58 +145,7 @@ namespace bench
     Spec spec;
     std::string line;
     while (std::getline(in, line))
-    {
-      std::istringstream words(line);
-      std::string key;
-      if (!(words >> key))
-        continue;
-      if (key == "model")
-        words >> spec.model_path;
-      else if (key == "method")
-        words >> spec.method;
-      else if (key == "metric")
-        words >> spec.metric;
-      else if (key == "samples")
-        words >> spec.samples_path;
-      else if (key == "q0")
-      {
-        long n;
-        words >> n;
-        spec.q0.resize(n);
-        for (long k = 0; k < n; ++k)
-          words >> spec.q0[k];
-      }
-      else if (key == "dt_safety")
-        words >> spec.dt_safety;
-      else if (key == "dt_max")
-        words >> spec.dt_max;
-      else if (key == "damping_factor")
-        words >> spec.damping_factor;
-      else if (key == "target")
-        words >> spec.target;
-      else if (key == "max_time")
-        words >> spec.max_time;
-      else if (key == "repeat_budget")
-        words >> spec.repeat_budget;
-      else if (key == "check_every")
-        words >> spec.check_every;
-      else if (key == "max_steps")
-        words >> spec.max_steps;
-      else if (key == "max_samples")
-        words >> spec.max_samples;
-      else if (key == "repeats")
-        words >> spec.repeats;
-      else if (key == "polish")
-        words >> spec.polish;
-      else if (
-        key == "joint_spring" || key == "point_spring" || key == "joint_load"
-        || key == "point_load")
-        spec.elements.push_back(line);
-      else
-        throw std::runtime_error("unknown key '" + key + "' in " + path);
-      if (words.fail())
-        throw std::runtime_error("bad line in " + path + ": " + line);
-    }
+      readSpecLine(line, path, spec);
     if (spec.metric != "euclid" && spec.metric != "mass")
       throw std::runtime_error("metric must be euclid or mass, got '" + spec.metric + "'");
     return spec;
@@ -166,6 +191,22 @@ namespace bench
     }
     if (words.fail())
       throw std::runtime_error("bad element line: " + line);
+  }
+
+  // The spec's model, checked against its start.
+  inline pinocchio::Model loadModel(const Spec & spec)
+  {
+    pinocchio::Model model;
+    model.loadFromBinary(spec.model_path);
+    if (spec.q0.size() != model.nq)
+      throw std::runtime_error("q0 does not match the model's nq");
+    return model;
+  }
+
+  inline void addElements(pinsettle::ForceElements & elements, const Spec & spec)
+  {
+    for (const std::string & line : spec.elements)
+      addElement(elements, line);
   }
 
   // The loops' state and workspace, sized once: nothing is allocated per step.

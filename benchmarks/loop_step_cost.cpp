@@ -144,36 +144,39 @@ namespace
     return result.wall_time / static_cast<double>(result.steps);
   }
 
-  int run(int argc, char ** argv)
+  struct Options
   {
-    std::vector<std::string> args, loop_specs;
+    std::vector<std::string> args, loop_specs; // args: ROBOT.urdf STEPS REPEATS
     std::string q_spec;
     bool json = false;
+  };
+
+  Options parseOptions(int argc, char ** argv)
+  {
+    Options options;
     for (int k = 1; k < argc; ++k)
     {
       const std::string arg = argv[k];
       if (arg == "--json")
-        json = true;
-      else if ((arg == "--loop" || arg == "--q0") && k + 1 < argc)
-        (arg == "--loop" ? loop_specs.push_back(argv[++k]) : void(q_spec = argv[++k]));
+        options.json = true;
+      else if (arg == "--loop" && k + 1 < argc)
+        options.loop_specs.push_back(argv[++k]);
+      else if (arg == "--q0" && k + 1 < argc)
+        options.q_spec = argv[++k];
       else
-        args.push_back(arg);
+        options.args.push_back(arg);
     }
-    if (args.size() != 3 || loop_specs.empty() || q_spec.empty())
-    {
-      std::cerr << "usage: " << argv[0]
-                << " ROBOT.urdf STEPS REPEATS --q0 Q1,Q2,... "
-                   "--loop FRAME_A,AX,AY,AZ,FRAME_B,BX,BY,BZ,point|frame [--loop ...] [--json]\n";
-      return 2;
-    }
-    const pinocchio::Model model = pinsettle::buildModelFromUrdf(args[0]);
-    const long steps = std::atol(args[1].c_str());
-    const int repeats = std::atoi(args[2].c_str());
-    if (steps <= 0 || repeats <= 0)
-      throw std::invalid_argument("STEPS and REPEATS must be positive integers");
-    pinsettle::LoopConstraints loops(model);
-    for (const std::string & spec : loop_specs)
-      addLoop(loops, model, spec);
+    return options;
+  }
+
+  bool complete(const Options & options)
+  {
+    return options.args.size() == 3 && !options.loop_specs.empty() && !options.q_spec.empty();
+  }
+
+  // --q0 Q1,Q2,...: model.nq numbers.
+  Eigen::VectorXd readStart(const pinocchio::Model & model, const std::string & q_spec)
+  {
     const std::vector<std::string> entries = split(q_spec);
     if (static_cast<int>(entries.size()) != model.nq)
       throw std::invalid_argument(
@@ -182,47 +185,112 @@ namespace
     Eigen::VectorXd q0(model.nq);
     for (int i = 0; i < model.nq; ++i)
       q0[i] = number(entries[static_cast<std::size_t>(i)], "--q0");
+    return q0;
+  }
 
-    pinocchio::Data data(model);
-    const double moved = pinsettle::assembleLoops(model, data, loops, q0);
-    const double dt = 0.1 * pinsettle::effectiveDtSafety(pinsettle::Settings())
-                      * pinsettle::computeTimeScale(model, data, loops, q0).critical_step;
+  // Per-step times (s) of the four steps, one entry per repeat; their names are the JSON's.
+  struct Times
+  {
+    std::vector<double> bare_tree, bare, exact, simplified;
+  };
 
-    std::vector<double> tree, bare, exact, simplified;
+  Times timeSteps(
+    const pinocchio::Model & model,
+    const pinsettle::LoopConstraints & loops,
+    const Eigen::VectorXd & q0,
+    long steps,
+    double dt,
+    int repeats)
+  {
+    Times t;
     for (int r = 0; r < repeats; ++r) // interleaved, so that machine noise hits all alike
     {
-      tree.push_back(bench::timeBareAbaStep(model, q0, steps, dt, "bare tree step"));
-      bare.push_back(bareLoopStep(model, loops, q0, steps, dt));
-      exact.push_back(settleStep(model, loops, q0, steps, pinsettle::EnergyMeasure::Exact));
-      simplified.push_back(
+      t.bare_tree.push_back(bench::timeBareAbaStep(model, q0, steps, dt, "bare tree step"));
+      t.bare.push_back(bareLoopStep(model, loops, q0, steps, dt));
+      t.exact.push_back(settleStep(model, loops, q0, steps, pinsettle::EnergyMeasure::Exact));
+      t.simplified.push_back(
         settleStep(model, loops, q0, steps, pinsettle::EnergyMeasure::Simplified));
     }
-    if (json) // per-step times of every repeat (ns), for benchmarks/report.py
-    {
-      std::cout << "{\"nq\": " << model.nq << ", \"nv\": " << model.nv
-                << ", \"rows\": " << loops.rows() << ", \"steps\": " << steps
-                << ", \"settled_steps\": " << settled_steps << ", \"dt\": " << dt
-                << ", \"assembly_distance\": " << moved
-                << ", \"constraint_error\": " << constraint_error
-                << ", \"ns_per_step\": {\"bare_tree\": " << bench::jsonList(tree)
-                << ", \"bare\": " << bench::jsonList(bare)
-                << ", \"exact\": " << bench::jsonList(exact)
-                << ", \"simplified\": " << bench::jsonList(simplified) << "}}\n";
-      return 0;
-    }
-    const double b = bench::median(bare);
-    auto row = [&](const char * name, const std::vector<double> & t) {
-      const double m = bench::median(t);
+    return t;
+  }
+
+  // The runs' size, the bare steps' fixed step (s) and how far the start was moved onto the
+  // loops.
+  struct RunSetup
+  {
+    long steps;
+    int repeats;
+    double dt, moved;
+  };
+
+  // Per-step times of every repeat (ns), for benchmarks/report.py.
+  void printJson(
+    const pinocchio::Model & model,
+    const pinsettle::LoopConstraints & loops,
+    const RunSetup & setup,
+    const Times & t)
+  {
+    std::cout << "{\"nq\": " << model.nq << ", \"nv\": " << model.nv
+              << ", \"rows\": " << loops.rows() << ", \"steps\": " << setup.steps
+              << ", \"settled_steps\": " << settled_steps << ", \"dt\": " << setup.dt
+              << ", \"assembly_distance\": " << setup.moved
+              << ", \"constraint_error\": " << constraint_error
+              << ", \"ns_per_step\": {\"bare_tree\": " << bench::jsonList(t.bare_tree)
+              << ", \"bare\": " << bench::jsonList(t.bare)
+              << ", \"exact\": " << bench::jsonList(t.exact)
+              << ", \"simplified\": " << bench::jsonList(t.simplified) << "}}\n";
+  }
+
+  // The medians against the bare constrained step's.
+  void printTable(
+    const pinocchio::Model & model,
+    const pinsettle::LoopConstraints & loops,
+    const RunSetup & setup,
+    const Times & t)
+  {
+    const double b = bench::median(t.bare);
+    auto row = [&](const char * name, const std::vector<double> & times) {
+      const double m = bench::median(times);
       std::cout << name << " " << m * 1e9 << " ns/step  ratio " << m / b << "\n";
     };
     std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << loops.rows()
-              << " loop equations, " << steps << " steps (the last solver run took "
-              << settled_steps << ", constraint error " << constraint_error << "), dt " << dt
-              << " s, median of " << repeats << "\n"
+              << " loop equations, " << setup.steps << " steps (the last solver run took "
+              << settled_steps << ", constraint error " << constraint_error << "), dt " << setup.dt
+              << " s, median of " << setup.repeats << "\n"
               << "bare constraintDynamics+integrate " << b * 1e9 << " ns/step\n";
-    row("bare aba+integrate (open tree)   ", tree);
-    row("pinsettle (exact)                ", exact);
-    row("pinsettle (simplified)           ", simplified);
+    row("bare aba+integrate (open tree)   ", t.bare_tree);
+    row("pinsettle (exact)                ", t.exact);
+    row("pinsettle (simplified)           ", t.simplified);
+  }
+
+  int run(int argc, char ** argv)
+  {
+    const Options options = parseOptions(argc, argv);
+    if (!complete(options))
+    {
+      std::cerr << "usage: " << argv[0]
+                << " ROBOT.urdf STEPS REPEATS --q0 Q1,Q2,... "
+                   "--loop FRAME_A,AX,AY,AZ,FRAME_B,BX,BY,BZ,point|frame [--loop ...] [--json]\n";
+      return 2;
+    }
+    const pinocchio::Model model = pinsettle::buildModelFromUrdf(options.args[0]);
+    RunSetup setup{std::atol(options.args[1].c_str()), std::atoi(options.args[2].c_str()), 0., 0.};
+    if (setup.steps <= 0 || setup.repeats <= 0)
+      throw std::invalid_argument("STEPS and REPEATS must be positive integers");
+    pinsettle::LoopConstraints loops(model);
+    for (const std::string & spec : options.loop_specs)
+      addLoop(loops, model, spec);
+    Eigen::VectorXd q0 = readStart(model, options.q_spec);
+
+    pinocchio::Data data(model);
+    setup.moved = pinsettle::assembleLoops(model, data, loops, q0);
+    setup.dt = 0.1 * pinsettle::effectiveDtSafety(pinsettle::Settings())
+               * pinsettle::computeTimeScale(model, data, loops, q0).critical_step;
+    const Times times = timeSteps(model, loops, q0, setup.steps, setup.dt, setup.repeats);
+    if (options.json)
+      printJson(model, loops, setup, times);
+    else
+      printTable(model, loops, setup, times);
     return 0;
   }
 } // namespace

@@ -32,7 +32,9 @@
 
 #include <cstdlib>
 #include <cstring>
+#include <functional>
 #include <iostream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -91,106 +93,191 @@ namespace
       stop_contacts = static_cast<long>(result.stop_contacts.size());
     return result.wall_time / static_cast<double>(result.steps);
   }
+
+  struct Options
+  {
+    std::vector<std::string> args; // ROBOT.urdf [steps] [repeats]
+    bool json = false;
+    std::string only; // the rows to time, as ",bare,exact,"; empty: every row
+
+    bool times(const std::string & row) const
+    {
+      return only.empty() || only.find("," + row + ",") != std::string::npos;
+    }
+  };
+
+  Options parseOptions(int argc, char ** argv)
+  {
+    Options options;
+    for (int k = 1; k < argc; ++k)
+      if (std::strcmp(argv[k], "--json") == 0)
+        options.json = true;
+      else if (std::strcmp(argv[k], "--only") == 0 && k + 1 < argc)
+        options.only = "," + std::string(argv[++k]) + ",";
+      else
+        options.args.push_back(argv[k]);
+    return options;
+  }
+
+  // The bare steps' fixed step: a tenth of the solver's automatic step at the start, halved
+  // until the bare run stays finite.
+  double bareStepSize(const pinocchio::Model & model, long steps)
+  {
+    pinocchio::Data data(model);
+    return finiteBareStep(
+      model, steps,
+      0.1 * pinsettle::effectiveDtSafety(pinsettle::Settings())
+        * pinsettle::computeTimeScale(model, data, start(model)).critical_step);
+  }
+
+  // The force elements and stops the rows other than bare and exact add to the model.
+  struct Additions
+  {
+    explicit Additions(const pinocchio::Model & model)
+    : none(model)
+    , joint_springs(model)
+    , point_spring(model)
+    , model_stops(model)
+    , stops(model_stops.empty() ? nullptr : &model_stops)
+    {
+      for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+        if (model.nvs[j] == 1)
+          joint_springs.addJointSpring(j, 10., 0.1, 0.);
+      point_spring.addPointSpring(
+        model.frames.size() - 1, Eigen::Vector3d::Zero(), 0, Eigen::Vector3d(0.3, 0.2, 0.5), 100.);
+    }
+
+    pinsettle::ForceElements none, joint_springs, point_spring;
+    // The model's position limits as stops; none (a model without finite limits): nullptr.
+    const pinsettle::JointStops model_stops;
+    const pinsettle::JointStops * stops;
+  };
+
+  // A row of the table and a key of the JSON: what it times, and its time per step (s) in each
+  // repeat.
+  struct Row
+  {
+    const char * name; // as --only and the JSON name it
+    const char * label;
+    std::function<double()> time;
+    std::vector<double> times;
+  };
+
+  std::vector<Row> makeRows(
+    const pinocchio::Model & model, long steps, double dt, const Additions & with)
+  {
+    const pinsettle::EnergyMeasure exact = pinsettle::EnergyMeasure::Exact;
+    return {
+      {"bare", "bare aba+integrate         ",
+       [&model, steps, dt] {
+         return bench::timeBareAbaStep(model, start(model), steps, dt, "baseline");
+       }},
+      {"exact", "pinsettle (exact)          ",
+       [&model, steps, exact] { return settleStep(model, steps, exact); }},
+      {"simplified", "pinsettle (simplified)     ",
+       [&model, steps] { return settleStep(model, steps, pinsettle::EnergyMeasure::Simplified); }},
+      {"no_elements", "scene without elements     ",
+       [&model, steps, exact, &with] { return settleStep(model, steps, exact, &with.none); }},
+      {"joint_springs", "joint springs on all joints",
+       [&model, steps, exact, &with] {
+         return settleStep(model, steps, exact, &with.joint_springs);
+       }},
+      {"point_spring", "one point spring           ",
+       [&model, steps, exact, &with] {
+         return settleStep(model, steps, exact, &with.point_spring);
+       }},
+      {"stops", "joint stops of the model   ",
+       [&model, steps, exact, &with] {
+         return settleStep(model, steps, exact, nullptr, with.stops);
+       }},
+    };
+  }
+
+  const std::vector<double> & timesOf(const std::vector<Row> & rows, const std::string & name)
+  {
+    for (const Row & row : rows)
+      if (name == row.name)
+        return row.times;
+    throw std::logic_error("no row " + name);
+  }
+
+  // Per-step times of every repeat (s), for benchmarks/report.py.
+  void printJson(
+    const pinocchio::Model & model,
+    long steps,
+    double dt,
+    const Additions & with,
+    const std::vector<Row> & rows)
+  {
+    std::cout << "{\"nq\": " << model.nq << ", \"nv\": " << model.nv << ", \"steps\": " << steps
+              << ", \"settled_steps\": " << settled_steps << ", \"dt\": " << dt
+              << ", \"stop_count\": " << with.model_stops.stops().size()
+              << ", \"stop_contacts\": " << stop_contacts << ", \"ns_per_step\": {";
+    for (std::size_t k = 0; k < rows.size(); ++k)
+      std::cout << (k ? ", " : "") << "\"" << rows[k].name
+                << "\": " << bench::jsonList(rows[k].times);
+    std::cout << "}}\n";
+  }
+
+  // The medians against the bare step's.
+  int printTable(
+    const pinocchio::Model & model,
+    long steps,
+    int repeats,
+    double dt,
+    const Additions & with,
+    const std::vector<Row> & rows)
+  {
+    const std::vector<double> &bare = timesOf(rows, "bare"), &exact = timesOf(rows, "exact"),
+                              &stopped = timesOf(rows, "stops");
+    if (bare.empty() || exact.empty())
+    {
+      std::cerr << "the table needs the bare and exact rows (or use --json)\n";
+      return 2;
+    }
+    const double b = bench::median(bare);
+    std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << steps
+              << " steps (the last solver run took " << settled_steps << "), dt " << dt
+              << " s, median of " << repeats << "\n"
+              << rows.front().label << " " << b * 1e9 << " ns/step\n";
+    for (const Row & row : rows)
+    {
+      if (row.times.empty() || std::strcmp(row.name, "bare") == 0) // bare: the line above
+        continue;
+      const double m = bench::median(row.times);
+      std::cout << row.label << " " << m * 1e9 << " ns/step  ratio " << m / b << "\n";
+    }
+    if (!stopped.empty())
+      std::cout << "stops / no stops " << bench::median(stopped) / bench::median(exact) << " ("
+                << with.model_stops.stops().size() << " stops, " << stop_contacts
+                << " joints on a stop at the end)\n";
+    return 0;
+  }
 } // namespace
 
 int main(int argc, char ** argv)
 {
-  std::vector<std::string> args;
-  bool json = false;
-  std::string only; // comma-separated rows to time; empty: every row
-  for (int k = 1; k < argc; ++k)
-    if (std::strcmp(argv[k], "--json") == 0)
-      json = true;
-    else if (std::strcmp(argv[k], "--only") == 0 && k + 1 < argc)
-      only = "," + std::string(argv[++k]) + ",";
-    else
-      args.push_back(argv[k]);
-  auto timed = [&](const char * row) {
-    return only.empty() || only.find("," + std::string(row) + ",") != std::string::npos;
-  };
-  if (args.empty())
+  const Options options = parseOptions(argc, argv);
+  if (options.args.empty())
   {
     std::cerr << "usage: " << argv[0] << " ROBOT.urdf [steps] [repeats] [--json] [--only ROWS]\n";
     return 2;
   }
+  const std::vector<std::string> & args = options.args;
   const pinocchio::Model model = pinsettle::buildModelFromUrdf(args[0]);
   const long steps = args.size() > 1 ? std::atol(args[1].c_str()) : 20000;
   const int repeats = args.size() > 2 ? std::atoi(args[2].c_str()) : 11;
-  pinocchio::Data data(model);
-  const double dt = finiteBareStep(
-    model, steps,
-    0.1 * pinsettle::effectiveDtSafety(pinsettle::Settings())
-      * pinsettle::computeTimeScale(model, data, start(model)).critical_step);
-
-  pinsettle::ForceElements none(model), joint_springs(model), point_spring(model);
-  for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
-    if (model.nvs[j] == 1)
-      joint_springs.addJointSpring(j, 10., 0.1, 0.);
-  point_spring.addPointSpring(
-    model.frames.size() - 1, Eigen::Vector3d::Zero(), 0, Eigen::Vector3d(0.3, 0.2, 0.5), 100.);
-
-  // The model's position limits as stops; none (a model without finite limits): nullptr.
-  const pinsettle::JointStops model_stops(model);
-  const pinsettle::JointStops * stops = model_stops.empty() ? nullptr : &model_stops;
-
-  std::vector<double> bare, exact, simplified, empty, springs, point, stopped;
+  const double dt = bareStepSize(model, steps);
+  const Additions with(model);
+  std::vector<Row> rows = makeRows(model, steps, dt, with);
   for (int r = 0; r < repeats; ++r) // interleaved, so that machine noise hits all alike
+    for (Row & row : rows)
+      if (options.times(row.name))
+        row.times.push_back(row.time());
+  if (options.json)
   {
-    if (timed("bare"))
-      bare.push_back(bench::timeBareAbaStep(model, start(model), steps, dt, "baseline"));
-    if (timed("exact"))
-      exact.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact));
-    if (timed("simplified"))
-      simplified.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Simplified));
-    if (timed("no_elements"))
-      empty.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &none));
-    if (timed("joint_springs"))
-      springs.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &joint_springs));
-    if (timed("point_spring"))
-      point.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, &point_spring));
-    if (timed("stops"))
-      stopped.push_back(settleStep(model, steps, pinsettle::EnergyMeasure::Exact, nullptr, stops));
-  }
-  if (json) // per-step times of every repeat (s), for benchmarks/report.py
-  {
-    std::cout << "{\"nq\": " << model.nq << ", \"nv\": " << model.nv << ", \"steps\": " << steps
-              << ", \"settled_steps\": " << settled_steps << ", \"dt\": " << dt
-              << ", \"stop_count\": " << model_stops.stops().size()
-              << ", \"stop_contacts\": " << stop_contacts
-              << ", \"ns_per_step\": {\"bare\": " << bench::jsonList(bare)
-              << ", \"exact\": " << bench::jsonList(exact)
-              << ", \"simplified\": " << bench::jsonList(simplified)
-              << ", \"no_elements\": " << bench::jsonList(empty)
-              << ", \"joint_springs\": " << bench::jsonList(springs)
-              << ", \"point_spring\": " << bench::jsonList(point)
-              << ", \"stops\": " << bench::jsonList(stopped) << "}}\n";
+    printJson(model, steps, dt, with, rows);
     return 0;
   }
-  if (bare.empty() || exact.empty())
-  {
-    std::cerr << "the table needs the bare and exact rows (or use --json)\n";
-    return 2;
-  }
-  const double b = bench::median(bare);
-  auto row = [&](const char * name, const std::vector<double> & t) {
-    if (t.empty())
-      return;
-    const double m = bench::median(t);
-    std::cout << name << " " << m * 1e9 << " ns/step  ratio " << m / b << "\n";
-  };
-  std::cout << "model nq=" << model.nq << " nv=" << model.nv << ", " << steps
-            << " steps (the last solver run took " << settled_steps << "), dt " << dt
-            << " s, median of " << repeats << "\n"
-            << "bare aba+integrate          " << b * 1e9 << " ns/step\n";
-  row("pinsettle (exact)          ", exact);
-  row("pinsettle (simplified)     ", simplified);
-  row("scene without elements     ", empty);
-  row("joint springs on all joints", springs);
-  row("one point spring           ", point);
-  row("joint stops of the model   ", stopped);
-  if (!stopped.empty())
-    std::cout << "stops / no stops " << bench::median(stopped) / bench::median(exact) << " ("
-              << model_stops.stops().size() << " stops, " << stop_contacts
-              << " joints on a stop at the end)\n";
-  return 0;
+  return printTable(model, steps, repeats, dt, with, rows);
 }

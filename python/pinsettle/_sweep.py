@@ -13,6 +13,7 @@ or solving imports neither.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
 import os
@@ -646,6 +647,14 @@ def _where(
     return _Where(threads, client, scheduler, connect_timeout, chunk_size)
 
 
+def _collect(
+    table: Table, report: Progress, cases: int, rows: list[tuple[int, dict[str, Any]]]
+) -> None:
+    """Rows of solved cases into the table, and the progress told."""
+    table.add(rows)
+    report(len(table.rows), cases)
+
+
 def _reporter(progress: bool | Progress) -> tuple[Progress, ProgressBar | None]:
     """The function told of the cases done, and the progress bar when it is that."""
     if progress is True:
@@ -677,7 +686,7 @@ def _run_cases(
     return threads
 
 
-def sweep(
+def sweep(  # noqa: PLR0913 (its keyword options are the sweep command's flags)
     scene: Any,
     vary: Mapping[str, Any] | None = None,
     starts: Any = None,
@@ -695,6 +704,7 @@ def sweep(
     connect_timeout: float = 5.0,
     **overrides: Any,
 ) -> DataFrame:
+    # #lizard forgives(length): the docstring is the sweep's reference, 49 of its 110 lines
     """Solve many cases of a scene and return a ``pandas.DataFrame``, one row per case.
 
     Args:
@@ -760,11 +770,7 @@ def sweep(
     if resume is not None:
         table.load(resume)
     report, bar = _reporter(progress)
-
-    def collect(rows: list[tuple[int, dict[str, Any]]]) -> None:
-        table.add(rows)
-        report(len(table.rows), plan.size)
-
+    collect = functools.partial(_collect, table, report, plan.size)
     started = time.perf_counter()
     resumed = len(table.rows)
     if bar is not None:

@@ -7,7 +7,7 @@
 #define PINOCCHIO_DISABLE_UNSUPPORTED_WARNINGS
 
 #include "pinsettle/loops.hpp"
-#include "pinsettle/solver.hpp"
+#include "pinsettle/statics.hpp"
 #include "loop-stepper.hpp"
 
 #include <pinocchio/algorithm/aba.hpp>
@@ -206,8 +206,6 @@ namespace pinsettle
       x.noalias() = svd.matrixV().leftCols(rank) * c.cwiseQuotient(svd.singularValues().head(rank));
     }
 
-    // Gauss-Newton onto the loops; on return error and J are those of the final q and svd is
-    // J's decomposition. Returns the largest error left.
     // A pinned joint's column is zero, but the least-norm step from an SVD puts round-off
     // (1e-17) on it all the same: enough to lift a joint off its stop, or give it a velocity
     // into it, so that it is no longer held and chatters there (Fetch's torso on its upper
@@ -253,13 +251,76 @@ namespace pinsettle
       return added;
     }
 
-    // Gauss-Newton onto the loops; on return error and J are those of the final q and svd is
-    // J's decomposition (pinned columns, or with stops the columns of the joints on a stop,
+    // Gauss-Newton's workspace: the loops' error and Jacobian at q and at a trial q_next, the
+    // Jacobian's SVD and the step.
+    struct GaussNewtonWork
+    {
+      GaussNewtonWork(const pinocchio::Model & model, const LoopConstraints & loops)
+      : error(loops.rows())
+      , error_next(loops.rows())
+      , J(loops.rows(), model.nv)
+      , dq(model.nv)
+      , q_next(model.nq)
+      , work_a(6, model.nv)
+      , work_b(6, model.nv)
+      {
+      }
+
+      Eigen::VectorXd error, error_next;
+      Eigen::MatrixXd J;
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd;
+      Eigen::VectorXd dq, q_next;
+      pinocchio::Data::Matrix6x work_a, work_b;
+    };
+
+    // What a projection onto the loops keeps still: pinned joints, or (stops instead) the
+    // joints on a stop that a step would push past it (held: an active set, refilled each step).
+    struct Stillness
+    {
+      const std::vector<Eigen::Index> * pinned = nullptr;
+      const JointStops * stops = nullptr;
+      std::vector<Eigen::Index> * held = nullptr;
+    };
+
+    // Along -dq from q, a full step halved while it does not lower the loops' error (far from
+    // the manifold the linearisation overshoots); q and size move to the first step that does.
+    // Returns whether one did.
+    bool searchLine(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const LoopConstraints & loops,
+      const Stillness & still,
+      Eigen::VectorXd & q,
+      double & size,
+      GaussNewtonWork & w)
+    {
+      for (double step = 1.; step > 1e-3; step *= 0.5)
+      {
+        pinocchio::integrate(model, q, (-step * w.dq).eval(), w.q_next);
+        keepPinned(model, q, still.pinned, w.q_next);
+        if (still.stops != nullptr) // the held joints where they were, all within their stops
+        {
+          keepPinned(model, q, still.held, w.q_next);
+          clampToStops(*still.stops, w.q_next);
+        }
+        evaluateLoops(model, data, loops, w.q_next, w.error_next, nullptr, w.work_a, w.work_b);
+        const double next = w.error_next.lpNorm<Eigen::Infinity>();
+        if (next < size)
+        {
+          q.swap(w.q_next);
+          size = next;
+          return true;
+        }
+      }
+      return false;
+    }
+
+    // Gauss-Newton onto the loops; on return w.error and w.J are those of the final q and w.svd
+    // is J's decomposition (pinned columns, or with stops the columns of the joints on a stop,
     // zeroed). Returns the largest error left.
-    // pinned: joints that do not move. stops (instead): a joint on a stop stays there unless
-    // the step pulls it into its range, each step solved with the columns of the joints it would
-    // push past their stop zeroed (an active set grown until it pushes none), and cut back onto
-    // the stops.
+    // With stops, a joint on a stop stays there unless the step pulls it into its range: each
+    // step is solved with the columns of the joints it would push past their stop zeroed (an
+    // active set grown until it pushes none), and cut back onto the stops.
     double gaussNewton(
       const pinocchio::Model & model,
       pinocchio::Data & data,
@@ -267,73 +328,43 @@ namespace pinsettle
       Eigen::VectorXd & q,
       double tolerance,
       int max_iterations,
-      Eigen::VectorXd & error,
-      Eigen::MatrixXd & J,
-      Eigen::JacobiSVD<Eigen::MatrixXd> & svd,
-      Eigen::VectorXd & dq,
-      Eigen::VectorXd & q_next,
-      Eigen::VectorXd & error_next,
-      pinocchio::Data::Matrix6x & work_a,
-      pinocchio::Data::Matrix6x & work_b,
-      const std::vector<Eigen::Index> * pinned = nullptr,
-      const JointStops * stops = nullptr,
-      std::vector<Eigen::Index> * held = nullptr)
+      GaussNewtonWork & w,
+      const Stillness & still = Stillness())
     {
       // A pinned joint's column is left out: the least-norm steps never move it.
       const auto evaluate = [&](bool all_on_stops) {
-        evaluateLoops(model, data, loops, q, error, &J, work_a, work_b);
-        if (pinned != nullptr)
-          for (const Eigen::Index i : *pinned)
-            J.col(i).setZero();
+        evaluateLoops(model, data, loops, q, w.error, &w.J, w.work_a, w.work_b);
+        if (still.pinned != nullptr)
+          for (const Eigen::Index i : *still.pinned)
+            w.J.col(i).setZero();
         if (all_on_stops)
         {
-          findJointsOnStops(*stops, q, *held);
-          for (const Eigen::Index i : *held)
-            J.col(i).setZero();
+          findJointsOnStops(*still.stops, q, *still.held);
+          for (const Eigen::Index i : *still.held)
+            w.J.col(i).setZero();
         }
-        svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        w.svd.compute(w.J, Eigen::ComputeFullU | Eigen::ComputeFullV);
       };
       evaluate(false);
-      double size = error.lpNorm<Eigen::Infinity>();
+      double size = w.error.lpNorm<Eigen::Infinity>();
       for (int it = 0; it < max_iterations && size > tolerance; ++it)
       {
-        solveLeastNorm(svd, svdRank(svd), error, dq);
-        if (stops != nullptr)
+        solveLeastNorm(w.svd, svdRank(w.svd), w.error, w.dq);
+        if (still.stops != nullptr)
         {
-          held->clear();
-          while (holdPushed(*stops, q, dq, *held, J))
+          still.held->clear();
+          while (holdPushed(*still.stops, q, w.dq, *still.held, w.J))
           {
-            svd.compute(J, Eigen::ComputeFullU | Eigen::ComputeFullV);
-            solveLeastNorm(svd, svdRank(svd), error, dq);
+            w.svd.compute(w.J, Eigen::ComputeFullU | Eigen::ComputeFullV);
+            solveLeastNorm(w.svd, svdRank(w.svd), w.error, w.dq);
           }
         }
-        // A full step, halved while it does not lower the error (far from the manifold the
-        // linearisation overshoots).
-        bool improved = false;
-        for (double step = 1.; step > 1e-3; step *= 0.5)
-        {
-          pinocchio::integrate(model, q, (-step * dq).eval(), q_next);
-          keepPinned(model, q, pinned, q_next);
-          if (stops != nullptr) // the held joints where they were, every joint within its stops
-          {
-            keepPinned(model, q, held, q_next);
-            clampToStops(*stops, q_next);
-          }
-          evaluateLoops(model, data, loops, q_next, error_next, nullptr, work_a, work_b);
-          const double next = error_next.lpNorm<Eigen::Infinity>();
-          if (next < size)
-          {
-            q.swap(q_next);
-            size = next;
-            improved = true;
-            break;
-          }
-        }
+        const bool improved = searchLine(model, data, loops, still, q, size, w);
         evaluate(false);
         if (!improved)
           break;
       }
-      if (stops != nullptr)
+      if (still.stops != nullptr)
         evaluate(true);
       return size;
     }
@@ -398,14 +429,70 @@ namespace pinsettle
   {
     if (loops.empty())
       return 0.;
-    Eigen::VectorXd error(loops.rows()), error_next(loops.rows()), dq(model.nv), q_next(model.nq);
-    Eigen::MatrixXd J(loops.rows(), model.nv);
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd;
-    pinocchio::Data::Matrix6x work_a(6, model.nv), work_b(6, model.nv);
-    return gaussNewton(
-      model, data, loops, q, tolerance, max_iterations, error, J, svd, dq, q_next, error_next,
-      work_a, work_b, pinned);
+    GaussNewtonWork work(model, loops);
+    Stillness still;
+    still.pinned = pinned;
+    return gaussNewton(model, data, loops, q, tolerance, max_iterations, work, still);
   }
+
+  namespace
+  {
+    // Why the loops cannot be assembled: the loop or coupling left most open at q (error) and
+    // how open it was at the start (error_start).
+    std::string describeOpenLoop(
+      const pinocchio::Model & model,
+      const LoopConstraints & loops,
+      const Eigen::VectorXd & error,
+      const Eigen::VectorXd & error_start)
+    {
+      Eigen::Index row = 0;
+      std::size_t worst = 0;
+      double worst_size = -1., worst_start = 0.;
+      for (std::size_t k = 0; k < loops.loops().size(); ++k)
+      {
+        const int rows = loops.loops()[k].rows();
+        const double size = error.segment(row, rows).lpNorm<Eigen::Infinity>();
+        if (size > worst_size)
+        {
+          worst = k;
+          worst_size = size;
+          worst_start = error_start.segment(row, rows).lpNorm<Eigen::Infinity>();
+        }
+        row += rows;
+      }
+      const JointCoupling * coupling = nullptr;
+      for (const JointCoupling & c : loops.couplings())
+      {
+        if (std::abs(error[row]) > worst_size)
+        {
+          coupling = &c;
+          worst_size = std::abs(error[row]);
+          worst_start = std::abs(error_start[row]);
+        }
+        ++row;
+      }
+      std::ostringstream msg;
+      msg.precision(4);
+      if (coupling != nullptr)
+      {
+        msg << "cannot assemble the couplings from the start configuration: " << coupling->name
+            << " (q['" << model.names[coupling->follower] << "'] = " << coupling->multiplier
+            << " * q['" << model.names[coupling->leader] << "'] + " << coupling->offset
+            << ") is still off by " << worst_size << " (rad or m) after Gauss-Newton from "
+            << worst_start;
+        return msg.str();
+      }
+      const Loop & loop = loops.loops()[worst];
+      msg << "cannot assemble the loops from the start configuration: " << loop.name << " ("
+          << toString(loop.kind) << ", joint '" << model.names[loop.joint_a] << "' to joint '"
+          << model.names[loop.joint_b] << "') is still " << worst_size
+          << (loop.kind == LoopKind::Point ? " m" : " (m or rad)")
+          << " apart after Gauss-Newton from " << worst_start
+          << " (the links cannot reach each other from there, or the start is too far from an "
+             "assembled pose; give [start] values close to one)";
+      return msg.str();
+    }
+  } // namespace
 
   double assembleLoops(
     const pinocchio::Model & model,
@@ -422,54 +509,8 @@ namespace pinsettle
     {
       // Name the loop that stays open.
       const Eigen::VectorXd error = computeLoopError(model, data, loops, q);
-      Eigen::Index row = 0;
-      std::size_t worst = 0;
-      double worst_size = -1., worst_start = 0.;
-      for (std::size_t k = 0; k < loops.loops().size(); ++k)
-      {
-        const int rows = loops.loops()[k].rows();
-        const double size = error.segment(row, rows).lpNorm<Eigen::Infinity>();
-        if (size > worst_size)
-        {
-          worst = k;
-          worst_size = size;
-          worst_start = error_start.segment(row, rows).lpNorm<Eigen::Infinity>();
-        }
-        row += rows;
-      }
-      std::ostringstream msg;
-      msg.precision(4);
-      const JointCoupling * coupling = nullptr;
-      for (const JointCoupling & c : loops.couplings())
-      {
-        if (std::abs(error[row]) > worst_size)
-        {
-          coupling = &c;
-          worst_size = std::abs(error[row]);
-          worst_start = std::abs(error_start[row]);
-        }
-        ++row;
-      }
-      if (coupling != nullptr)
-      {
-        msg << "cannot assemble the couplings from the start configuration: " << coupling->name
-            << " (q['" << model.names[coupling->follower] << "'] = " << coupling->multiplier
-            << " * q['" << model.names[coupling->leader] << "'] + " << coupling->offset
-            << ") is still off by " << worst_size << " (rad or m) after Gauss-Newton from "
-            << worst_start;
-        q = start;
-        throw std::invalid_argument(msg.str());
-      }
-      const Loop & loop = loops.loops()[worst];
-      msg << "cannot assemble the loops from the start configuration: " << loop.name << " ("
-          << toString(loop.kind) << ", joint '" << model.names[loop.joint_a] << "' to joint '"
-          << model.names[loop.joint_b] << "') is still " << worst_size
-          << (loop.kind == LoopKind::Point ? " m" : " (m or rad)")
-          << " apart after Gauss-Newton from " << worst_start
-          << " (the links cannot reach each other from there, or the start is too far from an "
-             "assembled pose; give [start] values close to one)";
       q = start;
-      throw std::invalid_argument(msg.str());
+      throw std::invalid_argument(describeOpenLoop(model, loops, error, error_start));
     }
     return pinocchio::difference(model, start, q).lpNorm<Eigen::Infinity>();
   }
@@ -566,6 +607,77 @@ namespace pinsettle
     return report;
   }
 
+  namespace
+  {
+    // A joint on a stop in balanceStops: its stop, the side, and whether its reaction is solved
+    // for (a stop that would pull is let go).
+    struct OnStop
+    {
+      const JointStops::Stop * stop;
+      StopSide side;
+      bool active;
+    };
+
+    std::vector<OnStop> findStopsReached(const JointStops & stops, const Eigen::VectorXd & q)
+    {
+      std::vector<OnStop> on;
+      for (const JointStops::Stop & s : stops.stops())
+      {
+        if (q[s.iq] <= s.lower)
+          on.push_back(OnStop{&s, StopSide::Lower, true});
+        else if (q[s.iq] >= s.upper)
+          on.push_back(OnStop{&s, StopSide::Upper, true});
+      }
+      return on;
+    }
+
+    // The active stops' reactions mu (one per entry of on, 0 for those let go) that balance
+    // tau best along the allowed motions N, and what they leave unbalanced.
+    void solveStopReactions(
+      const Eigen::MatrixXd & N,
+      const std::vector<OnStop> & on,
+      const Eigen::VectorXd & tau,
+      Eigen::VectorXd & mu,
+      Eigen::VectorXd & unbalanced)
+    {
+      std::vector<std::size_t> active;
+      for (std::size_t k = 0; k < on.size(); ++k)
+        if (on[k].active)
+          active.push_back(k);
+      Eigen::MatrixXd B(N.rows(), static_cast<Eigen::Index>(active.size()));
+      for (std::size_t c = 0; c < active.size(); ++c)
+        B.col(static_cast<Eigen::Index>(c)) =
+          N * N.row(on[active[c]].stop->iv).transpose(); // P e_i
+      mu = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(on.size()));
+      if (active.empty())
+        return;
+      const Eigen::VectorXd x = B.completeOrthogonalDecomposition().solve(tau);
+      for (std::size_t c = 0; c < active.size(); ++c)
+        mu[static_cast<Eigen::Index>(active[c])] = x[static_cast<Eigen::Index>(c)];
+      unbalanced = tau - B * x;
+    }
+
+    // The active stop whose reaction pulls hardest, or on.size() when none pulls.
+    std::size_t findHardestPull(const std::vector<OnStop> & on, const Eigen::VectorXd & mu)
+    {
+      std::size_t worst = on.size();
+      double worst_pull = 0.;
+      for (std::size_t k = 0; k < on.size(); ++k)
+      {
+        if (!on[k].active)
+          continue;
+        const double sign = on[k].side == StopSide::Lower ? 1. : -1.;
+        const double pull = -sign * mu[static_cast<Eigen::Index>(k)];
+        if (pull > worst_pull)
+        {
+          worst_pull = pull;
+          worst = k;
+        }
+      }
+      return worst;
+    }
+  } // namespace
+
   StopBalance balanceStops(
     const pinocchio::Model & model,
     pinocchio::Data & data,
@@ -576,20 +688,7 @@ namespace pinsettle
   {
     // Joints on a stop: their reactions mu (side * mu >= 0) enter as P E^T mu, P the projector
     // onto the allowed motions; a stop that would pull is let go and the others solved again.
-    struct OnStop
-    {
-      const JointStops::Stop * stop;
-      StopSide side;
-      bool active;
-    };
-    std::vector<OnStop> on;
-    for (const JointStops::Stop & s : stops.stops())
-    {
-      if (q[s.iq] <= s.lower)
-        on.push_back(OnStop{&s, StopSide::Lower, true});
-      else if (q[s.iq] >= s.upper)
-        on.push_back(OnStop{&s, StopSide::Upper, true});
-    }
+    std::vector<OnStop> on = findStopsReached(stops, q);
     StopBalance balance;
     balance.unbalanced = tau;
     Eigen::VectorXd mu;
@@ -598,35 +697,8 @@ namespace pinsettle
       const Eigen::MatrixXd N = computeLoopMotion(model, data, loops, q).basis;
       for (std::size_t pass = 0; pass <= on.size(); ++pass)
       {
-        std::vector<std::size_t> active;
-        for (std::size_t k = 0; k < on.size(); ++k)
-          if (on[k].active)
-            active.push_back(k);
-        Eigen::MatrixXd B(model.nv, static_cast<Eigen::Index>(active.size()));
-        for (std::size_t c = 0; c < active.size(); ++c)
-          B.col(static_cast<Eigen::Index>(c)) =
-            N * N.row(on[active[c]].stop->iv).transpose(); // P e_i
-        mu = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(on.size()));
-        if (!active.empty())
-        {
-          const Eigen::VectorXd x = B.completeOrthogonalDecomposition().solve(tau);
-          for (std::size_t c = 0; c < active.size(); ++c)
-            mu[static_cast<Eigen::Index>(active[c])] = x[static_cast<Eigen::Index>(c)];
-          balance.unbalanced = tau - B * x;
-        }
-        // Let go of the stop that pulls hardest, if any.
-        std::size_t worst = on.size();
-        double worst_pull = 0.;
-        for (const std::size_t k : active)
-        {
-          const double sign = on[k].side == StopSide::Lower ? 1. : -1.;
-          const double pull = -sign * mu[static_cast<Eigen::Index>(k)];
-          if (pull > worst_pull)
-          {
-            worst_pull = pull;
-            worst = k;
-          }
-        }
+        solveStopReactions(N, on, tau, mu, balance.unbalanced);
+        const std::size_t worst = findHardestPull(on, mu); // let go of it, if any
         if (worst == on.size())
           break;
         on[worst].active = false;
@@ -723,23 +795,17 @@ namespace pinsettle
 
   // --- the solver's per-step work ----------------------------------------------------------
 
-  struct LoopStepper::Impl
+  struct LoopStepper::Impl : GaussNewtonWork
   {
     typedef pinocchio::RigidConstraintModel ConstraintModel;
     typedef pinocchio::RigidConstraintData ConstraintData;
 
     Impl(const pinocchio::Model & model, const LoopConstraints & loops)
-    : model(model)
+    : GaussNewtonWork(model, loops)
+    , model(model)
     , loops(loops)
-    , error(loops.rows())
-    , error_next(loops.rows())
-    , J(loops.rows(), model.nv)
-    , dq(model.nv)
-    , q_next(model.nq)
     , tau(model.nv)
     , zero(Eigen::VectorXd::Zero(model.nv))
-    , work_a(6, model.nv)
-    , work_b(6, model.nv)
     {
       if (!loops.couplings().empty())
       {
@@ -783,11 +849,7 @@ namespace pinsettle
     std::vector<ConstraintModel> constraint_models;
     std::vector<ConstraintData> constraint_datas;
     pinocchio::ProximalSettings prox;
-    Eigen::VectorXd error, error_next;
-    Eigen::MatrixXd J;
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd;
-    Eigen::VectorXd dq, q_next, tau, zero, velocity;
-    pinocchio::Data::Matrix6x work_a, work_b;
+    Eigen::VectorXd tau, zero, velocity;
     // Couplings only: the allowed motions N and the reduced dynamics' workspace.
     Eigen::MatrixXd N, MN, reduced_mass;
     Eigen::VectorXd reduced_force, gamma;
@@ -933,17 +995,16 @@ namespace pinsettle
     pinocchio::Data & data, Eigen::VectorXd & q, const std::vector<Eigen::Index> * pinned)
   {
     Impl & d = *impl_;
-    ClosedLoops closed{
-      gaussNewton(
-        d.model, data, d.loops, q, 1e-13, 10, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
-        d.work_a, d.work_b, pinned),
-      pinned};
+    Stillness still;
+    still.pinned = pinned;
+    ClosedLoops closed{gaussNewton(d.model, data, d.loops, q, 1e-13, 10, d, still), pinned};
     // The joints on a stop hold the loops open: those the loops pull off their stop leave it.
     if (closed.left > kLoopTolerance && pinned != nullptr && d.stops != nullptr)
     {
-      closed.left = gaussNewton(
-        d.model, data, d.loops, q, 1e-13, 50, d.error, d.J, d.svd, d.dq, d.q_next, d.error_next,
-        d.work_a, d.work_b, nullptr, d.stops, &d.held);
+      Stillness on_stops;
+      on_stops.stops = d.stops;
+      on_stops.held = &d.held;
+      closed.left = gaussNewton(d.model, data, d.loops, q, 1e-13, 50, d, on_stops);
       closed.still = &d.held;
     }
     return closed;

@@ -314,6 +314,41 @@ namespace pinsettle
     }
   }
 
+  namespace
+  {
+    // Resting joints (index in v, +1 on a lower stop / -1 on an upper one) whose acceleration in
+    // a points into their stop.
+    bool isIntoStop(const std::pair<int, double> & resting, const Eigen::VectorXd & a)
+    {
+      return resting.second * a[resting.first] < 0.;
+    }
+
+    // One pass of the hold's active set: a held joint whose stop would have to pull (reaction
+    // against its side) is released, a free resting joint accelerated into its stop is held.
+    // Returns whether anything changed.
+    bool updateHeld(
+      const std::vector<std::pair<int, double>> & resting,
+      const Eigen::VectorXd & reactions,
+      const Eigen::VectorXd & a,
+      std::vector<bool> & held)
+    {
+      bool changed = false;
+      for (std::size_t k = 0; k < resting.size(); ++k)
+      {
+        // The stop may only push (side * force >= 0).
+        const bool release =
+          held[k] && resting[k].second * reactions[static_cast<Eigen::Index>(k)] < 0.;
+        const bool hold = !held[k] && isIntoStop(resting[k], a);
+        if (release || hold)
+        {
+          held[k] = hold;
+          changed = true;
+        }
+      }
+      return changed;
+    }
+  } // namespace
+
   bool StopHold::hold(
     pinocchio::Data & data,
     const Eigen::VectorXd & q,
@@ -321,10 +356,9 @@ namespace pinsettle
     const TimeScale * added)
   {
     findResting(q, v);
-    bool into = false;
-    for (const std::pair<int, double> & r : resting_)
-      into = into || r.second * data.ddq[r.first] < 0.;
-    if (!into)
+    if (std::none_of(resting_.begin(), resting_.end(), [&](const std::pair<int, double> & r) {
+          return isIntoStop(r, data.ddq);
+        }))
       return false;
 
     const pinocchio::Model & model = *dynamics_;
@@ -345,7 +379,7 @@ namespace pinsettle
     // stop, until neither happens (a bounded number of passes: the last one keeps its answer).
     held_.assign(resting_.size(), false);
     for (std::size_t k = 0; k < resting_.size(); ++k)
-      held_[k] = resting_[k].second * free_acceleration_[resting_[k].first] < 0.;
+      held_[k] = isIntoStop(resting_[k], free_acceleration_);
     held_acceleration_ = free_acceleration_;
     const std::size_t passes = 2 * resting_.size() + 2;
     for (std::size_t pass = 0; pass < passes; ++pass)
@@ -354,21 +388,7 @@ namespace pinsettle
         solveHeldOnLoops(held_, free_acceleration_, held_acceleration_);
       else
         solveHeld(held_, held_acceleration_);
-      bool changed = false;
-      for (std::size_t k = 0; k < resting_.size(); ++k)
-      {
-        const int i = resting_[k].first;
-        const double side = resting_[k].second;
-        // The stop may only push (side * force >= 0).
-        const bool release = held_[k] && side * reactions_[static_cast<Eigen::Index>(k)] < 0.;
-        const bool hold = !held_[k] && side * held_acceleration_[i] < 0.;
-        if (release || hold)
-        {
-          held_[k] = hold;
-          changed = true;
-        }
-      }
-      if (!changed)
+      if (!updateHeld(resting_, reactions_, held_acceleration_, held_))
         break;
     }
     data.ddq = held_acceleration_;

@@ -13,6 +13,7 @@
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>
 
+#include "pinsettle/constraint-set.hpp"
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/loops.hpp"
@@ -195,45 +196,9 @@ namespace
       stopsFrom(model, stops)};
   }
 
-  py::dict toDict(const pinocchio::Model & model, const Result & r)
+  // The trace as arrays: samples (step, time, energies, optionally q) and events.
+  py::dict traceToDict(const Result & r)
   {
-    py::dict out;
-    out["stop_contacts"] = stopContactsToList(model, r.stop_contacts);
-    py::list clamped;
-    for (const std::pair<pinocchio::JointIndex, double> & c : r.start_clamped)
-      clamped.append(py::make_tuple(model.names[c.first], c.second));
-    out["start_clamped"] = clamped;
-    out["q"] = r.q;
-    out["v"] = r.v;
-    out["status"] = toString(r.status);
-    out["steps"] = r.steps;
-    out["peaks"] = r.peaks;
-    out["pushes"] = r.pushes;
-    out["stability"] = toString(r.stability);
-    out["min_stiffness_eigenvalue"] = r.min_stiffness_eigenvalue;
-    out["neutral_directions"] = r.neutral_directions;
-    out["sim_time"] = r.sim_time;
-    out["wall_time"] = r.wall_time;
-    out["kinetic_energy"] = r.kinetic_energy;
-    out["simplified_kinetic_energy"] = r.simplified_kinetic_energy;
-    out["residual"] = r.residual;
-    out["residual_before_polish"] = r.residual_before_polish;
-    out["polish_iterations"] = r.polish_iterations;
-    out["polished"] = r.polished;
-    out["dt"] = r.dt;
-    out["dt_estimates"] = r.dt_estimates;
-    out["dt_reductions"] = r.dt_reductions;
-    out["scaled_modes"] = r.scaled_modes;
-    out["scaled_joints"] = r.scaled_joints;
-    out["mobility"] = r.mobility;
-    out["assembly_distance"] = r.assembly_distance;
-    out["constraint_error"] = r.constraint_error;
-    out["reason"] = r.reason;
-    if (r.trace.empty())
-    {
-      out["trace"] = py::none();
-      return out;
-    }
     const Eigen::Index n = static_cast<Eigen::Index>(r.trace.size());
     Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> step(n);
     Eigen::VectorXd time(n), energy(n), simplified(n);
@@ -273,7 +238,44 @@ namespace
     trace["event_time"] = event_time;
     trace["event_kind"] = event_kind;
     trace["event_joint"] = event_joint;
-    out["trace"] = trace;
+    return trace;
+  }
+
+  py::dict toDict(const pinocchio::Model & model, const Result & r)
+  {
+    py::dict out;
+    out["stop_contacts"] = stopContactsToList(model, r.stop_contacts);
+    py::list clamped;
+    for (const std::pair<pinocchio::JointIndex, double> & c : r.start_clamped)
+      clamped.append(py::make_tuple(model.names[c.first], c.second));
+    out["start_clamped"] = clamped;
+    out["q"] = r.q;
+    out["v"] = r.v;
+    out["status"] = toString(r.status);
+    out["steps"] = r.steps;
+    out["peaks"] = r.peaks;
+    out["pushes"] = r.pushes;
+    out["stability"] = toString(r.stability);
+    out["min_stiffness_eigenvalue"] = r.min_stiffness_eigenvalue;
+    out["neutral_directions"] = r.neutral_directions;
+    out["sim_time"] = r.sim_time;
+    out["wall_time"] = r.wall_time;
+    out["kinetic_energy"] = r.kinetic_energy;
+    out["simplified_kinetic_energy"] = r.simplified_kinetic_energy;
+    out["residual"] = r.residual;
+    out["residual_before_polish"] = r.residual_before_polish;
+    out["polish_iterations"] = r.polish_iterations;
+    out["polished"] = r.polished;
+    out["dt"] = r.dt;
+    out["dt_estimates"] = r.dt_estimates;
+    out["dt_reductions"] = r.dt_reductions;
+    out["scaled_modes"] = r.scaled_modes;
+    out["scaled_joints"] = r.scaled_joints;
+    out["mobility"] = r.mobility;
+    out["assembly_distance"] = r.assembly_distance;
+    out["constraint_error"] = r.constraint_error;
+    out["reason"] = r.reason;
+    out["trace"] = r.trace.empty() ? py::object(py::none()) : py::object(traceToDict(r));
     return out;
   }
 
@@ -347,6 +349,264 @@ namespace
     return toDict(model, result);
   }
 
+  // The time step's settings: dt, dt_safety and dt_growth ('auto' or a number) and their values
+  // in effect.
+  void bindStepSettings(py::class_<Settings> & settings)
+  {
+    settings
+      .def_property(
+        "dt", [](const Settings & s) { return autoOrNumber(s.dt); },
+        [](Settings & s, const py::object & value) {
+          s.dt = parseAutoOrNumber(value, "dt", "a finite number > 0 (seconds)", [](double x) {
+            return std::isfinite(x) && x > 0.;
+          });
+        },
+        "Time step (s) > 0, or 'auto' (the default): dt_safety * 2 / omega_max.")
+      .def_property(
+        "dt_safety", [](const Settings & s) { return autoOrNumber(s.dt_safety); },
+        [](Settings & s, const py::object & value) {
+          s.dt_safety = parseAutoOrNumber(
+            value, "dt_safety", "a number in (0, 1]", [](double x) { return x > 0. && x <= 1.; });
+        },
+        "Fraction of the stability limit used by dt='auto', in (0, 1], or 'auto' (the default): "
+        "0.3 with backtrack and the exact energy, 0.2 otherwise (measured).")
+      .def_property_readonly(
+        "effective_dt_safety", &effectiveDtSafety,
+        "The fraction dt='auto' uses: dt_safety, or for 'auto' that of the backtrack setting.")
+      .def_property(
+        "dt_growth", [](const Settings & s) { return autoOrNumber(s.dt_growth); },
+        [](Settings & s, const py::object & value) {
+          s.dt_growth = parseAutoOrNumber(value, "dt_growth", "a finite number >= 1", [](double x) {
+            return std::isfinite(x) && x >= 1.;
+          });
+        },
+        "Largest factor dt='auto' grows by between damping events, >= 1 (1: fixed), or 'auto' "
+        "(the default): 2.5 with backtrack, the exact energy and scale_stiff_modes, 1 otherwise "
+        "(measured).")
+      .def_property_readonly(
+        "effective_dt_growth", &effectiveDtGrowth,
+        "The growth dt='auto' uses: dt_growth, or for 'auto' that of the other settings.");
+  }
+
+  // The damping, stopping and trace settings: plain fields.
+  void bindRuleSettings(py::class_<Settings> & settings)
+  {
+    settings.def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
+      .def_readwrite(
+        "newton_takeover", &Settings::newton_takeover,
+        "Try Newton at damping events; a rest it reaches at round-off ends the run.")
+      .def_readwrite(
+        "scale_stiff_modes", &Settings::scale_stiff_modes,
+        "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).")
+      .def_readwrite(
+        "scale_joint_inertia", &Settings::scale_joint_inertia,
+        "With dt='auto', on a tree (no loops): a fictitious inertia per joint that brings "
+        "every joint's frequency down to the slowest one's (equilibria unchanged).")
+      .def_readwrite("kt", &Settings::kt, "Velocity scale at each energy peak, in [0, 1).")
+      .def_readwrite("err", &Settings::err, "Relative peak threshold, >= 0.")
+      .def_readwrite("ds", &Settings::ds, "Stopping window length (steps), >= 1.")
+      .def_readwrite(
+        "max_e", &Settings::max_e, "Bound on the sum of the last ds energy samples, >= 0.")
+      .def_readwrite("max_steps", &Settings::max_steps, "Largest number of steps, >= 1.")
+      .def_readwrite("max_time", &Settings::max_time, "Wall-clock budget (s), > 0; inf: none.")
+      .def_property(
+        "energy", [](const Settings & s) { return std::string(toString(s.energy)); },
+        [](Settings & s, const std::string & name) { s.energy = energyMeasureFromString(name); },
+        "Energy signal of the peak detector: 'exact' or 'simplified'.")
+      .def_readwrite("backtrack", &Settings::backtrack, "Back up to the interpolated peak.")
+      .def_readwrite(
+        "trace_every", &Settings::trace_every, "Trace a sample every N steps; 0: no trace.")
+      .def_readwrite("trace_capacity", &Settings::trace_capacity, "Most trace samples kept.")
+      .def_readwrite(
+        "trace_configurations", &Settings::trace_configurations,
+        "Record q in each trace sample (for playback).")
+      .def_readwrite(
+        "check_every", &Settings::check_every, "Steps between clock and Ctrl-C checks, >= 1.");
+  }
+
+  // Settings: each setting a property, the auto ones read and written as 'auto' or a number.
+  void bindSettings(py::module_ & m)
+  {
+    py::class_<Settings> settings(
+      m, "Settings", "Solver settings (inputs only; see pinsettle.Settings).");
+    settings.def(py::init<>()).def(py::init<const Settings &>(), py::arg("other"));
+    bindStepSettings(settings);
+    bindRuleSettings(settings);
+    settings.def("check", &checkSettings, "Raise ValueError naming the first invalid setting.");
+  }
+
+  // The solver and the stops it applies.
+  void bindSolve(py::module_ & m)
+  {
+    m.def(
+      "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
+      py::arg("callback") = py::none(), py::arg("elements") = py::none(),
+      py::arg("loops") = py::none(), py::arg("stops") = py::none(),
+      py::arg("progress") = py::none());
+
+    m.def(
+      "joint_stops",
+      [](const py::object & model_obj, const py::object & spec) {
+        const pinocchio::Model & model = modelFrom(model_obj);
+        const std::unique_ptr<JointStops> stops = stopsFrom(model, spec);
+        py::dict out;
+        py::list list, equal, unapplied;
+        if (stops)
+        {
+          for (const JointStops::Stop & s : stops->stops())
+            list.append(py::make_tuple(model.names[s.joint], s.iq, s.iv, s.lower, s.upper));
+          for (const pinocchio::JointIndex j : stops->equalLimitJoints())
+            equal.append(model.names[j]);
+          for (const pinocchio::JointIndex j : stops->unappliedLimitJoints())
+            unapplied.append(model.names[j]);
+        }
+        out["stops"] = list;
+        out["equal_limits"] = equal;
+        out["unapplied_limits"] = unapplied;
+        return out;
+      },
+      py::arg("model"), py::arg("stops"),
+      "The stops the solver applies: (joint, index in q, index in v, lower, upper) for each "
+      "joint with one, the joints whose equal model limits were taken as no stop, and the joints "
+      "of several configuration entries whose model limits no stop applies.");
+  }
+
+  // Helpers on a model: its kinetic energies, its mimic joints released.
+  void bindModelTools(py::module_ & m)
+  {
+    m.def(
+      "kinetic_energies",
+      [](const py::object & model_obj, const Eigen::VectorXd & q, const Eigen::VectorXd & v) {
+        const pinocchio::Model & model = modelFrom(model_obj);
+        checkConfiguration(model, q, "q");
+        checkVelocity(model, v, "v");
+        pinocchio::Data data(model);
+        return computeKineticEnergies(model, data, q, v);
+      },
+      py::arg("model"), py::arg("q"), py::arg("v"));
+
+    m.def(
+      "release_mimic",
+      [](const py::object & model_obj) {
+        bp::extract<pinocchio::Model &> model(model_obj.ptr());
+        if (!model.check())
+          throw py::type_error("model must be a pinocchio.Model");
+        std::vector<MimicJoint> mimics;
+        pinocchio::Model released = releaseMimicJoints(model(), mimics);
+        checkSupportedModel(released);
+        py::list couplings;
+        for (const MimicJoint & m : mimics)
+          couplings.append(py::make_tuple(m.follower, m.leader, m.multiplier, m.offset));
+        // A pinocchio.Model of Pinocchio's own bindings (Boost.Python owns the copy).
+        const bp::object out(released);
+        return py::make_tuple(py::reinterpret_borrow<py::object>(out.ptr()), couplings);
+      },
+      py::arg("model"),
+      "The model with its mimic joints made ordinary joints, and the couplings [(follower, leader, "
+      "multiplier, offset)] that hold them (joint indices, the same in both models).");
+  }
+
+  // Evaluations of a rest at one configuration: stiffness and verdict, static force.
+  void bindEvaluations(py::module_ & m)
+  {
+    m.def(
+      "stiffness",
+      [](
+        const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
+        const py::object & loops, const py::object & stops) {
+        Evaluation at = evaluationAt(model_obj, q, spec, loops, stops);
+        const ConstraintSet constraints(at.model, at.loops.get(), at.stops.get());
+        const StabilityReport report = constraints.assessStability(at.data, q, at.elements.get());
+        py::dict out;
+        out["stiffness_matrix"] = report.stiffness;
+        out["verdict"] = toString(report.verdict);
+        out["min_eigenvalue"] = report.min_eigenvalue;
+        out["neutral_directions"] = report.neutral_directions;
+        out["tolerance"] = report.tolerance;
+        out["eigenvalues"] = report.eigenvalues;
+        out["softest_direction"] = report.softest_direction;
+        out["basis"] = report.basis;
+        if (at.stops)
+        {
+          const Eigen::VectorXd tau = constraints.computeStaticForce(at.data, q, at.elements.get());
+          Result rest;
+          constraints.describeRest(at.data, q, tau, rest);
+          out["stop_contacts"] = stopContactsToList(at.model, rest.stop_contacts);
+          out["stop_residual"] = constraints.computeResidual(at.data, q, tau);
+        }
+        return out;
+      },
+      py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
+      py::arg("loops") = py::none(), py::arg("stops") = py::none());
+
+    m.def(
+      "static_force",
+      [](
+        const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
+        const py::object & loops) {
+        Evaluation at = evaluationAt(model_obj, q, spec, loops);
+        const ConstraintSet constraints(at.model, at.loops.get(), nullptr);
+        return constraints.computeStaticForce(at.data, q, at.elements.get());
+      },
+      py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
+      py::arg("loops") = py::none());
+  }
+
+  // The loops at one configuration, the start moved onto them, the time scale.
+  void bindLoopTools(py::module_ & m)
+  {
+    m.def(
+      "loops",
+      [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & loops) {
+        Evaluation at = evaluationAt(model_obj, q, py::none(), loops);
+        py::dict out;
+        if (!at.loops)
+          throw std::invalid_argument("loops: none given");
+        const LoopMotion motion = computeLoopMotion(at.model, at.data, *at.loops, q);
+        out["error"] = computeLoopError(at.model, at.data, *at.loops, q);
+        out["jacobian"] = computeLoopJacobian(at.model, at.data, *at.loops, q);
+        out["rank"] = motion.rank;
+        out["basis"] = motion.basis;
+        return out;
+      },
+      py::arg("model"), py::arg("q"), py::arg("loops"),
+      "Loop errors (m or rad), their Jacobian, its rank and the allowed motions at q.");
+
+    m.def(
+      "assemble_loops",
+      [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & loops) {
+        Evaluation at = evaluationAt(model_obj, q, py::none(), loops);
+        Eigen::VectorXd out = q;
+        pinocchio::normalize(at.model, out);
+        double moved = 0.;
+        if (at.loops)
+          moved = assembleLoops(at.model, at.data, *at.loops, out);
+        return py::make_tuple(out, moved);
+      },
+      py::arg("model"), py::arg("q"), py::arg("loops"),
+      "q moved onto the loops (Gauss-Newton) and how far it moved; ValueError if it cannot be.");
+
+    m.def(
+      "time_scale",
+      [](
+        const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
+        bool scale_stiff_modes, const py::object & loops) {
+        Evaluation at = evaluationAt(model_obj, q, spec, loops);
+        const TimeScale scale =
+          at.loops ? computeTimeScale(at.model, at.data, *at.loops, q, at.elements.get())
+                   : computeTimeScale(at.model, at.data, q, at.elements.get(), scale_stiff_modes);
+        py::dict out;
+        out["omega_max"] = scale.omega_max;
+        out["omega_unscaled"] = scale.omega_unscaled;
+        out["scaled_modes"] = static_cast<int>(scale.stiff_masses.size());
+        out["damping_rate"] = scale.damping_rate;
+        out["critical_step"] = scale.critical_step;
+        return out;
+      },
+      py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
+      py::arg("scale_stiff_modes") = false, py::arg("loops") = py::none());
+  }
+
 } // namespace
 
 PYBIND11_MODULE(_core, m)
@@ -354,239 +614,9 @@ PYBIND11_MODULE(_core, m)
   m.doc() = "pinsettle C++ core: kinetic-damping static equilibrium on Pinocchio's ABA";
   // Registers the Boost.Python converters of pinocchio.Model.
   py::module_::import("pinocchio");
-
-  py::class_<Settings>(m, "Settings", "Solver settings (inputs only; see pinsettle.Settings).")
-    .def(py::init<>())
-    .def(py::init<const Settings &>(), py::arg("other"))
-    .def_property(
-      "dt", [](const Settings & s) { return autoOrNumber(s.dt); },
-      [](Settings & s, const py::object & value) {
-        s.dt = parseAutoOrNumber(value, "dt", "a finite number > 0 (seconds)", [](double x) {
-          return std::isfinite(x) && x > 0.;
-        });
-      },
-      "Time step (s) > 0, or 'auto' (the default): dt_safety * 2 / omega_max.")
-    .def_property(
-      "dt_safety", [](const Settings & s) { return autoOrNumber(s.dt_safety); },
-      [](Settings & s, const py::object & value) {
-        s.dt_safety = parseAutoOrNumber(
-          value, "dt_safety", "a number in (0, 1]", [](double x) { return x > 0. && x <= 1.; });
-      },
-      "Fraction of the stability limit used by dt='auto', in (0, 1], or 'auto' (the default): "
-      "0.3 with backtrack and the exact energy, 0.2 otherwise (measured).")
-    .def_property_readonly(
-      "effective_dt_safety", &effectiveDtSafety,
-      "The fraction dt='auto' uses: dt_safety, or for 'auto' that of the backtrack setting.")
-    .def_property(
-      "dt_growth", [](const Settings & s) { return autoOrNumber(s.dt_growth); },
-      [](Settings & s, const py::object & value) {
-        s.dt_growth = parseAutoOrNumber(value, "dt_growth", "a finite number >= 1", [](double x) {
-          return std::isfinite(x) && x >= 1.;
-        });
-      },
-      "Largest factor dt='auto' grows by between damping events, >= 1 (1: fixed), or 'auto' "
-      "(the default): 2.5 with backtrack, the exact energy and scale_stiff_modes, 1 otherwise "
-      "(measured).")
-    .def_property_readonly(
-      "effective_dt_growth", &effectiveDtGrowth,
-      "The growth dt='auto' uses: dt_growth, or for 'auto' that of the other settings.")
-    .def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
-    .def_readwrite(
-      "newton_takeover", &Settings::newton_takeover,
-      "Try Newton at damping events; a rest it reaches at round-off ends the run.")
-    .def_readwrite(
-      "scale_stiff_modes", &Settings::scale_stiff_modes,
-      "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).")
-    .def_readwrite(
-      "scale_joint_inertia", &Settings::scale_joint_inertia,
-      "With dt='auto', on a tree (no loops): a fictitious inertia per joint that brings "
-      "every joint's frequency down to the slowest one's (equilibria unchanged).")
-    .def_readwrite("kt", &Settings::kt, "Velocity scale at each energy peak, in [0, 1).")
-    .def_readwrite("err", &Settings::err, "Relative peak threshold, >= 0.")
-    .def_readwrite("ds", &Settings::ds, "Stopping window length (steps), >= 1.")
-    .def_readwrite(
-      "max_e", &Settings::max_e, "Bound on the sum of the last ds energy samples, >= 0.")
-    .def_readwrite("max_steps", &Settings::max_steps, "Largest number of steps, >= 1.")
-    .def_readwrite("max_time", &Settings::max_time, "Wall-clock budget (s), > 0; inf: none.")
-    .def_property(
-      "energy", [](const Settings & s) { return std::string(toString(s.energy)); },
-      [](Settings & s, const std::string & name) { s.energy = energyMeasureFromString(name); },
-      "Energy signal of the peak detector: 'exact' or 'simplified'.")
-    .def_readwrite("backtrack", &Settings::backtrack, "Back up to the interpolated peak.")
-    .def_readwrite(
-      "trace_every", &Settings::trace_every, "Trace a sample every N steps; 0: no trace.")
-    .def_readwrite("trace_capacity", &Settings::trace_capacity, "Most trace samples kept.")
-    .def_readwrite(
-      "trace_configurations", &Settings::trace_configurations,
-      "Record q in each trace sample (for playback).")
-    .def_readwrite(
-      "check_every", &Settings::check_every, "Steps between clock and Ctrl-C checks, >= 1.")
-    .def("check", &checkSettings, "Raise ValueError naming the first invalid setting.");
-
-  m.def(
-    "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
-    py::arg("callback") = py::none(), py::arg("elements") = py::none(),
-    py::arg("loops") = py::none(), py::arg("stops") = py::none(), py::arg("progress") = py::none());
-
-  m.def(
-    "joint_stops",
-    [](const py::object & model_obj, const py::object & spec) {
-      const pinocchio::Model & model = modelFrom(model_obj);
-      const std::unique_ptr<JointStops> stops = stopsFrom(model, spec);
-      py::dict out;
-      py::list list, equal, unapplied;
-      if (stops)
-      {
-        for (const JointStops::Stop & s : stops->stops())
-          list.append(py::make_tuple(model.names[s.joint], s.iq, s.iv, s.lower, s.upper));
-        for (const pinocchio::JointIndex j : stops->equalLimitJoints())
-          equal.append(model.names[j]);
-        for (const pinocchio::JointIndex j : stops->unappliedLimitJoints())
-          unapplied.append(model.names[j]);
-      }
-      out["stops"] = list;
-      out["equal_limits"] = equal;
-      out["unapplied_limits"] = unapplied;
-      return out;
-    },
-    py::arg("model"), py::arg("stops"),
-    "The stops the solver applies: (joint, index in q, index in v, lower, upper) for each "
-    "joint with one, the joints whose equal model limits were taken as no stop, and the joints "
-    "of several configuration entries whose model limits no stop applies.");
-
-  m.def(
-    "kinetic_energies",
-    [](const py::object & model_obj, const Eigen::VectorXd & q, const Eigen::VectorXd & v) {
-      const pinocchio::Model & model = modelFrom(model_obj);
-      checkConfiguration(model, q, "q");
-      checkVelocity(model, v, "v");
-      pinocchio::Data data(model);
-      return computeKineticEnergies(model, data, q, v);
-    },
-    py::arg("model"), py::arg("q"), py::arg("v"));
-
-  m.def(
-    "release_mimic",
-    [](const py::object & model_obj) {
-      bp::extract<pinocchio::Model &> model(model_obj.ptr());
-      if (!model.check())
-        throw py::type_error("model must be a pinocchio.Model");
-      std::vector<MimicJoint> mimics;
-      pinocchio::Model released = releaseMimicJoints(model(), mimics);
-      checkSupportedModel(released);
-      py::list couplings;
-      for (const MimicJoint & m : mimics)
-        couplings.append(py::make_tuple(m.follower, m.leader, m.multiplier, m.offset));
-      // A pinocchio.Model of Pinocchio's own bindings (Boost.Python owns the copy).
-      const bp::object out(released);
-      return py::make_tuple(py::reinterpret_borrow<py::object>(out.ptr()), couplings);
-    },
-    py::arg("model"),
-    "The model with its mimic joints made ordinary joints, and the couplings [(follower, leader, "
-    "multiplier, offset)] that hold them (joint indices, the same in both models).");
-
-  m.def(
-    "stiffness",
-    [](
-      const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
-      const py::object & loops, const py::object & stops) {
-      Evaluation at = evaluationAt(model_obj, q, spec, loops, stops);
-      const bool both = at.loops && at.stops && !at.stops->empty();
-      const StabilityReport report =
-        both       ? assessStability(at.model, at.data, *at.loops, *at.stops, q, at.elements.get())
-        : at.loops ? assessStability(at.model, at.data, *at.loops, q, at.elements.get())
-        : at.stops ? assessStability(at.model, at.data, *at.stops, q, at.elements.get())
-                   : assessStability(at.model, at.data, q, at.elements.get());
-      py::dict out;
-      out["stiffness_matrix"] = report.stiffness;
-      out["verdict"] = toString(report.verdict);
-      out["min_eigenvalue"] = report.min_eigenvalue;
-      out["neutral_directions"] = report.neutral_directions;
-      out["tolerance"] = report.tolerance;
-      out["eigenvalues"] = report.eigenvalues;
-      out["softest_direction"] = report.softest_direction;
-      out["basis"] = report.basis;
-      if (both)
-      {
-        const StopBalance balance = balanceStops(
-          at.model, at.data, *at.loops, *at.stops, q,
-          computeStaticForce(at.model, at.data, *at.loops, q, at.elements.get()));
-        out["stop_contacts"] = stopContactsToList(at.model, balance.contacts);
-        out["stop_residual"] = balance.residual;
-      }
-      else if (at.stops)
-      {
-        const Eigen::VectorXd tau = computeStaticForce(at.model, at.data, q, at.elements.get());
-        out["stop_contacts"] = stopContactsToList(at.model, computeStopContacts(*at.stops, q, tau));
-        out["stop_residual"] = computeStopResidual(*at.stops, q, tau);
-      }
-      return out;
-    },
-    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(), py::arg("loops") = py::none(),
-    py::arg("stops") = py::none());
-
-  m.def(
-    "static_force",
-    [](
-      const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
-      const py::object & loops) {
-      Evaluation at = evaluationAt(model_obj, q, spec, loops);
-      if (at.loops)
-        return Eigen::VectorXd(
-          computeStaticForce(at.model, at.data, *at.loops, q, at.elements.get()));
-      return Eigen::VectorXd(computeStaticForce(at.model, at.data, q, at.elements.get()));
-    },
-    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
-    py::arg("loops") = py::none());
-
-  m.def(
-    "loops",
-    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & loops) {
-      Evaluation at = evaluationAt(model_obj, q, py::none(), loops);
-      py::dict out;
-      if (!at.loops)
-        throw std::invalid_argument("loops: none given");
-      const LoopMotion motion = computeLoopMotion(at.model, at.data, *at.loops, q);
-      out["error"] = computeLoopError(at.model, at.data, *at.loops, q);
-      out["jacobian"] = computeLoopJacobian(at.model, at.data, *at.loops, q);
-      out["rank"] = motion.rank;
-      out["basis"] = motion.basis;
-      return out;
-    },
-    py::arg("model"), py::arg("q"), py::arg("loops"),
-    "Loop errors (m or rad), their Jacobian, its rank and the allowed motions at q.");
-
-  m.def(
-    "assemble_loops",
-    [](const py::object & model_obj, const Eigen::VectorXd & q, const py::object & loops) {
-      Evaluation at = evaluationAt(model_obj, q, py::none(), loops);
-      Eigen::VectorXd out = q;
-      pinocchio::normalize(at.model, out);
-      double moved = 0.;
-      if (at.loops)
-        moved = assembleLoops(at.model, at.data, *at.loops, out);
-      return py::make_tuple(out, moved);
-    },
-    py::arg("model"), py::arg("q"), py::arg("loops"),
-    "q moved onto the loops (Gauss-Newton) and how far it moved; ValueError if it cannot be.");
-
-  m.def(
-    "time_scale",
-    [](
-      const py::object & model_obj, const Eigen::VectorXd & q, const py::object & spec,
-      bool scale_stiff_modes, const py::object & loops) {
-      Evaluation at = evaluationAt(model_obj, q, spec, loops);
-      const TimeScale scale =
-        at.loops ? computeTimeScale(at.model, at.data, *at.loops, q, at.elements.get())
-                 : computeTimeScale(at.model, at.data, q, at.elements.get(), scale_stiff_modes);
-      py::dict out;
-      out["omega_max"] = scale.omega_max;
-      out["omega_unscaled"] = scale.omega_unscaled;
-      out["scaled_modes"] = static_cast<int>(scale.stiff_masses.size());
-      out["damping_rate"] = scale.damping_rate;
-      out["critical_step"] = scale.critical_step;
-      return out;
-    },
-    py::arg("model"), py::arg("q"), py::arg("elements") = py::none(),
-    py::arg("scale_stiff_modes") = false, py::arg("loops") = py::none());
+  bindSettings(m);
+  bindSolve(m);
+  bindModelTools(m);
+  bindEvaluations(m);
+  bindLoopTools(m);
 }

@@ -533,3 +533,86 @@ def test_notebook_api_returns_pinocchios_visualizer():
     assert isinstance(viz, MeshcatVisualizer)
     assert viz.result is result and viz.url is None  # live=False: no server
     assert viz.html().startswith("<!DOCTYPE html>")
+
+
+# --- short settles: slow motion ---------------------------------------------------------------
+
+SHORT_SETTLES = ["fourbar", "slider_crank", "parallel_gripper"]
+
+
+@pytest.mark.parametrize("name", SHORT_SETTLES)
+def test_a_short_settle_plays_in_slow_motion(name, exported):
+    play = _play()
+    scene, result, viz, html, plot = exported(name)
+    assert result.sim_time < 0.5  # settles in a few frames of real time
+    timeline = viz.timeline
+    # Slowed down so that it lasts MIN_PLAYBACK_SECONDS (>= 2 s) of playback.
+    assert timeline.duration == pytest.approx(play.MIN_PLAYBACK_SECONDS) and timeline.duration >= 2
+    assert timeline.speed == pytest.approx(result.sim_time / play.MIN_PLAYBACK_SECONDS)
+    # A keyframe at least every 1.5 / FPS s of the motion (the last step is the hold).
+    steps = np.diff(timeline.times)
+    assert steps[:-1].max() <= 1.5 / play.FPS + 1e-12 and steps[-1] == play.HOLD_SECONDS
+    # The recorded configurations are among the keyframes, at their time (simulated time /
+    # speed), then the final pose (result.q, the last sample polished); those between are on
+    # Pinocchio's interpolation of their neighbours.
+    trace = result.trace
+    assert np.allclose(timeline.q[-1], result.q)
+    kept = trace.time < result.sim_time
+    for t, q in zip(trace.time[kept], trace.q[kept], strict=True):
+        k = int(np.argmin(np.abs(timeline.times - (t - trace.time[0]) / timeline.speed)))
+        assert np.allclose(timeline.q[k], q, atol=1e-12)
+    k = 1
+    recorded = np.isclose(
+        timeline.times[:, None], (trace.time[kept] - trace.time[0]) / timeline.speed
+    )
+    while recorded[k].any():
+        k += 1
+    before, after = k - 1, k + 1
+    while not recorded[after].any() and timeline.times[after] < timeline.duration:
+        after += 1
+    u = (timeline.times[k] - timeline.times[before]) / (
+        timeline.times[after] - timeline.times[before]
+    )
+    expected = pinocchio.interpolate(scene.model, timeline.q[before], timeline.q[after], u)
+    assert np.allclose(timeline.q[k], expected, atol=1e-12)
+    # The page says the factor.
+    assert play.speed_label(timeline.speed) == f"x{timeline.speed:.3g} (slow motion)"
+    assert f'"speed_label": "x{timeline.speed:.3g} (slow motion)"' in html.read_text("utf-8")
+
+
+def test_speed_overrides_the_slow_motion(tmp_path):
+    play = _play()
+    scene = pinsettle.load_scene(ROBOTS / "fourbar.toml")
+    result = pinsettle.solve(scene, **play.TRACE_SETTINGS)
+    viz = play.play(scene, result, speed=1.0, live=False)
+    assert viz.timeline.speed == 1.0
+    assert viz.timeline.duration == pytest.approx(result.sim_time)
+    assert play.speed_label(1.0) == "x1 (real time)" and play.speed_label(4.2) == "x4.2 (sped up)"
+    proc = subprocess.run(
+        [sys.executable, "-m", "pinsettle", "play", "fourbar", "--no-open", "--speed", "0.1"]
+        + ["--html", str(tmp_path / "f.html")],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert f"in {result.sim_time / 0.1:.3g} s (speed x0.1)" in proc.stdout
+
+
+def test_screenshot_of_a_short_settle_moves_between_start_and_end(exported, browser, tmp_path):
+    scene, result, viz, html, plot = exported("fourbar")
+    h = 600
+    below = slice(h // 5, h)  # below the overlay
+    shots = {
+        t: screenshot(browser, f"{html.as_uri()}#t={t}", tmp_path / f"{t}.png")[below]
+        for t in (0, 1.5, viz.timeline.duration)
+    }
+    start, middle, end = shots.values()
+
+    def changed(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.mean(np.abs(a - b).max(axis=2) > 0.05))
+
+    # Half-way through the playback the four-bar is neither where it started nor at rest.
+    assert changed(start, middle) > 0.002 and changed(middle, end) > 0.002, (
+        changed(start, middle),
+        changed(middle, end),
+    )

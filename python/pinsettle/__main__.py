@@ -433,8 +433,8 @@ _SOLVING = (
             flag(
                 "--speed",
                 metavar="X",
-                help="simulated seconds per second of playback (default: real time, or faster "
-                "so that a long settle plays in about 6 s)",
+                help="simulated seconds per second of playback (default: real time, faster so "
+                "that a long settle plays in about 6 s, slower so that a short one plays in 3 s)",
             ),
             flag("--html", metavar="FILE", help="write a static HTML page (no server)"),
             flag(

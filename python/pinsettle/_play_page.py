@@ -46,8 +46,8 @@ _OVERLAY_JS = """
     const now = (viewer.animator && viewer.animator.time) || 0;
     const t = Math.min(now, info.duration);
     const held = now >= info.duration && info.duration > 0;
-    clock.textContent = "t = " + (t * info.speed).toFixed(3) + " s simulated (x" +
-      info.speed.toPrecision(3) + ")" + (held ? ", final pose held" : "");
+    clock.textContent = "t = " + (t * info.speed).toFixed(3) + " s simulated, played " +
+      info.speed_label + (held ? ", final pose held" : "");
     const parts = [];
     let total = 0;
     for (const kind of ["damping", "push", "rollback", "impact"]) {

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, overload
 
 import numpy as np
@@ -12,6 +12,9 @@ from ._solve import Result
 
 #: A settle longer than this (simulated seconds) is sped up to play in about this long.
 PLAYBACK_SECONDS = 6.0
+#: A settle shorter than this (simulated seconds) is slowed down to play in this long: a
+#: four-bar settles in 0.18 s, a handful of frames in real time, seen as a jump.
+MIN_PLAYBACK_SECONDS = 3.0
 #: Keyframes per second of playback (at most; fewer when the trace has fewer samples).
 FPS = 30
 #: The final pose is held this long at the end of the animation (s), then stays (clamped).
@@ -52,8 +55,21 @@ def check_speed(speed: Any) -> float | None:
 
 
 def auto_speed(sim_time: float) -> float:
-    """Real time, or faster for a settle longer than ``PLAYBACK_SECONDS``."""
-    return max(1.0, sim_time / PLAYBACK_SECONDS) if math.isfinite(sim_time) else 1.0
+    """Real time; faster for a settle longer than ``PLAYBACK_SECONDS`` (it plays in that
+    long), slower for one shorter than ``MIN_PLAYBACK_SECONDS`` (it plays in that long)."""
+    if not math.isfinite(sim_time) or sim_time <= 0:
+        return 1.0
+    if sim_time < MIN_PLAYBACK_SECONDS:
+        return sim_time / MIN_PLAYBACK_SECONDS
+    return max(1.0, sim_time / PLAYBACK_SECONDS)
+
+
+def speed_label(speed: float) -> str:
+    """How the page and the command line say the speed: the factor, and what it means."""
+    if math.isclose(speed, 1.0, rel_tol=1e-9):
+        return "x1 (real time)"
+    kind = "slow motion" if speed < 1 else "sped up"
+    return f"x{speed:.3g} ({kind})"
 
 
 @dataclass(frozen=True)
@@ -142,6 +158,32 @@ def make_timeline(result: Result, nq: int, speed: float | None = None) -> Timeli
         if kind == "impact":
             impact_joints = joints[chosen][order]
     return Timeline(times, poses, speed, duration, sim_time, events, impact_joints)
+
+
+def densify(timeline: Timeline, model: Any) -> Timeline:
+    """``timeline`` with a keyframe at least every 1 / ``FPS`` s of the motion: a settle of
+    a few steps played in slow motion has keyframes seconds apart, and the viewer would move
+    each shape in a straight line between them (a chain's links drifting apart); the frames
+    between are Pinocchio's interpolation of the configurations, so that every link stays on
+    its joint."""
+    import pinocchio
+
+    times, poses = [timeline.times[:1]], [timeline.q[:1]]
+    motion = np.flatnonzero(timeline.times <= timeline.duration)
+    for i in motion[:-1]:
+        gap = timeline.times[i + 1] - timeline.times[i]
+        extra = round(gap * FPS) - 1  # a gap of up to 1.5 frames is kept as it is
+        u = np.arange(1, extra + 1) / (extra + 1) if extra > 0 else np.zeros(0)
+        q0, q1 = timeline.q[i], timeline.q[i + 1]
+        between = [pinocchio.interpolate(model, q0, q1, float(x)) for x in u]
+        times.append(timeline.times[i] + u * gap)
+        times.append(timeline.times[i + 1 : i + 2])
+        poses.append(np.reshape(between, (-1, timeline.q.shape[1])))
+        poses.append(timeline.q[i + 1 : i + 2])
+    rest = slice(motion[-1] + 1, None) if motion.size else slice(1, None)
+    times.append(timeline.times[rest])
+    poses.append(timeline.q[rest])
+    return replace(timeline, times=np.concatenate(times), q=np.concatenate(poses))
 
 
 def _pulse(grid: np.ndarray, times: np.ndarray) -> np.ndarray:

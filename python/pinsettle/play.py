@@ -3,8 +3,8 @@
 ``pinsettle.play(scene, result)`` draws the scene (its URDF's visual shapes and meshes, or a
 stick figure when it has none), its springs following the motion, a flash at each damping
 event, and plays the recorded trajectory with time scaled so that a long settle plays in a few
-seconds; the final pose is held. ``plot_energy(result, path)`` draws both energy measures
-against time with the damping events (PNG).
+seconds (and a short one in slow motion); the final pose is held. ``plot_energy(result, path)``
+draws both energy measures against time with the damping events (PNG).
 
 meshcat and matplotlib are an optional extra (``pip install 'pinsettle[viz]'``): they are
 imported inside the functions, never by ``import pinsettle`` nor by a solve.
@@ -30,7 +30,7 @@ import pinocchio
 
 from ._play_animation import build_animation
 from ._play_extra import VIZ_INSTALL, MissingDependencyError, require
-from ._play_meshes import _normal_mesh_class, _stick_figure, _visual_model, read_stl
+from ._play_meshes import _normal_mesh_class, _stick_figure, _visual_model, dae_mesh, read_stl
 from ._play_page import _html
 from ._play_plot import _impact_names as _impact_names  # the legend's names, tested here
 from ._play_plot import plot_energy
@@ -40,11 +40,14 @@ from ._play_timeline import (
     FLASH_SECONDS,
     FPS,
     HOLD_SECONDS,
+    MIN_PLAYBACK_SECONDS,
     PLAYBACK_SECONDS,
     Timeline,
     auto_speed,
     check_speed,
+    densify,
     make_timeline,
+    speed_label,
 )
 from ._scene import Scene, load_scene
 from ._solve import Result, solve
@@ -55,6 +58,7 @@ __all__ = [
     "FLASH_SECONDS",
     "FPS",
     "HOLD_SECONDS",
+    "MIN_PLAYBACK_SECONDS",
     "PLAYBACK_SECONDS",
     "SERVER_TIMEOUT",
     "TRACE_SETTINGS",
@@ -63,11 +67,13 @@ __all__ = [
     "Timeline",
     "auto_speed",
     "check_speed",
+    "densify",
     "make_timeline",
     "play",
     "plot_energy",
     "read_stl",
     "require",
+    "speed_label",
 ]
 
 #: Solver settings that record what playback needs (every step, at most 4096 samples kept:
@@ -142,6 +148,7 @@ class _Playback:
             "scene": self.scene.name,
             "status": status,
             "speed": self.timeline.speed,
+            "speed_label": speed_label(self.timeline.speed),
             "duration": self.timeline.duration,
             "events": {k: v.tolist() for k, v in self.timeline.events.items()},
         }
@@ -162,9 +169,12 @@ def _visualizer_class() -> type:
 
         def loadMeshFromFile(self, geometry_object: Any) -> Any:  # noqa: N802  (pinocchio's)
             # STL: our own triangles with normals (meshcat's loader keeps the file's, often
-            # zeros: a black mesh); DAE and OBJ as pinocchio loads them.
+            # zeros: a black mesh); DAE split into one mesh per material (a multi-material
+            # mesh is not drawn); OBJ as pinocchio loads it.
             if geometry_object.meshPath.lower().endswith(".stl"):
                 return _normal_mesh_class()(*read_stl(geometry_object.meshPath))
+            if geometry_object.meshPath.lower().endswith(".dae"):
+                return dae_mesh(geometry_object.meshPath)
             return super().loadMeshFromFile(geometry_object)
 
     return PlaybackVisualizer
@@ -202,7 +212,8 @@ def play(
             (``trace_configurations=True``, e.g. ``**TRACE_SETTINGS``); None to solve here
             with the scene's settings and ``TRACE_SETTINGS``.
         speed: simulated seconds per second of playback; None: real time, or faster so that a
-            settle longer than ``PLAYBACK_SECONDS`` plays in about that long.
+            settle longer than ``PLAYBACK_SECONDS`` plays in about that long, or slower (slow
+            motion) so that one shorter than ``MIN_PLAYBACK_SECONDS`` plays in that long.
         html: also write the self-contained static page (no server needed to view it).
         plot: also write the energy plot (PNG; see ``plot_energy``).
         live: start a meshcat server on 127.0.0.1 (the returned visualizer's ``url``; stop it
@@ -223,7 +234,7 @@ def play(
     speed = check_speed(speed)
     if result is None:
         result = solve(scene, **TRACE_SETTINGS)
-    timeline = make_timeline(result, scene.model.nq, speed)
+    timeline = densify(make_timeline(result, scene.model.nq, speed), scene.model)
     visual = _visual_model(scene) or _stick_figure(scene.model)
     window = _Window(_LiveServer() if live else None)
     try:

@@ -321,6 +321,55 @@ def test_live_page_shows_the_robot(live, browser, tmp_path):
     assert drawn_fraction(pixels) > 0.002
 
 
+def page_dom(browser: str, url: str, budget_ms: int) -> str:
+    """The page's DOM after ``budget_ms`` of (virtual) time, as headless Chromium prints it."""
+    proc = subprocess.run(
+        [browser, "--headless", "--no-sandbox", "--disable-gpu", "--use-gl=swiftshader"]
+        + ["--enable-unsafe-swiftshader", "--window-size=800,600"]
+        + [f"--virtual-time-budget={budget_ms}", "--dump-dom", url],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert "<html" in proc.stdout, proc.stderr[-2000:]
+    return proc.stdout
+
+
+def _overlay_text(dom: str) -> str:
+    """The text the overlay shows (its elements' text, tags dropped)."""
+    found = re.search(r'<div id="pinsettle-overlay"[^>]*>(.*?)</div>\s*<script', dom, re.S)
+    assert found, "no overlay in the page"
+    return re.sub(r"<[^>]+>", " ", found.group(1))
+
+
+def _overlay_pixels(pixels: np.ndarray) -> int:
+    """Dark (text) pixels where the overlay's box is (top left)."""
+    return int(np.count_nonzero(pixels[12:90, 12:480].max(axis=2) < 0.35))
+
+
+def test_live_page_has_the_overlay_of_the_static_page(live, browser, tmp_path):
+    # The live page carries the static page's overlay: the same information, the same script.
+    page = urllib.request.urlopen(live.url, timeout=10).read().decode("utf-8")
+    static = live.html()
+    for part in ('<div id="pinsettle-overlay">', "pinsettle-info", "function tick()"):
+        assert part in page and part in static
+    info = re.compile(r'id="pinsettle-info">(.*?)</script>', re.S)
+    assert info.search(page).group(1) == info.search(static).group(1)
+    # Played to the end in a browser: the title, the simulated time and speed, the counter.
+    result, timeline = live.result, live.timeline
+    text = " ".join(_overlay_text(page_dom(browser, live.url, 8000)).split())
+    assert text.startswith(f"ur5_tool_spring {result.status}: {result.steps} steps")
+    simulated = timeline.duration * timeline.speed
+    label = _play().speed_label(timeline.speed)
+    assert f"t = {simulated:.3f} s simulated, played {label}, final pose held" in text
+    n = len(timeline.events["damping"])
+    assert n == result.peaks > 0 and f"damping events {n} / {n}" in text
+    # ... and on screen: the overlay's text where meshcat's own page (no overlay) has none.
+    ours = screenshot(browser, live.url, tmp_path / "live.png", 8000)
+    plain = screenshot(browser, live.url.replace("/pinsettle/", "/static/"), tmp_path / "m.png")
+    assert _overlay_pixels(ours) > 300 and _overlay_pixels(plain) == 0
+
+
 # --- impacts on a stop: the link flashes ------------------------------------------------------
 
 

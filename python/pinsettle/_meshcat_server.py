@@ -5,7 +5,10 @@ every interface; this one binds both to 127.0.0.1. It prints ``zmq_url=...`` and
 ``web_url=...`` on stdout (as meshcat's server does), then stops writing anything, and exits
 by itself when the process that started it (``--parent PID``) is gone.
 
-Usage: ``python -m pinsettle._meshcat_server --parent PID``.
+With ``--page FILE`` it also serves that page at /pinsettle/ (pinsettle's live page: meshcat's
+viewer and the playback's overlay) and prints that address as web_url.
+
+Usage: ``python -m pinsettle._meshcat_server --parent PID [--page FILE]``.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -22,8 +26,16 @@ if TYPE_CHECKING:
 HOST = "127.0.0.1"
 
 
-def _bridge_class() -> type[Any]:
+def _bridge_class(page: str | None = None) -> type[Any]:
+    import tornado.web
     from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+    class PageHandler(tornado.web.RequestHandler):
+        """pinsettle's live page (meshcat's viewer and the playback's overlay)."""
+
+        def get(self) -> None:
+            self.set_header("Cache-Control", "no-store")
+            self.write(page or "")
 
     class LoopbackBridge(ZMQWebSocketBridge):  # type: ignore[misc]  # meshcat: no types
         """meshcat's bridge with its web server bound to 127.0.0.1 (not every interface)."""
@@ -39,6 +51,8 @@ def _bridge_class() -> type[Any]:
 
             # The bridge looks the method up on the instance (mypy forbids assigning a method).
             app.listen = listen_on_loopback  # type: ignore[method-assign]
+            if page is not None:
+                app.wildcard_router.add_rules([(r"/pinsettle/", PageHandler)])
             return app
 
     return LoopbackBridge
@@ -47,13 +61,16 @@ def _bridge_class() -> type[Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pinsettle._meshcat_server")
     parser.add_argument("--parent", type=int, default=None, help="exit when this process is gone")
+    parser.add_argument("--page", default=None, help="an HTML file to serve at /pinsettle/")
     args = parser.parse_args(argv)
 
     import tornado.ioloop
 
-    bridge = _bridge_class()(host=HOST)
+    page = None if args.page is None else Path(args.page).read_text(encoding="utf-8")
+    bridge = _bridge_class(page)(host=HOST)
+    web_url = bridge.web_url if page is None else bridge.web_url.replace("/static/", "/pinsettle/")
     print(f"zmq_url={bridge.zmq_url}", flush=True)
-    print(f"web_url={bridge.web_url}", flush=True)
+    print(f"web_url={web_url}", flush=True)
     # Nothing reads our output from now on: send it nowhere, so that a full pipe never blocks.
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)

@@ -1,5 +1,6 @@
-"""The static page of a playback: meshcat's viewer inline, the scene's commands, the animation
-and an overlay (scene, status, simulated time, event counts).
+"""The pages of a playback: the static one (meshcat's viewer inline, the scene's commands, the
+animation) and the live one (fed by the server), both with the same overlay (scene, status,
+simulated time and speed, event counts, a flash at each event).
 """
 
 from __future__ import annotations
@@ -123,11 +124,34 @@ def _html(commands: list[bytes], animation: bytes | None, overlay: dict[str, Any
         parts.append(f'<script id="pinsettle-animation">pinsettle_apply("{b64}");</script>\n')
         parts.append(f"<script>{_END_JS}</script>\n")
     if overlay is not None:
-        parts.append('<div id="pinsettle-overlay"></div>\n')
-        parts.append(
-            f'<script type="application/json" id="pinsettle-info">{_script_json(overlay)}'
-            "</script>\n"
-        )
-        parts.append(f"<script>{_OVERLAY_JS}</script>\n")
+        parts.append(_overlay_html(overlay))
     parts.append("</body>\n</html>\n")
     return "".join(parts)
+
+
+def _overlay_html(overlay: dict[str, Any]) -> str:
+    """The overlay (its box, what it shows, its script), the same on the static and the live
+    page."""
+    return (
+        '<div id="pinsettle-overlay"></div>\n'
+        f'<script type="application/json" id="pinsettle-info">{_script_json(overlay)}'
+        "</script>\n"
+        f"<script>{_OVERLAY_JS}</script>\n"
+    )
+
+
+def live_page(overlay: dict[str, Any]) -> str:
+    """The live page: meshcat's viewer from the server's /static/ folder, fed by its
+    websocket (as meshcat's own index.html), and the overlay of the static page."""
+    return "".join(
+        [
+            '<!DOCTYPE html>\n<html>\n<head>\n<meta charset="utf-8">\n',
+            "<title>pinsettle playback</title>\n",
+            f'<style>{_OVERLAY_CSS}</style>\n</head>\n<body>\n<div id="meshcat-pane"></div>\n',
+            '<script src="/static/main.min.js"></script>\n',
+            '<script>\nvar viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));\n',
+            "viewer.connect();\n</script>\n",
+            _overlay_html(overlay),
+            "</body>\n</html>\n",
+        ]
+    )

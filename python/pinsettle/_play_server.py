@@ -9,6 +9,7 @@ import os
 import selectors
 import subprocess
 import sys
+import tempfile
 import time
 import webbrowser
 from pathlib import Path
@@ -24,10 +25,26 @@ SERVER_TIMEOUT = 20.0
 
 
 class _LiveServer:
-    """A meshcat server on 127.0.0.1 in a child process (pinsettle._meshcat_server)."""
+    """A meshcat server on 127.0.0.1 in a child process (pinsettle._meshcat_server); with a
+    ``page`` (HTML), it serves that page at /pinsettle/, its ``web_url``."""
 
-    def __init__(self) -> None:
+    def __init__(self, page: str | None = None) -> None:
         command = [sys.executable, "-m", "pinsettle._meshcat_server", "--parent", str(os.getpid())]
+        page_file = None
+        if page is not None:  # handed over in a file, read by the server before it answers
+            with tempfile.NamedTemporaryFile(
+                "w", suffix=".html", prefix="pinsettle_", delete=False, encoding="utf-8"
+            ) as out:
+                out.write(page)
+            page_file = Path(out.name)
+            command += ["--page", str(page_file)]
+        try:
+            self._start(command)
+        finally:
+            if page_file is not None:
+                page_file.unlink(missing_ok=True)
+
+    def _start(self, command: list[str]) -> None:
         env = dict(os.environ)
         here = str(Path(__file__).resolve().parents[1])
         env["PYTHONPATH"] = os.pathsep.join([here, *filter(None, [env.get("PYTHONPATH")])])

@@ -31,7 +31,7 @@ import pinocchio
 from ._play_animation import build_animation
 from ._play_extra import VIZ_INSTALL, MissingDependencyError, require
 from ._play_meshes import _normal_mesh_class, _stick_figure, _visual_model, dae_mesh, read_stl
-from ._play_page import _html
+from ._play_page import _html, live_page
 from ._play_plot import _impact_names as _impact_names  # the legend's names, tested here
 from ._play_plot import plot_energy
 from ._play_server import SERVER_TIMEOUT, _LiveServer, _Window
@@ -142,16 +142,20 @@ class _Playback:
         self.close()
 
     def _overlay(self) -> dict[str, Any]:
-        result = self.result
-        status = f"{result.status}: {result.steps} steps, {result.peaks} damping events"
-        return {
-            "scene": self.scene.name,
-            "status": status,
-            "speed": self.timeline.speed,
-            "speed_label": speed_label(self.timeline.speed),
-            "duration": self.timeline.duration,
-            "events": {k: v.tolist() for k, v in self.timeline.events.items()},
-        }
+        return _overlay(self.scene, self.result, self.timeline)
+
+
+def _overlay(scene: Scene, result: Result, timeline: Timeline) -> dict[str, Any]:
+    """What the overlay of both pages shows (see ``_play_page``)."""
+    status = f"{result.status}: {result.steps} steps, {result.peaks} damping events"
+    return {
+        "scene": scene.name,
+        "status": status,
+        "speed": timeline.speed,
+        "speed_label": speed_label(timeline.speed),
+        "duration": timeline.duration,
+        "events": {k: v.tolist() for k, v in timeline.events.items()},
+    }
 
 
 @lru_cache(maxsize=1)
@@ -236,7 +240,8 @@ def play(
         result = solve(scene, **TRACE_SETTINGS)
     timeline = densify(make_timeline(result, scene.model.nq, speed), scene.model)
     visual = _visual_model(scene) or _stick_figure(scene.model)
-    window = _Window(_LiveServer() if live else None)
+    page = live_page(_overlay(scene, result, timeline))
+    window = _Window(_LiveServer(page) if live else None)
     try:
         viz = _loaded_visualizer(window, scene, result, timeline, visual)
         if html is not None:

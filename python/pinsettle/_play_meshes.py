@@ -1,9 +1,12 @@
-"""The shapes a playback draws: a URDF's visual shapes and meshes (STL read with normals), a
-stick figure for a model without them, a coil for a spring, and their bounding boxes.
+"""The shapes a playback draws: a URDF's visual shapes and meshes (STL read with normals, DAE
+split into one mesh per material), a stick figure for a model without them, a coil for a spring,
+and their bounding boxes.
 """
 
 from __future__ import annotations
 
+import copy
+import xml.etree.ElementTree as ET
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -89,6 +92,125 @@ def read_stl(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     vertices = triangles.reshape(-1, 3)
     faces = np.arange(vertices.shape[0]).reshape(-1, 3)
     return vertices, faces, np.repeat(normal, 3, axis=0)
+
+
+#: The primitives of a COLLADA <mesh>: ColladaLoader draws each <geometry> as one three.js mesh.
+_DAE_PRIMITIVES = frozenset(
+    "triangles polylist polygons trifans tristrips lines linestrips".split()
+)
+
+
+def _dae_tag(element: ET.Element) -> str:
+    return element.tag.rpartition("}")[2]
+
+
+def _mesh_of(geometry: ET.Element) -> ET.Element | None:
+    return next((child for child in geometry if _dae_tag(child) == "mesh"), None)
+
+
+def _split_geometry(geometry: ET.Element) -> list[ET.Element]:
+    """Copies of a COLLADA <geometry> whose <mesh> uses several materials, one per material
+    (each keeping the primitives of its material, the ids inside renamed), the first being the
+    original element kept under its id; [geometry] when it uses one material or none."""
+    mesh = _mesh_of(geometry)
+    primitives = [] if mesh is None else [c for c in mesh if _dae_tag(c) in _DAE_PRIMITIVES]
+    materials = list(dict.fromkeys(p.get("material") for p in primitives))
+    if len(materials) < 2:
+        return [geometry]
+    pieces = [geometry] + [copy.deepcopy(geometry) for _ in materials[1:]]
+    for k, (piece, material) in enumerate(zip(pieces, materials, strict=True)):
+        if k:
+            _rename_ids(piece, f"-pinsettle-{k}")
+        _keep_material(piece, material)
+    return pieces
+
+
+def _keep_material(geometry: ET.Element, material: str | None) -> None:
+    """Remove the primitives of the geometry's mesh drawn in another material."""
+    mesh = _mesh_of(geometry)
+    if mesh is None:
+        return
+    for child in list(mesh):
+        if _dae_tag(child) in _DAE_PRIMITIVES and child.get("material") != material:
+            mesh.remove(child)
+
+
+def _rename_ids(element: ET.Element, suffix: str) -> None:
+    """Every id inside ``element`` (itself included) suffixed, the references to them too."""
+    renamed = {}
+    for node in element.iter():
+        if "id" in node.attrib:
+            renamed[node.attrib["id"]] = node.attrib["id"] + suffix
+            node.attrib["id"] += suffix
+    for node in element.iter():
+        source = node.get("source", "")
+        if source.startswith("#") and source[1:] in renamed:
+            node.set("source", "#" + renamed[source[1:]])
+
+
+def split_dae_materials(text: str) -> str:
+    """COLLADA text in which every <geometry> using several materials is split into one
+    <geometry> per material, each drawn where the original was (its <instance_geometry>
+    repeated). meshcat's viewer merges a DAE's meshes into one with a list of materials, and a
+    mesh with several materials becomes one entry of that list that three.js skips without an
+    error (the UR5's shoulder, upper arm and wrists drew in pieces). The text is returned as it
+    is when nothing needs splitting, or when it is not COLLADA XML that can be rewritten."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return text  # assimp read it for pinocchio: ColladaLoader is left to try it as it is
+    skinned = {
+        node.get("source", "")[1:] for node in root.iter() if _dae_tag(node) in ("skin", "morph")
+    }
+    split: dict[str, list[str]] = {}
+    for library in [node for node in root.iter() if _dae_tag(node) == "library_geometries"]:
+        for at, geometry in reversed(list(enumerate(library))):
+            if _dae_tag(geometry) != "geometry" or geometry.get("id") in skinned:
+                continue
+            pieces = _split_geometry(geometry)
+            if len(pieces) > 1:
+                split[str(geometry.get("id"))] = [str(p.get("id")) for p in pieces[1:]]
+                for offset, piece in enumerate(pieces[1:], start=1):
+                    library.insert(at + offset, piece)
+    if not split:
+        return text
+    _repeat_instances(root, split)
+    return _unqualified_xml(root)
+
+
+def _unqualified_xml(root: ET.Element) -> str:
+    """The document as text, COLLADA's namespace the default one (ElementTree would write it
+    as a prefix, ``ns0:geometry``, which ColladaLoader does not read as ``geometry``)."""
+    if root.tag.startswith("{"):
+        namespace = root.tag[1:].partition("}")[0]
+        for node in root.iter():
+            if node.tag.startswith("{" + namespace + "}"):
+                node.tag = _dae_tag(node)
+        root.set("xmlns", namespace)
+    return ET.tostring(root, encoding="unicode")
+
+
+def _repeat_instances(root: ET.Element, split: dict[str, list[str]]) -> None:
+    """After each <instance_geometry> of a split geometry, one for each of its other pieces."""
+    for parent in list(root.iter()):
+        for at, child in reversed(list(enumerate(parent))):
+            url = child.get("url", "")
+            if _dae_tag(child) != "instance_geometry" or url[1:] not in split:
+                continue
+            for offset, piece in enumerate(split[url[1:]], start=1):
+                instance = copy.deepcopy(child)
+                instance.set("url", "#" + piece)
+                parent.insert(at + offset, instance)
+
+
+def dae_mesh(path: str | Path) -> Any:
+    """pinocchio's meshcat element for the DAE file at ``path`` (the file's own materials,
+    textures inlined), its multi-material meshes split by ``split_dae_materials``."""
+    from pinocchio.visualize.meshcat_visualizer import DaeMeshGeometry
+
+    mesh = DaeMeshGeometry(str(path))
+    mesh.dae_raw = split_dae_materials(mesh.dae_raw)
+    return mesh
 
 
 def _stick_figure(model: pinocchio.Model) -> pinocchio.GeometryModel:

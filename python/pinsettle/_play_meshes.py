@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import xml.etree.ElementTree as ET
+from collections import Counter
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -94,7 +95,8 @@ def read_stl(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return vertices, faces, np.repeat(normal, 3, axis=0)
 
 
-#: The primitives of a COLLADA <mesh>: ColladaLoader draws each <geometry> as one three.js mesh.
+#: The primitives of a COLLADA <mesh>. three.js's ColladaLoader makes one mesh of the
+#: primitives of one kind (with one material each), LineSegments of the lines.
 _DAE_PRIMITIVES = frozenset(
     "triangles polylist polygons trifans tristrips lines linestrips".split()
 )
@@ -109,30 +111,35 @@ def _mesh_of(geometry: ET.Element) -> ET.Element | None:
 
 
 def _split_geometry(geometry: ET.Element) -> list[ET.Element]:
-    """Copies of a COLLADA <geometry> whose <mesh> uses several materials, one per material
-    (each keeping the primitives of its material, the ids inside renamed), the first being the
-    original element kept under its id; [geometry] when it uses one material or none."""
+    """Copies of a COLLADA <geometry> whose <mesh> has several primitives of one kind (several
+    <triangles>, each in its material), the k-th copy keeping the k-th primitive of each kind,
+    the ids inside renamed; the first is the original element, under its id. [geometry] when
+    each kind has one primitive at most."""
     mesh = _mesh_of(geometry)
-    primitives = [] if mesh is None else [c for c in mesh if _dae_tag(c) in _DAE_PRIMITIVES]
-    materials = list(dict.fromkeys(p.get("material") for p in primitives))
-    if len(materials) < 2:
+    kinds = Counter(_dae_tag(c) for c in ([] if mesh is None else mesh))
+    pieces = max((n for kind, n in kinds.items() if kind in _DAE_PRIMITIVES), default=0)
+    if pieces < 2:
         return [geometry]
-    pieces = [geometry] + [copy.deepcopy(geometry) for _ in materials[1:]]
-    for k, (piece, material) in enumerate(zip(pieces, materials, strict=True)):
+    out = [geometry] + [copy.deepcopy(geometry) for _ in range(pieces - 1)]
+    for k, piece in enumerate(out):
         if k:
             _rename_ids(piece, f"-pinsettle-{k}")
-        _keep_material(piece, material)
-    return pieces
+        _keep_primitives(piece, k)
+    return out
 
 
-def _keep_material(geometry: ET.Element, material: str | None) -> None:
-    """Remove the primitives of the geometry's mesh drawn in another material."""
+def _keep_primitives(geometry: ET.Element, k: int) -> None:
+    """Remove from the geometry's mesh all primitives but the k-th one of each kind."""
     mesh = _mesh_of(geometry)
     if mesh is None:
         return
+    seen: Counter[str] = Counter()
     for child in list(mesh):
-        if _dae_tag(child) in _DAE_PRIMITIVES and child.get("material") != material:
-            mesh.remove(child)
+        kind = _dae_tag(child)
+        if kind in _DAE_PRIMITIVES:
+            seen[kind] += 1
+            if seen[kind] != k + 1:
+                mesh.remove(child)
 
 
 def _rename_ids(element: ET.Element, suffix: str) -> None:
@@ -149,11 +156,12 @@ def _rename_ids(element: ET.Element, suffix: str) -> None:
 
 
 def split_dae_materials(text: str) -> str:
-    """COLLADA text in which every <geometry> using several materials is split into one
-    <geometry> per material, each drawn where the original was (its <instance_geometry>
-    repeated). meshcat's viewer merges a DAE's meshes into one with a list of materials, and a
-    mesh with several materials becomes one entry of that list that three.js skips without an
-    error (the UR5's shoulder, upper arm and wrists drew in pieces). The text is returned as it
+    """COLLADA text in which every <geometry> with several primitives of one kind (several
+    <triangles>, each in its material) is split into geometries of one primitive each, drawn
+    where the original was (its <instance_geometry> repeated). meshcat's viewer merges a DAE's
+    meshes into one with a list of materials, and a mesh with several materials becomes one
+    entry of that list, which three.js skips without an error (the UR5's shoulder, upper arm
+    and wrists drew in pieces). The text is returned as it
     is when nothing needs splitting, or when it is not COLLADA XML that can be rewritten."""
     try:
         root = ET.fromstring(text)

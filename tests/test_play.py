@@ -665,3 +665,105 @@ def test_screenshot_of_a_short_settle_moves_between_start_and_end(exported, brow
         changed(start, middle),
         changed(middle, end),
     )
+
+
+# --- what holds a rest: loads, loop closure points, stop reactions ------------------------------
+
+
+def _clips(viz) -> dict:
+    return {str(path.lower()): clip for path, clip in viz.animation.clips.items()}
+
+
+def _rotate(quaternion_xyzw, vector) -> np.ndarray:
+    x, y, z, w = quaternion_xyzw
+    return pinocchio.Quaternion(w, x, y, z).matrix() @ np.asarray(vector, dtype=float)
+
+
+def test_a_point_load_is_an_arrow_from_its_point_along_its_force(exported):
+    scene, result, viz, html, plot = exported("fourbar_stop")
+    (load,) = scene.loads  # 10 N down at 0.2 m along the coupler
+    model, data = scene.model, scene.model.createData()
+    frame = model.getFrameId(load.frame)
+    force = np.asarray(load.force)
+    clip = _clips(viz)["/meshcat/pinsettle/forces/load_0"]
+    position, quaternion = clip.tracks["position"].values, clip.tracks["quaternion"].values
+    scale = clip.tracks["scale"].values
+    assert len(position) == viz.timeline.times.size
+    for q, at, turn, s in zip(viz.timeline.q, position, quaternion, scale, strict=True):
+        pinocchio.framesForwardKinematics(model, data, q)
+        # Its tail on the load's point (Pinocchio's placement of the frame), its axis (the
+        # arrow's +y) along the world-aligned force, its length constant.
+        assert np.allclose(at, data.oMf[frame].act(np.asarray(load.point)), atol=1e-12)
+        assert np.allclose(_rotate(turn, [0, 1, 0]), force / np.linalg.norm(force), atol=1e-9)
+        assert s[1] == pytest.approx(scale[0][1]) and s[1] > 0
+    # The last keyframe is the final pose.
+    pinocchio.framesForwardKinematics(model, data, result.q)
+    assert np.allclose(position[-1], data.oMf[frame].act(np.asarray(load.point)), atol=1e-12)
+
+
+def test_loop_closure_points_follow_their_bodies_and_meet_at_rest(exported):
+    scene, result, viz, html, plot = exported("fourbar")
+    (loop,) = scene.loops
+    model, data = scene.model, scene.model.createData()
+    clips = _clips(viz)
+    a = clips["/meshcat/pinsettle/forces/loop_0_a"].tracks["position"].values
+    b = clips["/meshcat/pinsettle/forces/loop_0_b"].tracks["position"].values
+    for q, at_a, at_b in zip(viz.timeline.q, a, b, strict=True):
+        pinocchio.framesForwardKinematics(model, data, q)
+        fa, fb = model.getFrameId(loop.a_frame), model.getFrameId(loop.b_frame)
+        assert np.allclose(at_a, data.oMf[fa].act(np.asarray(loop.a_point)), atol=1e-12)
+        assert np.allclose(at_b, data.oMf[fb].act(np.asarray(loop.b_point)), atol=1e-12)
+    assert np.linalg.norm(np.subtract(a[-1], b[-1])) < 1e-8  # closed at rest
+
+
+def test_a_stop_reaction_is_an_arrow_at_the_end(exported):
+    import umsgpack
+    from meshcat.servers.tree import find_node
+
+    play = _play()
+    scene, result, viz, html, plot = exported("fourbar_stop")
+    assert result.at_limit == {"rocker_joint": "upper"}
+    # The arrow: at the rocker's joint (Pinocchio's placement at rest), along its axis (y of
+    # the joint's frame), pointing down the joint's angle (an upper stop pushes q down).
+    model, data = scene.model, scene.model.createData()
+    joint = model.getJointId("rocker_joint")
+    assert model.joints[joint].shortname() == "JointModelRY"
+    pinocchio.forwardKinematics(model, data, result.q)
+    axis = data.oMi[joint].rotation[:, 1]
+    node = find_node(viz.window.tree, ["meshcat", "pinsettle", "forces", "stop_0"])
+    matrix = np.array(umsgpack.unpackb(node.transform)["matrix"]).reshape(4, 4).T
+    assert np.allclose(matrix[:3, 3], data.oMi[joint].translation, atol=1e-12)
+    direction = matrix[:3, 1] / np.linalg.norm(matrix[:3, 1])
+    assert np.allclose(direction, -axis, atol=1e-9)
+    # Shown once the motion is over, hidden before.
+    visible = _clips(viz)["/meshcat/pinsettle/forces/stop_0"].tracks["visible"]
+    assert visible.values == [False, False, True]
+    assert visible.frames[-1] == pytest.approx(viz.timeline.duration * play.FPS)
+    # The legend says what each mark is, with the reaction's value.
+    legend = play.play.__globals__["_overlay"](scene, result, viz.timeline)["legend"]
+    texts = " | ".join(mark["text"] for mark in legend)
+    assert "point load" in texts and "10 N on coupler" in texts
+    assert "loop closure points" in texts
+    reaction = result.limit_reactions["rocker_joint"]
+    assert "stop reaction" in texts and f"rocker_joint {reaction:.3g} N m" in texts
+    assert '"legend": [' in html.read_text("utf-8")
+
+
+def _color_pixels(pixels: np.ndarray, color: int) -> int:
+    """Pixels of the flat colour ``color``, the legend's swatches (left of the overlay's text)
+    left out."""
+    rgb = np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255]) / 255
+    found = np.abs(pixels - rgb).max(axis=2) < 0.03
+    found[:160, :40] = False
+    return int(np.count_nonzero(found))
+
+
+def test_screenshot_shows_the_load_the_loop_and_the_stop_reaction(exported, browser, tmp_path):
+    forces = importlib.import_module("pinsettle._play_forces")
+    scene, result, viz, html, plot = exported("fourbar_stop")
+    end = screenshot(browser, html.as_uri() + "#end", tmp_path / "end.png")
+    moving = screenshot(browser, html.as_uri() + "#t=1", tmp_path / "moving.png")
+    for color in (forces.LOAD_COLOR, forces.LOOP_COLOR):
+        assert _color_pixels(end, color) > 200 and _color_pixels(moving, color) > 200
+    assert _color_pixels(end, forces.STOP_COLOR) > 200
+    assert _color_pixels(moving, forces.STOP_COLOR) == 0

@@ -11,9 +11,11 @@ from typing import Any
 import numpy as np
 import pinocchio
 
+from ._play_forces import draw_forces
 from ._play_meshes import _decompose, _frame_id, _helix, _local_corners, _normal_mesh_class
 from ._play_timeline import FPS, Timeline, _pulse
 from ._scene import Scene
+from ._solve import Result
 
 _SPRING_COLOR = 0xE8590C
 _END_COLOR = 0x343A40
@@ -153,9 +155,9 @@ class _Tracks:
         _add_visibility(self.animation, path, frames, shown)
 
 
-def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> Any:
-    """Load the mechanism, its springs and the event flashes into the viewer, place the
-    camera, and make the animation (returned)."""
+def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any, result: Result) -> Any:
+    """Load the mechanism, its springs, the event flashes and the forces that hold it into the
+    viewer, place the camera, and make the animation (returned)."""
     viz.loadViewerModel(rootNodeName="pinocchio")
     keys = _keyframes(viz, scene, timeline, visual)
     target, distance, size = _view(keys, visual)
@@ -169,6 +171,7 @@ def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> 
         _add_springs(viz.viewer, keys.ends, radius, tracks)
     _add_event_flashes(viz.viewer, timeline, keys.com, radius, tracks)
     _add_impact_flashes(viz, timeline, visual, keys, radius, tracks)
+    draw_forces(viz, scene, result, timeline, size, tracks)
     viz.display(timeline.q[-1])  # the final pose, also where the animation ends
     return tracks.animation
 

@@ -1,6 +1,7 @@
 """The pages of a playback: the static one (meshcat's viewer inline, the scene's commands, the
 animation) and the live one (fed by the server), both with the same overlay (scene, status,
-simulated time and speed, event counts, a flash at each event).
+simulated time and speed, event counts, a flash at each event, the legend of the forces'
+marks).
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ body { margin: 0; }
 }
 #pinsettle-overlay.flash { background: rgba(255, 176, 0, 0.85); }
 #pinsettle-overlay b { font-weight: 600; }
+.pinsettle-swatch {
+  display: inline-block; width: 10px; height: 10px; margin-right: 6px; border-radius: 2px;
+}
 """
 
 _OVERLAY_JS = """
@@ -34,6 +38,15 @@ _OVERLAY_JS = """
   title.firstChild.textContent = info.scene;
   title.lastChild.textContent = info.status;
   box.append(title, clock, counter);
+  for (const mark of info.legend || []) {  // what each mark of the forces is
+    const entry = document.createElement("div");
+    const swatch = document.createElement("span");
+    entry.className = "pinsettle-legend";
+    swatch.className = "pinsettle-swatch";
+    swatch.style.background = mark.color;
+    entry.append(swatch, document.createTextNode(mark.text));
+    box.append(entry);
+  }
   function upto(times, t) {
     let lo = 0, hi = times.length;
     while (lo < hi) {

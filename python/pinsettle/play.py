@@ -30,6 +30,7 @@ import pinocchio
 
 from ._play_animation import build_animation
 from ._play_extra import VIZ_INSTALL, MissingDependencyError, require
+from ._play_forces import forces_legend
 from ._play_meshes import _normal_mesh_class, _stick_figure, _visual_model, dae_mesh, read_stl
 from ._play_page import _html, live_page
 from ._play_plot import _impact_names as _impact_names  # the legend's names, tested here
@@ -149,6 +150,7 @@ def _overlay(scene: Scene, result: Result, timeline: Timeline) -> dict[str, Any]
     """What the overlay of both pages shows (see ``_play_page``)."""
     status = f"{result.status}: {result.steps} steps, {result.peaks} damping events"
     return {
+        "legend": forces_legend(scene, result),
         "scene": scene.name,
         "status": status,
         "speed": timeline.speed,
@@ -269,7 +271,7 @@ def _loaded_visualizer(
     viz.window = window
     viz.scene, viz.result, viz.timeline = scene, result, timeline
     viz.initViewer(viewer=meshcat.Visualizer(window=window)["pinsettle"])
-    viz.animation = build_animation(viz, scene, timeline, visual)
+    viz.animation = build_animation(viz, scene, timeline, visual, result)
     viz.viewer.set_animation(viz.animation, play=True, repetitions=1)
     return viz
 

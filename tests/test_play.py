@@ -740,9 +740,10 @@ def test_a_stop_reaction_is_an_arrow_at_the_end(exported):
     assert visible.values == [False, False, True]
     assert visible.frames[-1] == pytest.approx(viz.timeline.duration * play.FPS)
     # The legend says what each mark is, with the reaction's value.
-    legend = play.play.__globals__["_overlay"](scene, result, viz.timeline)["legend"]
+    legend = viz._overlay()["legend"]
     texts = " | ".join(mark["text"] for mark in legend)
-    assert "point load" in texts and "10 N on coupler" in texts
+    assert "arrow: load" in texts and "forces 10 N on coupler" in texts
+    assert "joint spring (crank_joint k = 4)" in texts
     assert "loop closure points" in texts
     reaction = result.limit_reactions["rocker_joint"]
     assert "stop reaction" in texts and f"rocker_joint {reaction:.3g} N m" in texts
@@ -767,3 +768,42 @@ def test_screenshot_shows_the_load_the_loop_and_the_stop_reaction(exported, brow
         assert _color_pixels(end, color) > 200 and _color_pixels(moving, color) > 200
     assert _color_pixels(end, forces.STOP_COLOR) > 200
     assert _color_pixels(moving, forces.STOP_COLOR) == 0
+
+
+def _joint_axis_world(model, data, joint: int) -> np.ndarray:
+    """A revolute or prismatic joint's axis in the world, from its type (…X, …Y, …Z) and
+    Pinocchio's placement of the joint."""
+    letter = model.joints[joint].shortname()[-1]
+    return data.oMi[joint].rotation[:, "XYZ".index(letter)]
+
+
+def test_a_joint_load_is_a_double_arrow_along_its_axis_and_a_joint_spring_a_coil(exported):
+    from meshcat.servers.tree import find_node
+
+    scene, result, viz, html, plot = exported("slider_crank")
+    model, data = scene.model, scene.model.createData()
+    crank, slider = model.getJointId("crank_joint"), model.getJointId("slider_joint")
+    assert model.joints[crank].shortname() == "JointModelRY"
+    assert model.joints[slider].shortname() == "JointModelPX"
+    clips = _clips(viz)
+    load = clips["/meshcat/pinsettle/forces/load_0"].tracks
+    coil = clips["/meshcat/pinsettle/forces/joint_spring_0"].tracks
+    for k, q in enumerate(viz.timeline.q):
+        pinocchio.forwardKinematics(model, data, q)
+        # The 0.5 N m effort on the crank: at the crank's joint, along +its axis (right-hand
+        # rule: the effort is positive).
+        assert np.allclose(load["position"].values[k], data.oMi[crank].translation, atol=1e-12)
+        pointing = _rotate(load["quaternion"].values[k], [0, 1, 0])
+        assert np.allclose(pointing, _joint_axis_world(model, data, crank), atol=1e-9)
+        # The slider's spring: a coil along the slider's direction, centred on its joint.
+        axis = _joint_axis_world(model, data, slider)
+        along = _rotate(coil["quaternion"].values[k], [0, 0, 1])
+        assert np.allclose(along, axis, atol=1e-9)
+        middle = np.asarray(coil["position"].values[k]) + 0.5 * coil["scale"].values[k][2] * axis
+        assert np.allclose(middle, data.oMi[slider].translation, atol=1e-12)
+    # A torque has two heads, a force one.
+    tree = viz.window.tree
+    assert find_node(tree, ["meshcat", "pinsettle", "forces", "load_0", "head_1"]).object
+    legend = " | ".join(mark["text"] for mark in viz._overlay()["legend"])
+    assert "double head: torques 0.5 N m at crank_joint" in legend
+    assert "joint spring (slider_joint k = 200)" in legend

@@ -14,16 +14,18 @@ import pinocchio
 from ._play_meshes import _frame_id
 from ._play_timeline import FPS, Timeline
 from ._scene import Scene
-from ._scene_values import PointLoad
+from ._scene_values import JointLoad, PointLoad
 from ._solve import Result
 
 #: The marks' colours (flat, unlit: the same on screen whatever the light).
 LOAD_COLOR = 0xC00000
 LOOP_COLOR = 0x7048E8
 STOP_COLOR = 0x2B8A3E
+JOINT_SPRING_COLOR = 0xF08C00
 #: The longest load arrow, and every stop-reaction arrow, as a share of the view's size.
 ARROW_LENGTH = 0.3
 _Y = np.array([0.0, 1.0, 0.0])  # meshcat's cylinders stand along y
+_Z = np.array([0.0, 0.0, 1.0])  # the coil of _helix along z
 
 
 @dataclass(frozen=True)
@@ -56,17 +58,20 @@ def arrow_matrix(tail: np.ndarray, vector: np.ndarray) -> np.ndarray:
     return m
 
 
-def _load_arrow(node: Any, color: int, sizes: _Sizes) -> None:
-    """An arrow of unit length along +y (its shaft and head scale with it; the head's share is
-    fixed) under ``node``."""
+def _load_arrow(node: Any, color: int, sizes: _Sizes, *, double: bool = False) -> None:
+    """An arrow of unit length along +y under ``node`` (its shaft and heads scale with it);
+    ``double``: a second head behind the first (a torque, by the right-hand rule)."""
     import meshcat.geometry as mg
 
     material = mg.MeshBasicMaterial(color=color)
-    shaft, head = node["shaft"], node["head"]
+    heads = (0.9, 0.72) if double else (0.9,)
+    shaft = node["shaft"]
     shaft.set_object(mg.Cylinder(0.8, radius=sizes.shaft), material)
     shaft.set_transform(pinocchio.SE3(np.eye(3), np.array([0.0, 0.4, 0.0])).homogeneous)
-    head.set_object(mg.Cylinder(0.2, radiusTop=0.0, radiusBottom=sizes.head), material)
-    head.set_transform(pinocchio.SE3(np.eye(3), np.array([0.0, 0.9, 0.0])).homogeneous)
+    for h, y in enumerate(heads):
+        head = node[f"head_{h}"]
+        head.set_object(mg.Cylinder(0.2, radiusTop=0.0, radiusBottom=sizes.head), material)
+        head.set_transform(pinocchio.SE3(np.eye(3), np.array([0.0, y, 0.0])).homogeneous)
 
 
 def _frame_points(
@@ -83,31 +88,133 @@ def _frame_points(
     return out
 
 
-def point_loads(scene: Scene) -> list[PointLoad]:
-    return [load for load in scene.loads if isinstance(load, PointLoad)]
+@dataclass(frozen=True)
+class _Mark:
+    """One load drawn: a force (one head) or a torque (two heads, a moment vector by the
+    right-hand rule), its tail and its vector (N or N m, world) at each keyframe."""
+
+    torque: bool
+    tails: np.ndarray  # (keys, 3)
+    vectors: np.ndarray  # (keys, 3)
+    label: str
 
 
-def _drawn_loads(scene: Scene) -> list[PointLoad]:
+def _joint_axes(model: pinocchio.Model, qs: np.ndarray, joint: int) -> tuple[np.ndarray, bool]:
+    """The world direction of a 1-DoF joint's motion at each configuration, and whether it
+    turns (a revolute joint: its axis) or slides (a prismatic one: its direction)."""
+    data = model.createData()
+    columns = np.zeros((len(qs), 6))
+    for k, q in enumerate(qs):
+        pinocchio.computeJointJacobians(model, data, q)
+        frame = pinocchio.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        jacobian = np.reshape(pinocchio.getJointJacobian(model, data, joint, frame), (6, -1))
+        columns[k] = jacobian[:, model.idx_vs[joint]]  # (a model of nv = 1 gives a vector)
+    turns = bool(np.linalg.norm(columns[-1, 3:]) > 1e-9)
+    axes = columns[:, 3:] if turns else columns[:, :3]
+    return axes / np.linalg.norm(axes, axis=1, keepdims=True), turns
+
+
+def _joint_origins(model: pinocchio.Model, qs: np.ndarray, joint: int) -> np.ndarray:
+    data = model.createData()
+    out = np.zeros((len(qs), 3))
+    for k, q in enumerate(qs):
+        pinocchio.forwardKinematics(model, data, q)
+        out[k] = data.oMi[joint].translation
+    return out
+
+
+def _point_load_marks(model: pinocchio.Model, qs: np.ndarray, load: PointLoad) -> list[_Mark]:
+    """A point load's force and torque (world-aligned, constant) at its point."""
+    tails = _frame_points(model, qs, [(load.frame, load.point)])[:, 0]
+    marks = []
+    for torque, value, unit in ((False, load.force, "N"), (True, load.torque, "N m")):
+        vector = np.asarray(value, dtype=float)
+        if np.linalg.norm(vector) > 0:
+            label = f"{np.linalg.norm(vector):.3g} {unit} on {load.frame}"
+            marks.append(_Mark(torque, tails, np.tile(vector, (len(qs), 1)), label))
+    return marks
+
+
+def _joint_load_marks(model: pinocchio.Model, qs: np.ndarray, load: JointLoad) -> list[_Mark]:
+    """A joint load on a 1-DoF joint: its effort along the joint's axis (a torque about a
+    revolute joint's, a force along a prismatic one's), at the joint."""
+    joint = model.getJointId(load.joint)
+    if model.joints[joint].nv != 1 or not any(load.effort):
+        return []
+    axes, turns = _joint_axes(model, qs, joint)
+    label = f"{abs(load.effort[0]):.3g} {'N m' if turns else 'N'} at {load.joint}"
+    return [_Mark(turns, _joint_origins(model, qs, joint), load.effort[0] * axes, label)]
+
+
+def load_marks(model: pinocchio.Model, scene: Scene, qs: np.ndarray) -> list[_Mark]:
+    """Every load of ``scene`` drawn, at the configurations ``qs`` (see ``_Mark``)."""
+    marks: list[_Mark] = []
+    for load in scene.loads:
+        if isinstance(load, PointLoad):
+            marks += _point_load_marks(model, qs, load)
+        else:
+            marks += _joint_load_marks(model, qs, load)
+    return marks
+
+
+def _undrawn_loads(model: pinocchio.Model, scene: Scene) -> list[str]:
+    """The joints whose loads are not drawn: joint loads on joints of several degrees of
+    freedom (a free body's wrench has no one axis)."""
     return [
-        load
+        load.joint
         for load in scene.loads
-        if isinstance(load, PointLoad) and np.linalg.norm(load.force) > 0
+        if isinstance(load, JointLoad) and model.joints[model.getJointId(load.joint)].nv != 1
     ]
 
 
 def draw_loads(viz: Any, scene: Scene, timeline: Timeline, sizes: _Sizes, tracks: Any) -> None:
-    """Each point load: an arrow from its point along its (world-aligned) force, the largest
-    ``sizes.arrow`` long, the others in proportion; following the point."""
-    loads = _drawn_loads(scene)
-    if not loads:
-        return
-    at = _frame_points(viz.model, timeline.q, [(load.frame, load.point) for load in loads])
-    largest = max(float(np.linalg.norm(load.force)) for load in loads)
-    for i, load in enumerate(loads):
+    """Each load: an arrow from its point along its force (a double-headed one along its
+    torque), the largest force and the largest torque ``sizes.arrow`` long, the others in
+    proportion; following the body."""
+    marks = load_marks(viz.model, scene, timeline.q)
+    for i, mark in enumerate(marks):
         node = viz.viewer[f"forces/load_{i}"]
-        _load_arrow(node, LOAD_COLOR, sizes)
-        vector = sizes.arrow * np.asarray(load.force, dtype=float) / largest
-        matrices = np.array([arrow_matrix(p, vector) for p in at[:, i]])
+        _load_arrow(node, LOAD_COLOR, sizes, double=mark.torque)
+        scale = sizes.arrow / _largest_norm(marks, mark.torque)
+        matrices = np.array(
+            [arrow_matrix(t, scale * v) for t, v in zip(mark.tails, mark.vectors, strict=True)]
+        )
+        node.set_transform(matrices[-1])
+        tracks.poses(node.path, matrices)
+
+
+def _largest_norm(marks: list[_Mark], torque: bool) -> float:
+    return max(
+        (float(np.linalg.norm(m.vectors, axis=1).max()) for m in marks if m.torque == torque),
+        default=1.0,
+    )
+
+
+def draw_joint_springs(
+    viz: Any, scene: Scene, timeline: Timeline, sizes: _Sizes, tracks: Any
+) -> None:
+    """Each joint spring: a short coil at its joint, along the joint's axis, following it."""
+    import meshcat.geometry as mg
+
+    from ._play_meshes import _helix, _normal_mesh_class
+
+    length = 0.4 * sizes.arrow
+    coil = 2.5 * sizes.head
+    mesh = _normal_mesh_class()(*_helix(coil, 0.25 * sizes.shaft / 0.8, length, coils=5))
+    material = mg.MeshBasicMaterial(color=JOINT_SPRING_COLOR)
+    for i, spring in enumerate(scene.joint_springs):
+        joint = viz.model.getJointId(spring.joint)
+        axes, _ = _joint_axes(viz.model, timeline.q, joint)
+        origins = _joint_origins(viz.model, timeline.q, joint)
+        node = viz.viewer[f"forces/joint_spring_{i}"]
+        node.set_object(mesh, material)
+        matrices = np.zeros((len(origins), 4, 4))
+        for k, (origin, axis) in enumerate(zip(origins, axes, strict=True)):
+            m = np.eye(4)
+            m[:3, :3] = pinocchio.Quaternion.FromTwoVectors(_Z, axis).matrix()
+            m[:3, :3] = m[:3, :3] @ np.diag([1.0, 1.0, length])
+            m[:3, 3] = origin - 0.5 * length * axis  # centred on the joint
+            matrices[k] = m
         node.set_transform(matrices[-1])
         tracks.poses(node.path, matrices)
 
@@ -133,19 +240,6 @@ def draw_loops(viz: Any, scene: Scene, timeline: Timeline, sizes: _Sizes, tracks
         tracks.poses(node.path, matrices)
 
 
-def _joint_axis(model: pinocchio.Model, q: np.ndarray, joint: int) -> tuple[np.ndarray, str]:
-    """The world direction of a 1-DoF joint's motion and its unit of effort: the rotation axis
-    of a revolute joint ('N m'), the direction of a prismatic one ('N')."""
-    data = model.createData()
-    pinocchio.computeJointJacobians(model, data, q)
-    column = pinocchio.getJointJacobian(
-        model, data, joint, pinocchio.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    )[:, model.idx_vs[joint]]
-    if np.linalg.norm(column[3:]) > 1e-9:
-        return column[3:] / np.linalg.norm(column[3:]), "N m"
-    return column[:3] / np.linalg.norm(column[:3]), "N"
-
-
 def stop_reactions(scene: Scene, result: Result) -> list[tuple[str, np.ndarray, np.ndarray, str]]:
     """Each stop a joint rests on at the end: the joint, where it is (world), the reaction as
     a vector along its axis (a torque about it by the right-hand rule, or a force), the unit."""
@@ -155,7 +249,8 @@ def stop_reactions(scene: Scene, result: Result) -> list[tuple[str, np.ndarray, 
     out = []
     for name, side in result.at_limit.items():
         joint = model.getJointId(name)
-        axis, unit = _joint_axis(model, result.q, joint)
+        axes, turns = _joint_axes(model, result.q[None, :], joint)
+        axis, unit = axes[0], "N m" if turns else "N"
         sign = 1.0 if side == "lower" else -1.0  # a lower stop pushes q up, an upper one down
         reaction = sign * result.limit_reactions.get(name, 0.0) * axis
         out.append((name, data.oMi[joint].translation.copy(), reaction, unit))
@@ -181,32 +276,55 @@ def draw_stops(
 def draw_forces(
     viz: Any, scene: Scene, result: Result, timeline: Timeline, size: float, tracks: Any
 ) -> None:
-    """Point loads, loop closure points and stop reactions drawn (see the draw_ functions),
+    """Loads, joint springs, loop closure points and stop reactions drawn (see the draw_ functions),
     their dimensions from the view's ``size`` (m), their motion added to ``tracks``."""
     sizes = _Sizes.of(size)
     draw_loads(viz, scene, timeline, sizes, tracks)
+    draw_joint_springs(viz, scene, timeline, sizes, tracks)
     draw_loops(viz, scene, timeline, sizes, tracks)
     draw_stops(viz, scene, result, timeline, sizes, tracks)
 
 
+def _loads_text(scene: Scene, result: Result) -> str:
+    marks = load_marks(scene.model, scene, result.q[None, :])
+    forces = ", ".join(m.label for m in marks if not m.torque)
+    torques = ", ".join(m.label for m in marks if m.torque)
+    undrawn = ", ".join(_undrawn_loads(scene.model, scene))
+    parts = [
+        f"forces {forces}" if forces else "",
+        f"double head: torques {torques}" if torques else "",
+        f"not drawn: the effort on {undrawn}" if undrawn else "",
+    ]
+    what = "; ".join(p for p in parts if p)
+    return f"arrow: load, length by size ({what})" if what else ""
+
+
+def _joint_springs_text(scene: Scene, result: Result) -> str:
+    springs = ", ".join(f"{s.joint} k = {s.stiffness:.3g}" for s in scene.joint_springs)
+    return f"coil on a joint's axis: joint spring ({springs})" if springs else ""
+
+
+def _loops_text(scene: Scene, result: Result) -> str:
+    return "balls: loop closure points (a small, b large), met when closed" if scene.loops else ""
+
+
+def _stops_text(scene: Scene, result: Result) -> str:
+    reactions = stop_reactions(scene, result)
+    held = ", ".join(f"{name} {np.linalg.norm(r):.3g} {unit}" for name, _, r, unit in reactions)
+    what = "arrow at the end: stop reaction, a torque by the right-hand rule or a force"
+    return f"{what} ({held})" if held else ""
+
+
+#: The legend's entries: the colour of a kind of mark, and what says what it is (or "").
+_LEGEND = (
+    (LOAD_COLOR, _loads_text),
+    (JOINT_SPRING_COLOR, _joint_springs_text),
+    (LOOP_COLOR, _loops_text),
+    (STOP_COLOR, _stops_text),
+)
+
+
 def forces_legend(scene: Scene, result: Result) -> list[dict[str, str]]:
     """What each kind of mark drawn is: ``{"color", "text"}`` (for the overlay)."""
-    legend = []
-    loads = _drawn_loads(scene)
-    if loads:
-        forces = ", ".join(f"{np.linalg.norm(load.force):.3g} N on {load.frame}" for load in loads)
-        legend.append((LOAD_COLOR, f"arrow: point load, length by force ({forces})"))
-    if scene.loops:
-        legend.append(
-            (LOOP_COLOR, "balls: loop closure points (a small, b large), met when closed")
-        )
-    reactions = stop_reactions(scene, result)
-    if reactions:
-        held = ", ".join(f"{name} {np.linalg.norm(r):.3g} {unit}" for name, _, r, unit in reactions)
-        legend.append(
-            (
-                STOP_COLOR,
-                f"arrow at the end: stop reaction, a torque by the right-hand rule ({held})",
-            )
-        )
-    return [{"color": _hex(color), "text": text} for color, text in legend]
+    texts = ((color, text(scene, result)) for color, text in _LEGEND)
+    return [{"color": _hex(color), "text": text} for color, text in texts if text]

@@ -807,3 +807,24 @@ def test_a_joint_load_is_a_double_arrow_along_its_axis_and_a_joint_spring_a_coil
     legend = " | ".join(mark["text"] for mark in viz._overlay()["legend"])
     assert "double head: torques 0.5 N m at crank_joint" in legend
     assert "joint spring (slider_joint k = 200)" in legend
+
+
+def test_the_camera_frames_everything_below_the_overlay():
+    animation = importlib.import_module("pinsettle._play_animation")
+    rng = np.random.default_rng(4)
+    points = rng.normal(size=(200, 3)) * [0.3, 0.2, 0.5] + [1.0, -2.0, 0.5]
+    for top in (0.0, 0.25):
+        target, distance, size = animation._camera_fit(points, top)
+        # Project as meshcat's camera does: at distance along _CAMERA_DIRECTION from the
+        # target, looking at it, z up, the vertical field of view _CAMERA_FOV, a 4:3 view.
+        back = animation._CAMERA_DIRECTION / np.linalg.norm(animation._CAMERA_DIRECTION)
+        right = np.cross(-back, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, -back)
+        rel = points - (target + distance * back)
+        depth = rel @ -back
+        tan = np.tan(np.radians(animation._CAMERA_FOV) / 2)
+        y, x = (rel @ up) / (depth * tan), (rel @ right) / (depth * tan * 4 / 3)
+        # Every point in view, none in the top share left to the overlay; the fit is tight.
+        assert np.all(depth > 0) and np.all(np.abs(x) <= 1) and y.min() >= -1
+        assert y.max() <= 1 - 2 * top and y.max() > 1 - 2 * top - 0.3

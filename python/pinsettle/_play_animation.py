@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
-from ._play_forces import draw_forces
+from ._play_forces import draw_forces, forces_legend, mark_tips
 from ._play_meshes import _decompose, _frame_id, _helix, _local_corners, _normal_mesh_class
 from ._play_timeline import FPS, Timeline, _pulse
 from ._scene import Scene
@@ -28,10 +28,11 @@ _CAMERA_DIRECTION = np.array([0.45, -1.0, 0.35])  # from the mechanism towards t
 _CAMERA_FOV = 40.0  # degrees, vertical
 
 
-def _camera_fit(points: np.ndarray) -> tuple[np.ndarray, float, float]:
+def _camera_fit(points: np.ndarray, top: float = 0.0) -> tuple[np.ndarray, float, float]:
     """Where the camera looks, how far from there it stands (looking along
     -_CAMERA_DIRECTION with the vertical field of view _CAMERA_FOV, in a view at least 4:3
-    wide) so that every point is seen with a margin, and the size of the cloud (m)."""
+    wide) so that every point is seen with a margin below the share ``top`` of the view's
+    height (left to the overlay), and the size of the cloud (m)."""
     back = _CAMERA_DIRECTION / np.linalg.norm(_CAMERA_DIRECTION)
     right = np.cross(-back, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
@@ -43,9 +44,12 @@ def _camera_fit(points: np.ndarray) -> tuple[np.ndarray, float, float]:
     size = max(float(np.linalg.norm(high - low)), 0.05)
     middle = (low + high) / 2
     x, y, z = (points - middle) @ right, (points - middle) @ up, (points - middle) @ back
-    target = middle + right * (x.max() + x.min()) / 2 + up * (y.max() + y.min()) / 2
     margin = 0.06 * size
     half_x, half_y = (x.max() - x.min()) / 2 + margin, (y.max() - y.min()) / 2 + margin
+    half_y /= 1 - top  # the view's half height: the cloud fills all but the top
+    target = (
+        middle + right * (x.max() + x.min()) / 2 + up * ((y.max() + y.min()) / 2 + top * half_y)
+    )
     tan = math.tan(math.radians(_CAMERA_FOV) / 2)
     distance = float(z.max()) + max(half_y / tan, half_x / (tan * 4 / 3), 0.05)
     return target, distance, size
@@ -88,9 +92,12 @@ def _keyframes(viz: Any, scene: Scene, timeline: Timeline, visual: Any) -> _Keyf
     return out
 
 
-def _view(keys: _Keyframes, visual: Any) -> tuple[np.ndarray, float, float]:
+def _view(
+    keys: _Keyframes, visual: Any, marks: np.ndarray | None = None, top: float = 0.0
+) -> tuple[np.ndarray, float, float]:
     """The camera's target and distance, and the size of the view (m): everything the
-    animation shows, or the final pose alone after a runaway."""
+    animation shows (``marks``: more points of the final pose, e.g. the arrows' tips), or the
+    final pose alone after a runaway; below the share ``top`` of the view's height."""
     scales = np.array([obj.meshScale for obj in visual.geometryObjects]).reshape(-1, 1, 3)
     corners = _local_corners(visual)  # (ngeoms, 8, 3): each shape's bounding box
     placements = keys.placements
@@ -99,11 +106,13 @@ def _view(keys: _Keyframes, visual: Any) -> tuple[np.ndarray, float, float]:
     cloud = [shapes, keys.ends.reshape(-1, 3), keys.com]
     everything = np.concatenate([c.reshape(-1, 3) for c in cloud])
     last = np.concatenate([shapes[-1].reshape(-1, 3), keys.ends[-1].reshape(-1, 3), keys.com[-1:]])
-    target, distance, size = _camera_fit(everything)
+    if marks is not None:
+        everything, last = np.concatenate([everything, marks]), np.concatenate([last, marks])
+    target, distance, size = _camera_fit(everything, top)
     if size > 20 * _camera_fit(last)[2]:
         # A runaway (a body falling for kilometres): a view of the whole path would show a
         # speck; frame the final pose, which the animation holds.
-        target, distance, size = _camera_fit(last)
+        target, distance, size = _camera_fit(last, top)
     return target, distance, size
 
 
@@ -160,7 +169,11 @@ def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any, res
     viewer, place the camera, and make the animation (returned)."""
     viz.loadViewerModel(rootNodeName="pinocchio")
     keys = _keyframes(viz, scene, timeline, visual)
+    # The top of the view is left to the overlay (its lines, 19 px each, of a 600 px view);
+    # the forces' arrows are sized by the view, and framed too.
+    top = (20 + 19 * (3 + len(forces_legend(scene, result)))) / 600
     target, distance, size = _view(keys, visual)
+    target, distance, _ = _view(keys, visual, mark_tips(scene, result, size), top)
     _place_camera(viz, target, distance)
     radius = size / 2
     tracks = _Tracks(timeline)

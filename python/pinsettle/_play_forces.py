@@ -273,6 +273,18 @@ def draw_stops(
             tracks.visibility(node.path, [0.0, end - 1e-6, end], np.array([False, False, True]))
 
 
+def mark_tips(scene: Scene, result: Result, size: float) -> np.ndarray:
+    """Where the arrows of the loads and the stops' reactions end in the final pose (world),
+    drawn for a view of ``size`` (m): for the camera to frame them too."""
+    sizes = _Sizes.of(size)
+    marks = load_marks(scene.model, scene, result.q[None, :])
+    tips = [m.tails[0] + sizes.arrow * m.vectors[0] / _largest_norm(marks, m.torque) for m in marks]
+    for _, at, reaction, _ in stop_reactions(scene, result):
+        norm = float(np.linalg.norm(reaction))
+        tips.append(at + sizes.arrow * (reaction / norm if norm > 0 else _Y))
+    return np.reshape(tips, (-1, 3))
+
+
 def draw_forces(
     viz: Any, scene: Scene, result: Result, timeline: Timeline, size: float, tracks: Any
 ) -> None:

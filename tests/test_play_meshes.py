@@ -66,6 +66,43 @@ def _instanced_primitives(text: str) -> tuple[Counter[tuple[str, str, str]], int
     return pieces, several
 
 
+def _source_rows(source: ET.Element) -> np.ndarray:
+    array = next(node for node in source if _tag(node) == "float_array")
+    accessor = next(node for node in source.iter() if _tag(node) == "accessor")
+    return np.array((array.text or "").split(), float).reshape(-1, int(accessor.get("stride")))
+
+
+def _first(nodes: Any, tag: str, semantic: str | None = None) -> ET.Element:
+    return next(n for n in nodes if _tag(n) == tag and semantic in (None, n.get("semantic")))
+
+
+def _corners_of(triangles: ET.Element, mesh: ET.Element) -> np.ndarray:
+    """The corners of the triangles (a row of 9 coordinates each)."""
+    inputs = [n for n in triangles if _tag(n) == "input"]
+    stride = max(int(n.get("offset", 0)) for n in inputs) + 1
+    vertex = _first(inputs, "input", "VERTEX")
+    vertices = next(n for n in mesh if n.get("id") == vertex.get("source")[1:])
+    position = _first(vertices, "input", "POSITION")
+    rows = _source_rows(next(n for n in mesh if n.get("id") == position.get("source")[1:]))
+    indices = np.array(_first(triangles, "p").text.split(), int)
+    return rows[indices[int(vertex.get("offset", 0)) :: stride]].reshape(-1, 9)
+
+
+def _triangle_corners(text: str) -> dict[str, np.ndarray]:
+    """The corners of every instanced <triangles> of a DAE, by material, in a canonical
+    order (sorted rows)."""
+    root = ET.fromstring(text)
+    geometries = {g.get("id"): g for g in root.iter() if _tag(g) == "geometry"}
+    out: dict[str, list[np.ndarray]] = {}
+    for instance in (node for node in root.iter() if _tag(node) == "instance_geometry"):
+        mesh = _first(geometries[instance.get("url", "")[1:]], "mesh")
+        for triangles in (n for n in mesh if _tag(n) == "triangles"):
+            corners = _corners_of(triangles, mesh)
+            out.setdefault(triangles.get("material", ""), []).append(corners)
+    joined = {m: np.concatenate(c) for m, c in out.items()}
+    return {m: c[np.lexsort(c.T[::-1])] for m, c in joined.items()}
+
+
 def _sent_dae(viz: Any) -> dict[str, str]:
     """The DAE text the viewer was sent, by the name of its node (lower case)."""
     import umsgpack
@@ -88,13 +125,13 @@ def _solved(name: str) -> tuple[Any, Any]:
 # --- the DAE text sent ----------------------------------------------------------------------
 
 _BLUE = """<triangles material="blue" count="1"><input semantic="VERTEX" source="#g-v" offset="0"/>
-<p>0 2 1</p></triangles>"""
+<p>3 2 1</p></triangles>"""
 _DAE = """<?xml version="1.0"?>
 <COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
 <library_geometries>
 <geometry id="g"><mesh>
-<source id="g-pos"><float_array id="g-pos-array" count="9">0 0 0 1 0 0 0 1 0</float_array>
-<technique_common><accessor source="#g-pos-array" count="3" stride="3"/></technique_common>
+<source id="g-pos"><float_array id="g-pos-array" count="12">0 0 0 1 0 0 0 1 0 2 3 4</float_array>
+<technique_common><accessor source="#g-pos-array" count="4" stride="3"/></technique_common>
 </source>
 <vertices id="g-v"><input semantic="POSITION" source="#g-pos"/></vertices>
 <triangles material="red" count="1"><input semantic="VERTEX" source="#g-v" offset="0"/>
@@ -132,6 +169,11 @@ def test_split_gives_each_mesh_one_primitive_of_a_kind():
     after, several_after = _instanced_primitives(split)
     assert several_before == 1 and several_after == 0
     assert after == before  # every primitive drawn, once
+    # ... with the same corners (the blue piece keeps 3 of the 4 positions, renumbered).
+    corners, split_corners = _triangle_corners(_TWO_PRIMITIVES), _triangle_corners(split)
+    assert corners.keys() == split_corners.keys() == {"red", "blue"}
+    assert all(np.array_equal(corners[m], split_corners[m]) for m in corners)
+    assert "0 1 0 2 3 4" not in split.split("-pinsettle-1")[1]  # no unused position copied
     # Nothing to split: the very same text.
     single = _DAE.format(second="")
     assert _instanced_primitives(single)[1] == 0
@@ -169,6 +211,11 @@ def test_every_dae_primitive_is_sent_in_a_mesh_of_its_own(name):
         file_pieces, _ = _instanced_primitives(Path(obj.meshPath).read_text(encoding="utf-8"))
         assert several == 0, f"{name} {Path(obj.meshPath).name}: a mesh with several materials"
         assert pieces == file_pieces, f"{name} {Path(obj.meshPath).name}: pieces lost"
+        corners = _triangle_corners(text)
+        file_corners = _triangle_corners(Path(obj.meshPath).read_text(encoding="utf-8"))
+        assert corners.keys() == file_corners.keys()
+        for material, expected in file_corners.items():
+            assert np.array_equal(corners[material], expected), (name, obj.name, material)
 
 
 # --- the robots in a browser ----------------------------------------------------------------

@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import xml.etree.ElementTree as ET
 from collections import Counter
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -125,6 +126,7 @@ def _split_geometry(geometry: ET.Element) -> list[ET.Element]:
         if k:
             _rename_ids(piece, f"-pinsettle-{k}")
         _keep_primitives(piece, k)
+        _compact_sources(piece)
     return out
 
 
@@ -140,6 +142,109 @@ def _keep_primitives(geometry: ET.Element, k: int) -> None:
             seen[kind] += 1
             if seen[kind] != k + 1:
                 mesh.remove(child)
+
+
+@dataclass
+class _Column:
+    """The indices at one offset of a primitive's <p> elements, and the sources they index."""
+
+    lists: list[tuple[ET.Element, np.ndarray]]  # each <p> and all of its indices
+    offset: int
+    stride: int
+    sources: list[str]
+
+    def values(self) -> np.ndarray:
+        return np.concatenate([a[self.offset :: self.stride] for _, a in self.lists])
+
+
+def _columns(mesh: ET.Element) -> list[_Column]:
+    """The index columns of the mesh's primitives; ValueError where they cannot be read."""
+    vertices = {
+        node.get("id"): [i.get("source", "")[1:] for i in node if _dae_tag(i) == "input"]
+        for node in mesh
+        if _dae_tag(node) == "vertices"
+    }
+    primitives = [node for node in mesh if _dae_tag(node) in _DAE_PRIMITIVES]
+    return [column for p in primitives for column in _primitive_columns(p, vertices)]
+
+
+def _primitive_columns(primitive: ET.Element, vertices: dict[Any, list[str]]) -> list[_Column]:
+    """One column per offset of the primitive's inputs (a VERTEX input indexes the sources
+    of its <vertices>)."""
+    inputs = [node for node in primitive if _dae_tag(node) == "input"]
+    if not inputs or any(_dae_tag(node) == "ph" for node in primitive):
+        raise ValueError("a primitive without inputs, or a polygon with holes")
+    lists = [
+        (node, np.array((node.text or "").split(), dtype=np.int64))
+        for node in primitive
+        if _dae_tag(node) == "p"
+    ]
+    offsets = [int(node.get("offset", "0")) for node in inputs]
+    out = []
+    for offset in sorted(set(offsets)):
+        refs = [
+            i.get("source", "")[1:] for i, o in zip(inputs, offsets, strict=True) if o == offset
+        ]
+        names = [name for ref in refs for name in vertices.get(ref, [ref])]
+        out.append(_Column(lists, offset, max(offsets) + 1, names))
+    return out
+
+
+def _used_rows(columns: list[_Column]) -> dict[str, np.ndarray]:
+    """The rows of each source that the columns index (sorted); ValueError when the sources
+    one column indexes are not indexed alike elsewhere (no one numbering would fit)."""
+    used: dict[str, np.ndarray] = {}
+    for column in columns:
+        for name in column.sources:
+            used[name] = np.union1d(used.get(name, np.zeros(0, np.int64)), column.values())
+    for column in columns:
+        if any(not np.array_equal(used[n], used[column.sources[0]]) for n in column.sources):
+            raise ValueError("the sources of one column indexed differently")
+    return used
+
+
+def _kept_rows(source: ET.Element, rows: np.ndarray) -> tuple[ET.Element, ET.Element, str]:
+    """The source's data array, its accessor and the text of the array with only ``rows``."""
+    array = next(node for node in source if _dae_tag(node).endswith("_array"))
+    accessor = next(node for node in source.iter() if _dae_tag(node) == "accessor")
+    stride, count = int(accessor.get("stride", "1")), int(accessor.get("count", "0"))
+    words = (array.text or "").split()
+    if (
+        int(accessor.get("offset", "0"))
+        or len(words) < stride * count
+        or not (0 <= rows.min() and rows.max() < count)
+    ):
+        raise ValueError("an accessor that does not read its array from the start")
+    table = np.array(words[: stride * count], dtype=object).reshape(count, stride)
+    return array, accessor, " ".join(table[rows].ravel())
+
+
+def _compact_sources(geometry: ET.Element) -> None:
+    """Keep in the geometry's sources only the rows its primitives index, renumbered: a piece
+    of a split mesh would otherwise carry a copy of all of the mesh's data. Left as it is
+    where the mesh is not plain enough to be sure of it."""
+    mesh = _mesh_of(geometry)
+    if mesh is None:
+        return
+    try:
+        columns = _columns(mesh)
+        used = _used_rows(columns)
+        sources = {node.get("id"): node for node in mesh if _dae_tag(node) == "source"}
+        kept = {name: _kept_rows(sources[name], rows) for name, rows in used.items()}
+    except (ValueError, KeyError, IndexError, StopIteration):
+        return
+    for name, (array, accessor, text) in kept.items():
+        array.text = text
+        array.set("count", str(used[name].size * int(accessor.get("stride", "1"))))
+        accessor.set("count", str(used[name].size))
+    written = {}
+    for column in columns:
+        for node, values in column.lists:
+            part = values[column.offset :: column.stride]
+            values[column.offset :: column.stride] = np.searchsorted(used[column.sources[0]], part)
+            written[id(node)] = (node, values)
+    for node, values in written.values():
+        node.text = " ".join(map(str, values.tolist()))
 
 
 def _rename_ids(element: ET.Element, suffix: str) -> None:

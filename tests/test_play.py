@@ -828,3 +828,32 @@ def test_the_camera_frames_everything_below_the_overlay():
         # Every point in view, none in the top share left to the overlay; the fit is tight.
         assert np.all(depth > 0) and np.all(np.abs(x) <= 1) and y.min() >= -1
         assert y.max() <= 1 - 2 * top and y.max() > 1 - 2 * top - 0.3
+
+
+def test_a_point_torque_has_two_heads_and_a_free_bodys_wrench_is_named_as_not_drawn(tmp_path):
+    from meshcat.servers.tree import find_node
+
+    play = _play()
+    scene = pinsettle.Scene.from_urdf(ROBOTS / "pendulum.urdf").set_start(hinge=0.3)
+    scene.add_load(frame="arm", point=(0.0, 0.0, -0.5), force=(2.0, 0.0, 0.0))
+    scene.add_load(frame="arm", point=(0.0, 0.0, -0.5), torque=(0.0, 0.5, 0.0))
+    viz = play.play(scene, live=False)
+    clips, tree = _clips(viz), viz.window.tree
+    model, data = scene.model, scene.model.createData()
+    pinocchio.framesForwardKinematics(model, data, viz.result.q)
+    at = data.oMf[model.getFrameId("arm")].act(np.array([0.0, 0.0, -0.5]))
+    for i, (vector, heads) in enumerate((([1, 0, 0], 1), ([0, 1, 0], 2))):
+        tracks = clips[f"/meshcat/pinsettle/forces/load_{i}"].tracks
+        assert np.allclose(tracks["position"].values[-1], at, atol=1e-12)
+        assert np.allclose(_rotate(tracks["quaternion"].values[-1], [0, 1, 0]), vector, atol=1e-9)
+        node = find_node(tree, ["meshcat", "pinsettle", "forces", f"load_{i}"])
+        assert sorted(k for k in node if k.startswith("head_")) == [
+            f"head_{h}" for h in range(heads)
+        ]
+    legend = " | ".join(mark["text"] for mark in viz._overlay()["legend"])
+    assert "forces 2 N on arm; double head: torques 0.5 N m on arm" in legend
+    # A joint load on a free body's root (6 entries): no one axis to draw it along; said.
+    free = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    free.add_load(free.model.names[1], [0.0, 0.0, 9.81, 0.0, 0.0, 0.0])
+    legend = " | ".join(m["text"] for m in play.play(free, live=False)._overlay()["legend"])
+    assert f"not drawn: the effort on {free.model.names[1]}" in legend

@@ -1,19 +1,22 @@
 """Watch a mechanism settle: playback of a solve in meshcat, and its energy plot.
 
 ``pinsettle.play(scene, result)`` draws the scene (its URDF's visual shapes and meshes, or a
-stick figure when it has none), its springs following the motion, a flash at each damping
-event, and plays the recorded trajectory with time scaled so that a long settle plays in a few
-seconds (and a short one in slow motion); the final pose is held. ``plot_energy(result, path)``
-draws both energy measures against time with the damping events (PNG).
+stick figure when it has none), its springs following the motion, what holds it (loads, joint
+springs, the loops' closure points, the stops' reactions at the end; a legend says which mark
+is what), a flash at each damping event, and plays the recorded trajectory with time scaled so
+that a long settle plays in a few seconds (and a short one in slow motion); the final pose is
+held. ``plot_energy(result, path)`` draws both energy measures against time with the damping
+events (PNG).
 
 meshcat and matplotlib are an optional extra (``pip install 'pinsettle[viz]'``): they are
 imported inside the functions, never by ``import pinsettle`` nor by a solve.
 
 This module is the front door (``play``, the visualizer it returns, the public names); the
 rooms behind it: ``_play_timeline`` (which pose is shown when), ``_play_meshes`` (the shapes),
-``_play_animation`` (the scene and its animation in meshcat), ``_play_server`` (the window
-meshcat talks to and the live server), ``_play_page`` (the static HTML), ``_play_plot`` (the
-energy plot) and ``_play_extra`` (the optional extra).
+``_play_animation`` (the scene and its animation in meshcat), ``_play_forces`` (the marks of
+what holds it), ``_play_server`` (the window meshcat talks to and the live server),
+``_play_page`` (the static and live pages), ``_play_plot`` (the energy plot) and
+``_play_extra`` (the optional extra).
 """
 
 from __future__ import annotations

@@ -857,3 +857,40 @@ def test_a_point_torque_has_two_heads_and_a_free_bodys_wrench_is_named_as_not_dr
     free.add_load(free.model.names[1], [0.0, 0.0, 9.81, 0.0, 0.0, 0.0])
     legend = " | ".join(m["text"] for m in play.play(free, live=False)._overlay()["legend"])
     assert f"not drawn: the effort on {free.model.names[1]}" in legend
+
+
+def test_a_loop_reaction_balances_the_rocker_and_is_an_arrow_at_the_end(exported):
+    forces = importlib.import_module("pinsettle._play_forces")
+    play = _play()
+    scene, result, viz, html, plot = exported("fourbar")
+    (loop,) = scene.loops  # a: the coupler's end, b: the rocker's
+    ((at, force),) = forces.loop_reactions(scene, result)
+    model, data = scene.model, scene.model.createData()
+    pinocchio.framesForwardKinematics(model, data, result.q)
+    a = data.oMf[model.getFrameId(loop.a_frame)].act(np.asarray(loop.a_point))
+    assert np.allclose(at, a, atol=1e-12)
+    # The rocker alone (hinged to the ground, nothing else on it but its weight and the
+    # closure's force -force at b): its moments about its hinge balance. Its weight's moment
+    # is Pinocchio's generalized gravity of its joint (the rocker is a leaf of the tree).
+    rocker = model.getJointId("rocker_joint")
+    assert model.parents[rocker] == 0 and [load.frame for load in scene.loads] == ["coupler"]
+    assert [spring.joint for spring in scene.joint_springs] == ["crank_joint"]
+    gravity = pinocchio.computeGeneralizedGravity(model, data, result.q)[model.idx_vs[rocker]]
+    axis = _joint_axis_world(model, data, rocker)
+    moment = axis @ np.cross(a - data.oMi[rocker].translation, -force)
+    assert moment == pytest.approx(gravity, rel=1e-6, abs=1e-9)
+    assert abs(force[1]) < 1e-12  # planar: no out-of-plane force
+    # Drawn at a along the force, once the motion is over.
+    import umsgpack
+    from meshcat.servers.tree import find_node
+
+    node = find_node(viz.window.tree, ["meshcat", "pinsettle", "forces", "loop_reaction_0"])
+    matrix = np.array(umsgpack.unpackb(node.transform)["matrix"]).reshape(4, 4).T
+    assert np.allclose(matrix[:3, 3], a, atol=1e-12)
+    direction = matrix[:3, 1] / np.linalg.norm(matrix[:3, 1])
+    assert np.allclose(direction, force / np.linalg.norm(force), atol=1e-9)
+    visible = _clips(viz)["/meshcat/pinsettle/forces/loop_reaction_0"].tracks["visible"]
+    assert visible.values == [False, False, True]
+    assert visible.frames[-1] == pytest.approx(viz.timeline.duration * play.FPS)
+    legend = " | ".join(mark["text"] for mark in viz._overlay()["legend"])
+    assert f"force on a (loop 1 {np.linalg.norm(force):.3g} N)" in legend

@@ -279,10 +279,57 @@ def mark_tips(scene: Scene, result: Result, size: float) -> np.ndarray:
     sizes = _Sizes.of(size)
     marks = load_marks(scene.model, scene, result.q[None, :])
     tips = [m.tails[0] + sizes.arrow * m.vectors[0] / _largest_norm(marks, m.torque) for m in marks]
-    for _, at, reaction, _ in stop_reactions(scene, result):
+    reactions = [(at, r) for _, at, r, _ in stop_reactions(scene, result)]
+    for at, reaction in reactions + loop_reactions(scene, result):
         norm = float(np.linalg.norm(reaction))
         tips.append(at + sizes.arrow * (reaction / norm if norm > 0 else _Y))
     return np.reshape(tips, (-1, 3))
+
+
+def loop_reactions(scene: Scene, result: Result) -> list[tuple[np.ndarray, np.ndarray]]:
+    """At a rest, each loop's reaction: where its closure point a is (world) and the force the
+    closure exerts on a's body there (N, world; b's body gets the opposite). The static force
+    of the open tree, less the stops' reactions, is what the closures take: J^T force = f
+    (least squares: a planar loop's out-of-plane force is indeterminate, reported as 0). None
+    unless the solve converged."""
+    if not scene.loops or not result.converged:
+        return []
+    from . import _core
+
+    compiled = scene.compile(result.q)
+    model, q = compiled.model, result.q[compiled.q_index]
+    assert compiled.loops is not None  # the scene has loops
+    stops = np.zeros(model.nv)
+    for name, side in result.at_limit.items():
+        sign = 1.0 if side == "lower" else -1.0  # as in stop_reactions
+        stops[model.idx_vs[model.getJointId(name)]] = sign * result.limit_reactions[name]
+    force = _core.static_force(model, q, compiled.elements) - stops
+    jacobian = _core.loops(model, q, compiled.loops)["jacobian"]
+    multipliers = np.linalg.lstsq(jacobian.T, force, rcond=None)[0]
+    ends = [(loop.a_frame, loop.a_point) for loop in scene.loops]
+    at = _frame_points(scene.model, result.q[None, :], ends)[0]
+    out, row = [], 0
+    for i, loop in enumerate(scene.loops):  # rows: 3 for a point loop, 6 for a frame loop
+        out.append((at[i], multipliers[row : row + 3]))
+        row += 3 if loop.kind == "point" else 6
+    return out
+
+
+def draw_loop_reactions(
+    viz: Any, scene: Scene, result: Result, timeline: Timeline, sizes: _Sizes, tracks: Any
+) -> None:
+    """Each loop's reaction at rest: an arrow ``sizes.arrow`` long at closure point a along
+    the force on a's body, shown once the motion is over."""
+    end = timeline.duration * FPS
+    for i, (at, force) in enumerate(loop_reactions(scene, result)):
+        norm = float(np.linalg.norm(force))
+        if norm == 0:
+            continue
+        node = viz.viewer[f"forces/loop_reaction_{i}"]
+        _load_arrow(node, LOOP_COLOR, sizes)
+        node.set_transform(arrow_matrix(at, sizes.arrow * force / norm))
+        if end > 0:  # hidden while it moves: the reaction is that of the rest
+            tracks.visibility(node.path, [0.0, end - 1e-6, end], np.array([False, False, True]))
 
 
 def draw_forces(
@@ -295,6 +342,7 @@ def draw_forces(
     draw_joint_springs(viz, scene, timeline, sizes, tracks)
     draw_loops(viz, scene, timeline, sizes, tracks)
     draw_stops(viz, scene, result, timeline, sizes, tracks)
+    draw_loop_reactions(viz, scene, result, timeline, sizes, tracks)
 
 
 def _loads_text(scene: Scene, result: Result) -> str:
@@ -317,7 +365,14 @@ def _joint_springs_text(scene: Scene, result: Result) -> str:
 
 
 def _loops_text(scene: Scene, result: Result) -> str:
-    return "balls: loop closure points (a small, b large), met when closed" if scene.loops else ""
+    if not scene.loops:
+        return ""
+    text = "balls: loop closure points (a small, b large), met when closed"
+    forces = [float(np.linalg.norm(force)) for _, force in loop_reactions(scene, result)]
+    if forces:
+        values = ", ".join(f"loop {i} {f:.3g} N" for i, f in enumerate(forces, start=1))
+        text += f"; arrow at the end: force on a ({values})"
+    return text
 
 
 def _stops_text(scene: Scene, result: Result) -> str:

@@ -880,7 +880,10 @@ namespace pinsettle
     // of constraintDynamics handle that with a regularisation mu, here 1e-12 of the matrix's
     // scale (its largest diagonal entry), so that one or two iterations converge.
     const Eigen::MatrixXd Jq = computeLoopJacobian(d.model, data, d.loops, q);
-    pinocchio::computeMinverse(d.model, data, q);
+    // M^-1 through the instantiations pinocchio_default carries (aba, then computeMinverse
+    // from its articulated inertias): computeMinverse(model, data, q) compiles here again.
+    prebuilt::aba(d.model, data, q, d.zero, d.zero, pinocchio::Convention::WORLD);
+    pinocchio::computeMinverse(d.model, data);
     const Eigen::MatrixXd Minv = data.Minv.selfadjointView<Eigen::Upper>();
     const double scale = (Jq * Minv * Jq.transpose()).diagonal().maxCoeff();
     d.prox = pinocchio::ProximalSettings(1e-14, std::max(1e-12 * scale, 1e-300), 20);

@@ -207,13 +207,16 @@ namespace pinsettle
     return e + 0.5 * stiff_p_.cwiseAbs2().dot(time_scale_.stiff_masses);
   }
 
-  void StepController::correctAcceleration(pinocchio::Data & data, const Eigen::VectorXd & q)
+  void StepController::correctAcceleration(pinocchio::Data & data)
   {
     if (stiffModes() == 0)
       return;
     const Eigen::MatrixXd & W = time_scale_.stiff_momenta;
     a_ = data.ddq; // kept aside from computeMinverse's passes
-    pinocchio::computeMinverse(dynamicsModel(), data, q);
+    // data holds this step's aba on dynamicsModel(), world convention: M^-1 from its
+    // articulated inertias, through the instantiation pinocchio_default carries (with q the
+    // whole algorithm compiled here again, about 57 s) and without a forward pass of its own.
+    pinocchio::computeMinverse(dynamicsModel(), data);
     stiff_y_.noalias() = data.Minv.selfadjointView<Eigen::Upper>() * W.transpose();
     stiff_s_.noalias() = W * stiff_y_;
     stiff_s_.diagonal() += time_scale_.stiff_masses.cwiseInverse();

@@ -379,8 +379,11 @@ BOOST_AUTO_TEST_CASE(step_controller_scales_a_stiff_mode_consistently)
   BOOST_CHECK_CLOSE(control.addedEnergy(w), 0.5 * w.dot((scaled - M) * w), 1e-9);
   // The corrected acceleration a' solves (M + W^T D W) a' = M a.
   const Eigen::VectorXd a = Eigen::VectorXd::Random(2);
+  // As in a step: the dynamics at q first (world convention), then its acceleration replaced.
+  pinsettle::prebuilt::aba(
+    control.dynamicsModel(), data, q, v, Eigen::VectorXd::Zero(2), pinocchio::Convention::WORLD);
   data.ddq = a;
-  control.correctAcceleration(data, q);
+  control.correctAcceleration(data);
   BOOST_CHECK((scaled * data.ddq).isApprox(M * a, 1e-9));
 }
 

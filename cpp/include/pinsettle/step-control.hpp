@@ -178,9 +178,11 @@ namespace pinsettle
     /// modes' added inertia), by the Woodbury identity: a' = a - Y (diag(d)^-1 + W Y)^-1 W a,
     /// Y = M^-1 W^T. Nothing happens when no mode is scaled.
     ///
-    /// \param[in] q The configuration of data.ddq (dim model.nq).
+    /// \param[in,out] data Holds pinocchio::aba on dynamicsModel() in the world convention at
+    ///            the step's configuration (the step's dynamics: its articulated inertias give
+    ///            M^-1), with data.ddq the acceleration to correct.
     ///
-    void correctAcceleration(pinocchio::Data & data, const Eigen::VectorXd & q);
+    void correctAcceleration(pinocchio::Data & data);
 
     ///
     /// \brief The length of the next step (s): dt, with the automatic step grown since the last

@@ -239,9 +239,9 @@ namespace pinsettle
   , v_(model.nv)
   , dq_(model.nv)
   , q_next_(model.nq)
+  , tau_(Eigen::VectorXd::Zero(model.nv))
   , q_before_(model.nq)
   , q_before2_(model.nq)
-  , tau_(Eigen::VectorXd::Zero(model.nv))
   , fext_(model.joints.size(), pinocchio::Force::Zero())
   , window_(1, 0.)
   , step_control_(model, constraints_.loops())
@@ -476,7 +476,7 @@ namespace pinsettle
       computeAcceleration(step_control_.dynamicsModel()); // the free motion: hold() decides
     }
     // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
-    step_control_.correctAcceleration(data, q_);
+    step_control_.correctAcceleration(data);
     constraints_.hold(data, q_, v_, step_control_.timeScale());
   }
 

@@ -80,3 +80,46 @@ def test_relative_links_land_on_a_file_and_heading_of_the_repository(page):
         elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
             bad.append(f"{target}: no heading #{anchor} in {dest.name}")
     assert not bad, bad
+
+
+# The numbers of a solve quoted in the docs and the scene files (steps and damping events with
+# the default settings) are checked against a fresh solve, so they cannot drift when a default
+# changes. benchmarks/pictures.py rewrites the playback caption's; the scene files' by hand.
+STEPS = re.compile(r"(\d+) steps, (\d+) damping events")
+
+
+def _steps_and_events(scene_file: Path) -> tuple[int, int]:
+    import pinsettle  # here: the other tests of this file need only the text
+
+    result = pinsettle.solve(pinsettle.load_scene(scene_file))
+    assert result.status == "converged", (scene_file.name, result.status)
+    return result.steps, result.peaks
+
+
+def test_playback_caption_says_the_steps_of_a_fresh_solve():
+    page = (ROOT / "docs" / "playback.md").read_text()
+    caption = re.search(r"!\[[^]]*\]\(play_ur5_tool_spring\.png\)", page)
+    assert caption, "docs/playback.md shows no play_ur5_tool_spring.png"
+    quoted = STEPS.search(caption.group(0))
+    assert quoted, caption.group(0)
+    measured = _steps_and_events(ROOT / "robots" / "ur5_tool_spring.toml")
+    assert (int(quoted[1]), int(quoted[2])) == measured, "run python benchmarks/pictures.py"
+
+
+SCENES_WITH_STEPS = sorted(
+    path
+    for path in (ROOT / "robots").glob("*.toml")
+    if re.search(r"^# Expected: converged \(\d+ steps", path.read_text(), re.M)
+)
+
+
+def test_scene_files_quote_steps_somewhere():
+    assert len(SCENES_WITH_STEPS) >= 5, SCENES_WITH_STEPS
+
+
+@pytest.mark.parametrize("scene_file", SCENES_WITH_STEPS, ids=lambda p: p.stem)
+def test_scene_file_comment_says_the_steps_of_a_fresh_solve(scene_file):
+    quoted = STEPS.search(scene_file.read_text())
+    assert quoted
+    measured = _steps_and_events(scene_file)
+    assert (int(quoted[1]), int(quoted[2])) == measured, f"update {scene_file.name}'s comment"

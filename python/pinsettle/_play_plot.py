@@ -55,7 +55,8 @@ def plot_energy(result: Result, path: str | Path, *, title: str | None = None) -
     ax.grid(True, which="major", alpha=0.3)
     if t.size:
         ax.set_xlim(float(t[0]), float(max(t[-1], result.sim_time)))
-    ax.legend(fontsize=8, loc="upper right", framealpha=0.9)
+    # Below the axes, never on the curves (they fill the axes wherever the run went).
+    fig.legend(loc="outside lower center", ncols=2, fontsize=8, frameon=False)
     fig.savefig(path, format="png")
     return path
 

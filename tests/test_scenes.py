@@ -112,7 +112,7 @@ EXPECTED = {
     ),
     "panda_fingers_locked": Expected(
         {
-            "panda_joint1": "-0.187814",
+            "panda_joint1": "0.080985",
             "panda_joint2": "1.7628",
             "panda_joint3": "-0.010341",
             "panda_joint4": "-1.656010",
@@ -129,7 +129,7 @@ EXPECTED = {
     ),
     "panda": Expected(
         {
-            "panda_joint1": "-0.175350",
+            "panda_joint1": "0.081483",
             "panda_joint2": "1.7628",
             "panda_joint3": "-0.010341",
             "panda_joint4": "-1.656015",
@@ -150,7 +150,7 @@ EXPECTED = {
     ),
     "xarm7": Expected(
         {
-            "joint1": "-0.034480",
+            "joint1": "-0.007095",
             "joint2": "2.0944",
             "joint3": "0.045640",
             "joint4": "1.802980",
@@ -170,12 +170,12 @@ EXPECTED = {
     "slider_spring": Expected({"slider": "-0.03924"}, ("500",)),
     "ur5": Expected(
         {
-            "shoulder_pan_joint": "0.00755",
+            "shoulder_pan_joint": "-0.1381",
             "shoulder_lift_joint": "1.570796",
             "elbow_joint": "0",
             "wrist_1_joint": "-1.570796",
-            "wrist_2_joint": "0.00765",
-            "wrist_3_joint": "0.00898",
+            "wrist_2_joint": "-0.1381",
+            "wrist_3_joint": "-0.0012",
         },
         ("0", "0", "0", "0.1725", "10.69", "64.51"),
         neutral=("shoulder_pan_joint", "wrist_2_joint", "wrist_3_joint"),
@@ -202,7 +202,7 @@ EXPECTED = {
             "elbow_joint": "-2.293533",
             "wrist_1_joint": "3.818607",
             "wrist_2_joint": "-1.487249",
-            "wrist_3_joint": "-3.7916",
+            "wrist_3_joint": "-2.1290",
         },
         ("0", "3.76", "5.97", "21.5", "36.7", "129.0"),
         neutral=("wrist_3_joint",),

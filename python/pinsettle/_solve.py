@@ -465,11 +465,8 @@ def solve(
         raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
     if isinstance(model, pinocchio.Model) and has_mimic_joints(model):
         return _solve_coupled(model, q0, settings, v0, callback, limits, progress, overrides)
-    report = _progress_reporter(progress)
-    if isinstance(model, Scene):
-        run = _run_scene(model, q0, settings, v0, callback, limits, report, overrides)
-    else:
-        run = _run_model(model, q0, settings, v0, callback, limits, report, overrides)
+    request = _Request(q0, settings, v0, callback, limits, _progress_reporter(progress), overrides)
+    run = _run_scene(model, request) if isinstance(model, Scene) else _run_model(model, request)
     if run.unapplied:
         _warn_unapplied(run.unapplied)
     return run.result()
@@ -504,6 +501,19 @@ def _solve_coupled(
     return dataclasses.replace(
         result, q=scene.to_mimic_q(result.q), v=scene.to_mimic_v(result.v), trace=trace
     )
+
+
+@dataclass
+class _Request:
+    """What solve was asked, for a scene or a model alike (report: the core's progress hook)."""
+
+    q0: Any
+    settings: Settings | Mapping[str, Any] | None
+    v0: Any
+    callback: Callable[[], bool] | None
+    limits: bool | None
+    report: Callable[[Mapping[str, Any]], None] | None
+    overrides: dict[str, Any]
 
 
 @dataclass
@@ -542,39 +552,36 @@ class _Run:
         )
 
 
-def _run_scene(
-    scene: Scene,
-    q0: Any,
-    settings: Settings | Mapping[str, Any] | None,
-    v0: Any,
-    callback: Callable[[], bool] | None,
-    limits: bool | None,
-    report: Callable[[Mapping[str, Any]], None] | None,
-    overrides: dict[str, Any],
-) -> _Run:
+def _run_scene(scene: Scene, request: _Request) -> _Run:
     """A scene solved on its compiled model (locked joints removed), the answer back in the
     scene's full model."""
     full = scene.model
-    s = make_settings(scene.settings if settings is None else settings, overrides)
+    s = make_settings(
+        scene.settings if request.settings is None else request.settings, request.overrides
+    )
     s.check()
-    q_full = scene.q0() if q0 is None else as_vector(q0, "q0", full.nq, "model.nq")
-    compiled = scene.compile(None if q0 is None else q_full)
-    v_full = np.zeros(full.nv) if v0 is None else as_vector(v0, "v0", full.nv, "model.nv")
+    q_full = scene.q0() if request.q0 is None else as_vector(request.q0, "q0", full.nq, "model.nq")
+    compiled = scene.compile(None if request.q0 is None else q_full)
+    v_full = (
+        np.zeros(full.nv)
+        if request.v0 is None
+        else as_vector(request.v0, "v0", full.nv, "model.nv")
+    )
     locked_v = np.delete(v_full, compiled.v_index)
     if np.any(locked_v != 0.0):
         raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
-    stops = compiled.stops_for(_limits_flag(limits, scene.limits))
+    stops = compiled.stops_for(_limits_flag(request.limits, scene.limits))
     equal, unapplied = compiled.limit_notes(stops)
     raw = _core.solve(
         compiled.model,
         q_full[compiled.q_index],
         v_full[compiled.v_index],
         s,
-        callback,
+        request.callback,
         compiled.elements,
         compiled.loops,
         stops,
-        progress=report,
+        progress=request.report,
     )
     raw["q"] = compiled.full_q(raw["q"])
     raw["loops"] = len(scene.loops)
@@ -588,26 +595,25 @@ def _run_scene(
     return _Run(raw, s, stops, equal, unapplied, compiled.model, full)
 
 
-def _run_model(
-    model: Any,
-    q0: Any,
-    settings: Settings | Mapping[str, Any] | None,
-    v0: Any,
-    callback: Callable[[], bool] | None,
-    limits: bool | None,
-    report: Callable[[Mapping[str, Any]], None] | None,
-    overrides: dict[str, Any],
-) -> _Run:
+def _run_model(model: Any, request: _Request) -> _Run:
     """A pinocchio.Model solved as it is, its position limits as stops unless limits=False."""
     _check_model(model)
     if model.nv == 0:
         raise ValueError("model has no degree of freedom: nothing to settle")
-    s = make_settings(settings, overrides)
+    s = make_settings(request.settings, request.overrides)
     s.check()
-    q = pinocchio.neutral(model) if q0 is None else as_vector(q0, "q0", model.nq, "model.nq")
-    v = np.zeros(model.nv) if v0 is None else as_vector(v0, "v0", model.nv, "model.nv")
+    q = (
+        pinocchio.neutral(model)
+        if request.q0 is None
+        else as_vector(request.q0, "q0", model.nq, "model.nq")
+    )
+    v = (
+        np.zeros(model.nv)
+        if request.v0 is None
+        else as_vector(request.v0, "v0", model.nv, "model.nv")
+    )
     stops: tuple[bool, list[tuple[int, float, float]]] | None = (
-        (True, []) if _limits_flag(limits, True) else None
+        (True, []) if _limits_flag(request.limits, True) else None
     )
     equal: list[str] = []
     unapplied: list[str] = []
@@ -615,7 +621,7 @@ def _run_model(
         found = _core.joint_stops(model, stops)
         equal = [str(name) for name in found["equal_limits"]]
         unapplied = [str(name) for name in found["unapplied_limits"]]
-    raw = _core.solve(model, q, v, s, callback, None, None, stops, progress=report)
+    raw = _core.solve(model, q, v, s, request.callback, None, None, stops, progress=request.report)
     raw["loops"] = 0
     return _Run(raw, s, stops, equal, unapplied, model, model)
 

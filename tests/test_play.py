@@ -7,7 +7,9 @@ where their absence is a failure. The missing-extra message is tested in every c
 
 from __future__ import annotations
 
+import html as html_lib
 import importlib
+import json
 import os
 import re
 import shutil
@@ -164,8 +166,8 @@ def test_the_animation_ends_on_the_final_pose(name, exported):
         clip = clips[f"/meshcat/pinsettle/pinocchio/visuals/{obj.name}"]
         position = clip.tracks["position"]
         assert np.allclose(position.values[-1], gdata.oMg[g].translation, atol=1e-9), obj.name
-        # ... held: the last two keyframes are the same pose.
-        assert np.allclose(position.values[-2], position.values[-1])
+        # ... at the end of the motion (the viewer keeps the last keyframe's pose).
+        assert position.frames[-1] == pytest.approx(viz.timeline.end * _play().FPS)
         w = clip.tracks["quaternion"].values[-1]  # x, y, z, w
         expected = pinocchio.Quaternion(gdata.oMg[g].rotation)
         assert abs(np.dot(w, expected.coeffs())) == pytest.approx(1.0, abs=1e-9), obj.name
@@ -480,9 +482,11 @@ def _impact_pixels(pixels: np.ndarray) -> float:
 def test_screenshot_shows_the_flash_at_an_impact(impacts, browser, tmp_path):
     scene, result, viz, html = impacts
     at = float(viz.timeline.events["impact"][0]) + 0.3 * _play().FLASH_SECONDS
-    flash = screenshot(browser, f"{html.as_uri()}#t={at:.4f}", tmp_path / "flash.png")
+    speed = viz.timeline.speed  # #t= is simulated time; the events are in playback seconds
+    flash = screenshot(browser, f"{html.as_uri()}#t={at * speed:.6g}", tmp_path / "flash.png")
     end = screenshot(browser, html.as_uri() + "#end", tmp_path / "end.png")
-    before = screenshot(browser, f"{html.as_uri()}#t={max(at - 0.35, 0):.4f}", tmp_path / "b.png")
+    before_t = max(at - 0.35, 0) * speed
+    before = screenshot(browser, f"{html.as_uri()}#t={before_t:.6g}", tmp_path / "b.png")
     assert _impact_pixels(flash) > 0.001, "no flash at the impact"
     assert _impact_pixels(end) == 0 and _impact_pixels(before) == 0
 
@@ -601,9 +605,9 @@ def test_a_short_settle_plays_in_slow_motion(name, exported):
     # Slowed down so that it lasts MIN_PLAYBACK_SECONDS (>= 2 s) of playback.
     assert timeline.duration == pytest.approx(play.MIN_PLAYBACK_SECONDS) and timeline.duration >= 2
     assert timeline.speed == pytest.approx(result.sim_time / play.MIN_PLAYBACK_SECONDS)
-    # A keyframe at least every 1.5 / FPS s of the motion (the last step is the hold).
+    # A keyframe at least every 1.5 / FPS s of the motion, the last at its end (no hold).
     steps = np.diff(timeline.times)
-    assert steps[:-1].max() <= 1.5 / play.FPS + 1e-12 and steps[-1] == play.HOLD_SECONDS
+    assert steps.max() <= 1.5 / play.FPS + 1e-12 and timeline.end == timeline.duration
     # The recorded configurations are among the keyframes, at their time (simulated time /
     # speed), then the final pose (result.q, the last sample polished); those between are on
     # Pinocchio's interpolation of their neighbours.
@@ -655,8 +659,8 @@ def test_screenshot_of_a_short_settle_moves_between_start_and_end(exported, brow
     h = 600
     below = slice(h // 5, h)  # below the overlay
     shots = {
-        t: screenshot(browser, f"{html.as_uri()}#t={t}", tmp_path / f"{t}.png")[below]
-        for t in (0, 1.5, viz.timeline.duration)
+        t: screenshot(browser, f"{html.as_uri()}#t={t:.6g}", tmp_path / f"{t}.png")[below]
+        for t in (0, 0.5 * result.sim_time, result.sim_time)  # simulated time
     }
     start, middle, end = shots.values()
 
@@ -668,6 +672,42 @@ def test_screenshot_of_a_short_settle_moves_between_start_and_end(exported, brow
         changed(start, middle),
         changed(middle, end),
     )
+
+
+@pytest.mark.parametrize("name", ["fourbar", "ur5"])
+def test_the_time_slider_reads_simulated_time(name, exported, browser, tmp_path):
+    # meshcat's Animations folder: its time slider runs from 0 to the simulated time of the
+    # settle (no hold after it), its timeScale is the playback's speed, and the page opened
+    # on its end or half-way (#t=, simulated seconds) shows that time on the slider. The
+    # page is read by a script added to a copy of it (dat.gui keeps the values in input
+    # properties, not in the DOM; a playing page is not read: how far headless Chromium's
+    # virtual time gets varies from run to run).
+    scene, result, viz, html, plot = exported(name)
+    probe = """<pre id="probe"></pre><script>(function read() {
+      const a = viewer.animator, gui = a.folder.__folders["default"].__controllers;
+      const slider = gui.find((c) => c.property === "time");
+      const scale = gui.find((c) => c.property === "timeScale");
+      document.getElementById("probe").textContent = JSON.stringify({time: a.time,
+        max: slider.__max, speed: a.mixer.timeScale, playing: a.playing,
+        shown: Number(slider.__li.querySelector("input").value),
+        speed_shown: Number(scale.__input.value)});
+      requestAnimationFrame(read);
+    })();</script></body>"""
+    head, _, tail = html.read_text("utf-8").rpartition("</body>")
+    copy = tmp_path / "probe.html"
+    copy.write_text(head + probe + tail, encoding="utf-8")
+    sim_time = viz.timeline.sim_time  # the trace's first sample to the end
+    assert sim_time == pytest.approx(result.sim_time, abs=1e-12)
+    for at in (sim_time, 0.5 * sim_time):
+        url = copy.as_uri() + ("#end" if at == sim_time else f"#t={at!r}")
+        found = re.search(r'<pre id="probe">(.*?)</pre>', page_dom(browser, url, 2000), re.S)
+        assert found and found.group(1), url
+        read = json.loads(html_lib.unescape(found.group(1)))
+        assert read["max"] == pytest.approx(sim_time, rel=1e-6)  # three.js keeps float32
+        assert read["speed"] == pytest.approx(viz.timeline.speed, rel=1e-12)
+        assert read["speed_shown"] == pytest.approx(viz.timeline.speed, abs=0.01)
+        assert not read["playing"] and read["time"] == pytest.approx(at, rel=1e-6)
+        assert read["shown"] == pytest.approx(at, abs=1e-3)
 
 
 # --- what holds a rest: loads, loop closure points, stop reactions ------------------------------
@@ -766,7 +806,8 @@ def test_screenshot_shows_the_load_the_loop_and_the_stop_reaction(exported, brow
     forces = importlib.import_module("pinsettle._play_forces")
     scene, result, viz, html, plot = exported("fourbar_stop")
     end = screenshot(browser, html.as_uri() + "#end", tmp_path / "end.png")
-    moving = screenshot(browser, html.as_uri() + "#t=1", tmp_path / "moving.png")
+    at = viz.timeline.speed  # 1 s into the playback, in simulated time
+    moving = screenshot(browser, f"{html.as_uri()}#t={at:.6g}", tmp_path / "moving.png")
     for color in (forces.LOAD_COLOR, forces.LOOP_COLOR):
         assert _color_pixels(end, color) > 200 and _color_pixels(moving, color) > 200
     assert _color_pixels(end, forces.STOP_COLOR) > 200

@@ -133,12 +133,14 @@ def _place_camera(viz: Any, target: np.ndarray, distance: float) -> None:
 
 
 class _Tracks:
-    """The animation being made, with the keyframe times (frames at ``FPS``)."""
+    """The animation being made, with the keyframe times (frames at ``FPS`` a second of
+    playback) and the clips' rate (``Timeline.clip_fps``: frames per simulated second)."""
 
     def __init__(self, timeline: Timeline) -> None:
         from meshcat.animation import Animation
 
-        self.animation = Animation(default_framerate=FPS)
+        self.fps = timeline.clip_fps
+        self.animation = Animation(default_framerate=self.fps)
         self.key_frames = (timeline.times * FPS).tolist()
 
     def poses(self, path: Any, matrices: np.ndarray, frames: list[float] | None = None) -> None:
@@ -153,7 +155,7 @@ class _Tracks:
             tracks["position"].append(position)
             tracks["quaternion"].append(quaternion)
             tracks["scale"].append(scale)
-        clip = AnimationClip(fps=FPS)
+        clip = AnimationClip(fps=self.fps)
         for name, jstype in (("position", "vector3"), ("quaternion", "quaternion")):
             clip.tracks[name] = AnimationTrack(name, jstype, list(frames), tracks[name])
         if not np.allclose(tracks["scale"], 1.0):
@@ -161,7 +163,7 @@ class _Tracks:
         self.animation.clips[path] = clip
 
     def visibility(self, path: Any, frames: list[float], shown: np.ndarray) -> None:
-        _add_visibility(self.animation, path, frames, shown)
+        _add_visibility(self.animation, path, frames, shown, self.fps)
 
 
 def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any, result: Result) -> Any:
@@ -255,7 +257,7 @@ def _add_event_flashes(
         static = np.diag([tiny, tiny, tiny, 1.0])
         static[:3, 3] = com[-1]
         node.set_transform(static)
-        clip = AnimationClip(fps=FPS)
+        clip = AnimationClip(fps=tracks.fps)
         clip.tracks["position"] = AnimationTrack(
             "position", "vector3", list(grid_frames), position.tolist()
         )
@@ -332,11 +334,14 @@ def _load_flash_shape(viz: Any, obj: pinocchio.GeometryObject) -> Any:
     return node
 
 
-def _add_visibility(animation: Any, path: Any, frames: list[float], shown: np.ndarray) -> None:
-    """Show the node at ``path`` at the keyframes where ``shown`` holds, hide it elsewhere."""
+def _add_visibility(
+    animation: Any, path: Any, frames: list[float], shown: np.ndarray, fps: float
+) -> None:
+    """Show the node at ``path`` at the keyframes where ``shown`` holds, hide it elsewhere
+    (a new clip at ``fps`` frames a second if the node has none)."""
     from meshcat.animation import AnimationClip, AnimationTrack
 
-    clip = animation.clips.setdefault(path, AnimationClip(fps=FPS))
+    clip = animation.clips.setdefault(path, AnimationClip(fps=fps))
     clip.tracks["visible"] = AnimationTrack(
         "visible", "boolean", list(frames), [bool(x) for x in shown]
     )

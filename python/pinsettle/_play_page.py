@@ -56,11 +56,11 @@ _OVERLAY_JS = """
     return lo;
   }
   let shown = -1;
-  function tick() {
+  function tick() {  // the viewer's time is simulated time (its clips are)
     const now = (viewer.animator && viewer.animator.time) || 0;
     const t = Math.min(now, info.duration);
     const held = now >= info.duration && info.duration > 0;
-    clock.textContent = "t = " + (t * info.speed).toFixed(3) + " s simulated, played " +
+    clock.textContent = "t = " + t.toFixed(3) + " s simulated, played " +
       info.speed_label + (held ? ", final pose held" : "");
     const parts = [];
     let total = 0;
@@ -83,8 +83,25 @@ _OVERLAY_JS = """
 })();
 """
 
+# The clips run in simulated time, so that meshcat's time slider reads simulated seconds; each
+# animation loaded is played at the playback's speed (its mixer's timeScale, set before the
+# first frame, shown in the Animations folder), on the saved and the live page alike.
+_SPEED_JS = """
+(function (speed) {
+  const animator = viewer.animator;
+  const load = animator.load.bind(animator);
+  animator.load = function (animations, options) {
+    load(animations, options);
+    animator.mixer.timeScale = speed;
+    for (const folder of Object.values(animator.folder.__folders)) {
+      for (const control of folder.__controllers) control.updateDisplay();
+    }
+  };
+})(%s);
+"""
+
 # page.html#end opens on the final pose, paused (for a quick look, a screenshot or a test);
-# page.html#t=1.5 on the frame 1.5 s into the playback, paused.
+# page.html#t=0.05 on the frame 0.05 s of simulated time into the settle, paused.
 _END_JS = """
 (function () {
   const animator = viewer.animator;
@@ -94,7 +111,7 @@ _END_JS = """
     const t = Math.min(Math.max(at, 0), animator.duration);
     animator.playing = false;
     animator.seek(t);
-    animator.time = t;
+    animator.display_progress(t);  // the time slider shows it too
   }
 })();
 """
@@ -107,6 +124,14 @@ function pinsettle_apply(b64) {
   viewer.handle_command_bytearray(bytes);
 }
 """
+
+
+def _speed_js(overlay: dict[str, Any] | None) -> str:
+    """The hook that plays each animation loaded at the overlay's speed (simulated seconds a
+    second); none without an overlay (the clips then play in real time)."""
+    if overlay is None:
+        return ""
+    return _SPEED_JS % json.dumps(float(overlay["speed"]))
 
 
 def _script_json(value: Any) -> str:
@@ -129,6 +154,7 @@ def _html(commands: list[bytes], animation: bytes | None, overlay: dict[str, Any
         f'<style>{_OVERLAY_CSS}</style>\n</head>\n<body>\n<div id="meshcat-pane"></div>\n',
         f"<script>{viewer_js}</script>\n",
         '<script>\nvar viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));\n',
+        _speed_js(overlay),
         _APPLY_JS,
         f"{_script_json(encoded)}.forEach(pinsettle_apply);\n</script>\n",
     ]
@@ -163,6 +189,7 @@ def live_page(overlay: dict[str, Any]) -> str:
             f'<style>{_OVERLAY_CSS}</style>\n</head>\n<body>\n<div id="meshcat-pane"></div>\n',
             '<script src="/static/main.min.js"></script>\n',
             '<script>\nvar viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));\n',
+            _speed_js(overlay),
             "viewer.connect();\n</script>\n",
             _overlay_html(overlay),
             "</body>\n</html>\n",

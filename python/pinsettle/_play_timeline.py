@@ -17,8 +17,6 @@ PLAYBACK_SECONDS = 6.0
 MIN_PLAYBACK_SECONDS = 3.0
 #: Keyframes per second of playback (at most; fewer when the trace has fewer samples).
 FPS = 30
-#: The final pose is held this long at the end of the animation (s), then stays (clamped).
-HOLD_SECONDS = 0.5
 #: A damping event flashes for this long (s of playback).
 FLASH_SECONDS = 0.25
 
@@ -75,9 +73,11 @@ def speed_label(speed: float) -> str:
 @dataclass(frozen=True)
 class Timeline:
     """What the animation shows: keyframe times (s of playback) and configurations (the last
-    two are the final pose, held), the event times (s of playback) by kind (sorted), the speed
-    and the length of the motion (s of playback, without the hold). ``impact_joints`` gives
-    the joint (index in the scene's model) of each of ``events['impact']``."""
+    is the final pose, which the viewer then keeps), the event times (s of playback) by kind
+    (sorted), the speed and the length of the motion (s of playback). ``impact_joints`` gives
+    the joint (index in the scene's model) of each of ``events['impact']``. The viewer's clips
+    run in simulated time (``clip_fps`` keyframes a simulated second, played at ``speed``),
+    so that its time slider reads simulated seconds."""
 
     times: np.ndarray
     q: np.ndarray
@@ -89,8 +89,15 @@ class Timeline:
 
     @property
     def end(self) -> float:
-        """Length of the whole animation, hold included (s)."""
+        """Length of the whole animation (s of playback): ``duration``, or one frame for a
+        run that did not move."""
         return float(self.times[-1])
+
+    @property
+    def clip_fps(self) -> float:
+        """Keyframes (at ``FPS`` a second of playback) per simulated second: the viewer's
+        clips are in simulated time."""
+        return FPS / self.speed
 
     def frame_times(self) -> np.ndarray:
         """A uniform grid at ``FPS`` over the whole animation (for the event flashes)."""
@@ -118,7 +125,7 @@ def _trace_of(result: Result, nq: int) -> Any:
 
 def make_timeline(result: Result, nq: int, speed: float | None = None) -> Timeline:
     """Keyframes of the playback of ``result`` (see ``Timeline``): the trace's samples mapped
-    to playback time (at most ``FPS`` a second), then the final pose, held."""
+    to playback time (at most ``FPS`` a second), then the final pose."""
     trace = _trace_of(result, nq)
     speed = check_speed(speed)
     t = np.asarray(trace.time, dtype=float)
@@ -142,8 +149,11 @@ def make_timeline(result: Result, nq: int, speed: float | None = None) -> Timeli
     final = np.asarray(result.q, dtype=float)[None, :]
     if play_t.size and duration - play_t[-1] < 1e-9:
         play_t, q = play_t[:-1], q[:-1]
-    times = np.concatenate([play_t, [duration, duration + HOLD_SECONDS]])
-    poses = np.concatenate([q, final, final])
+    # A run that did not move still gets a clip of one frame: a clip of length 0 divides
+    # by its length in the viewer.
+    ends = [duration] if duration > 0 else [0.0, 1.0 / FPS]
+    times = np.concatenate([play_t, ends])
+    poses = np.concatenate([q] + [final] * len(ends))
     events: dict[str, np.ndarray] = {}
     kinds = np.asarray(trace.event_kind, dtype=object)
     event_t = (np.asarray(trace.event_time, dtype=float) - t0) / speed

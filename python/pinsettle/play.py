@@ -43,7 +43,6 @@ from ._play_timeline import (
     EVENT_KINDS,
     FLASH_SECONDS,
     FPS,
-    HOLD_SECONDS,
     MIN_PLAYBACK_SECONDS,
     PLAYBACK_SECONDS,
     Timeline,
@@ -61,7 +60,6 @@ __all__ = [
     "EVENT_KINDS",
     "FLASH_SECONDS",
     "FPS",
-    "HOLD_SECONDS",
     "MIN_PLAYBACK_SECONDS",
     "PLAYBACK_SECONDS",
     "SERVER_TIMEOUT",
@@ -115,7 +113,7 @@ class _Playback:
 
     @property
     def duration(self) -> float:
-        """Length of the animation (s), the final hold included."""
+        """Length of the animation (s of playback)."""
         return self.timeline.end
 
     def html(self) -> str:
@@ -158,8 +156,9 @@ def _overlay(scene: Scene, result: Result, timeline: Timeline) -> dict[str, Any]
         "status": status,
         "speed": timeline.speed,
         "speed_label": speed_label(timeline.speed),
-        "duration": timeline.duration,
-        "events": {k: v.tolist() for k, v in timeline.events.items()},
+        # In simulated time, as the viewer's clips and time slider.
+        "duration": timeline.duration * timeline.speed,
+        "events": {k: (v * timeline.speed).tolist() for k, v in timeline.events.items()},
     }
 
 

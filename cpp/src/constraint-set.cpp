@@ -50,6 +50,8 @@ namespace pinsettle
       assemble(data, q, v, result);
     if (stops_ == nullptr)
       return;
+    if (hold_)
+      hold_->start();
     clampToStops(*stops_, q, &result.start_clamped);
     pinsettle::enforceStops(*stops_, q, v);
     if (loops_ != nullptr && !result.start_clamped.empty())

@@ -401,6 +401,11 @@ namespace pinsettle
     stationary_ = false;
     newton_tried_at_ = 0;
     settled_by_newton_ = false;
+    // Nothing of a previous run is read in this one (a solver is reused across solves).
+    locked_ = nullptr;
+    q_before_ = q_;
+    q_before2_ = q_;
+    exact_before_ = 0.;
 
     peaks_ = PeakDetector(settings.err);
     window_ = StoppingWindow(settings.ds, settings.max_e);

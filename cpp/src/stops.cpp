@@ -282,6 +282,15 @@ namespace pinsettle
     lock_mass_ = locked_side_;
   }
 
+  void StopHold::start()
+  {
+    std::fill(locked_side_.begin(), locked_side_.end(), 0.);
+    std::fill(side_.begin(), side_.end(), 0.);
+    std::fill(lock_mass_.begin(), lock_mass_.end(), 0.);
+    dynamics_ = &stops_.model();
+    dynamics_version_ = 0;
+  }
+
   void StopHold::useDynamicsModel(const pinocchio::Model & model, std::uint64_t version)
   {
     if (&model == dynamics_ && version == dynamics_version_)

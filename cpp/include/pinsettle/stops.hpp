@@ -226,6 +226,12 @@ namespace pinsettle
     explicit StopHold(const JointStops & stops, const LoopConstraints * loops = nullptr);
 
     ///
+    /// \brief Forget what a previous run left: no joint locked, no diagonal mass known, the
+    /// model's own dynamics followed. A run starts here, as on a new StopHold.
+    ///
+    void start();
+
+    ///
     /// \brief Replace the free acceleration data.ddq by the held one.
     ///
     /// \param[in] q, v The state (on the stops' ranges, as enforceStops leaves it).

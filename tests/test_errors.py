@@ -219,7 +219,9 @@ def test_v0_of_a_free_flyer_has_nv_entries(solo12):
     "model", [{}, None, "ur5", pinocchio.Model().createData()], ids=["dict", "None", "str", "Data"]
 )
 def test_model_of_wrong_type(model):
-    with pytest.raises(TypeError, match=r"^model must be a pinocchio.Model, got "):
+    with pytest.raises(
+        TypeError, match=r"^model must be a pinocchio.Model or a pinsettle.Scene, got "
+    ):
         pinsettle.solve(model)
 
 

@@ -11,6 +11,7 @@
 #include <pinocchio/algorithm/joint-configuration.hpp>
 
 #include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/stl.h>
 
 #include "pinsettle/constraint-set.hpp"
@@ -22,9 +23,11 @@
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"
 
+#include <cmath>
 #include <memory>
 #include <optional>
 #include <sstream>
+#include <unordered_map>
 
 namespace py = pybind11;
 namespace bp = boost::python;
@@ -241,41 +244,88 @@ namespace
     return trace;
   }
 
+  // A key of the result's dict, made once and kept (interned): toDict runs after every solve,
+  // where a key made from its C string each time is a measurable part of a short solve.
+  py::handle internedKey(const char * name)
+  {
+    static std::unordered_map<const char *, PyObject *> keys; // used with the GIL held
+    const auto found = keys.try_emplace(name, nullptr);
+    if (found.second)
+      found.first->second = PyUnicode_InternFromString(name);
+    return found.first->second;
+  }
+
+  // A vector as a new numpy array (a copy: the result it comes from is gone after the call).
+  py::array_t<double> toArray(const Eigen::VectorXd & x)
+  {
+    return py::array_t<double>(x.size(), x.data());
+  }
+
+  // 'm' for a prismatic joint, 'rad' for a revolute or helical one (a joint with a stop).
+  const char * unitOf(const pinocchio::Model & model, pinocchio::JointIndex joint)
+  {
+    const std::string kind = model.joints[joint].shortname();
+    const bool prismatic = kind == "JointModelPX" || kind == "JointModelPY"
+                           || kind == "JointModelPZ" || kind.find("Prismatic") != std::string::npos;
+    return prismatic ? "m" : "rad";
+  }
+
+  // The stops' fields of a result by joint name: at_limit (side), limit_reactions (>= 0),
+  // start_clamped (how far the start was moved) and the unit of each joint named there.
+  void nameStops(const pinocchio::Model & model, const Result & r, py::dict & out)
+  {
+    py::dict at_limit, reactions, clamped, units;
+    for (const StopContact & contact : r.stop_contacts)
+    {
+      const py::str name(model.names[contact.joint]);
+      at_limit[name] = internedKey(toString(contact.side));
+      reactions[name] = contact.reaction;
+      units[name] = internedKey(unitOf(model, contact.joint));
+    }
+    for (const std::pair<pinocchio::JointIndex, double> & c : r.start_clamped)
+    {
+      const py::str name(model.names[c.first]);
+      clamped[name] = c.second;
+      units[name] = internedKey(unitOf(model, c.first));
+    }
+    out[internedKey("at_limit")] = at_limit;
+    out[internedKey("limit_reactions")] = reactions;
+    out[internedKey("start_clamped")] = clamped;
+    out[internedKey("units")] = units;
+  }
+
   py::dict toDict(const pinocchio::Model & model, const Result & r)
   {
     py::dict out;
-    out["stop_contacts"] = stopContactsToList(model, r.stop_contacts);
-    py::list clamped;
-    for (const std::pair<pinocchio::JointIndex, double> & c : r.start_clamped)
-      clamped.append(py::make_tuple(model.names[c.first], c.second));
-    out["start_clamped"] = clamped;
-    out["q"] = r.q;
-    out["v"] = r.v;
-    out["status"] = toString(r.status);
-    out["steps"] = r.steps;
-    out["peaks"] = r.peaks;
-    out["pushes"] = r.pushes;
-    out["stability"] = toString(r.stability);
-    out["min_stiffness_eigenvalue"] = r.min_stiffness_eigenvalue;
-    out["neutral_directions"] = r.neutral_directions;
-    out["sim_time"] = r.sim_time;
-    out["wall_time"] = r.wall_time;
-    out["kinetic_energy"] = r.kinetic_energy;
-    out["simplified_kinetic_energy"] = r.simplified_kinetic_energy;
-    out["residual"] = r.residual;
-    out["residual_before_polish"] = r.residual_before_polish;
-    out["polish_iterations"] = r.polish_iterations;
-    out["polished"] = r.polished;
-    out["dt"] = r.dt;
-    out["dt_estimates"] = r.dt_estimates;
-    out["dt_reductions"] = r.dt_reductions;
-    out["scaled_modes"] = r.scaled_modes;
-    out["scaled_joints"] = r.scaled_joints;
-    out["mobility"] = r.mobility;
-    out["assembly_distance"] = r.assembly_distance;
-    out["constraint_error"] = r.constraint_error;
-    out["reason"] = r.reason;
-    out["trace"] = r.trace.empty() ? py::object(py::none()) : py::object(traceToDict(r));
+    const auto field = [&out](const char * name) { return out[internedKey(name)]; };
+    nameStops(model, r, out);
+    field("q") = toArray(r.q);
+    field("v") = toArray(r.v);
+    field("status") = internedKey(toString(r.status));
+    field("steps") = r.steps;
+    field("peaks") = r.peaks;
+    field("pushes") = r.pushes;
+    field("stability") = internedKey(toString(r.stability));
+    field("min_stiffness_eigenvalue") = r.min_stiffness_eigenvalue;
+    field("neutral_directions") = r.neutral_directions;
+    field("sim_time") = r.sim_time;
+    field("wall_time") = r.wall_time;
+    field("kinetic_energy") = r.kinetic_energy;
+    field("simplified_kinetic_energy") = r.simplified_kinetic_energy;
+    field("residual") = r.residual;
+    field("residual_before_polish") = r.residual_before_polish;
+    field("polish_iterations") = r.polish_iterations;
+    field("polished") = r.polished;
+    field("dt") = r.dt;
+    field("dt_estimates") = r.dt_estimates;
+    field("dt_reductions") = r.dt_reductions;
+    field("scaled_modes") = r.scaled_modes;
+    field("scaled_joints") = r.scaled_joints;
+    field("mobility") = r.mobility;
+    field("assembly_distance") = r.assembly_distance;
+    field("constraint_error") = r.constraint_error;
+    field("reason") = r.reason;
+    field("trace") = r.trace.empty() ? py::object(py::none()) : py::object(traceToDict(r));
     return out;
   }
 
@@ -291,28 +341,15 @@ namespace
     return out;
   }
 
-  py::dict solve(
-    const py::object & model_obj,
-    const Eigen::VectorXd & q0,
-    const Eigen::VectorXd & v0,
-    const Settings & settings,
+  // The user's callback and Ctrl-C, polled by the loop with the GIL released in between:
+  // Ctrl-C (SIGINT) ends the run as "aborted" and keeps the state; an exception from the
+  // user's callback or progress ends it and is kept in error, to be re-raised.
+  AbortCallback pollHook(
     const py::object & callback,
-    const py::object & elements_spec,
-    const py::object & loops_spec,
-    const py::object & stops_spec,
-    const py::object & progress)
+    const py::object & progress,
+    std::optional<py::error_already_set> & error)
   {
-    const pinocchio::Model & model = modelFrom(model_obj);
-    const std::unique_ptr<ForceElements> elements = elementsFrom(model, elements_spec);
-    const std::unique_ptr<LoopConstraints> loops = loopsFrom(model, loops_spec);
-    const std::unique_ptr<JointStops> stops = stopsFrom(model, stops_spec);
-    Solver solver(model, loops.get(), stops.get());
-
-    // Polled with the GIL released in between: Ctrl-C (SIGINT) ends the run as "aborted" and
-    // keeps the state; an exception from the user's callback ends it and is re-raised.
-    std::optional<py::error_already_set> error;
-    // progress(dict) is told where the run stands at each poll; its return value is ignored.
-    const AbortCallback hook = [&](const RunProgress & p) -> bool {
+    return [&error, callback, progress](const RunProgress & p) -> bool {
       py::gil_scoped_acquire gil;
       if (PyErr_CheckSignals() != 0)
       {
@@ -326,6 +363,7 @@ namespace
       }
       try
       {
+        // progress(dict) is told where the run stands at each poll; its value is ignored.
         if (!progress.is_none())
           progress(progressDict(p));
         if (callback.is_none())
@@ -338,16 +376,131 @@ namespace
         return true;
       }
     };
-
-    Result result;
-    {
-      py::gil_scoped_release release;
-      result = solver.solve(q0, v0, settings, elements.get(), hook);
-    }
-    if (error)
-      throw std::move(*error);
-    return toDict(model, result);
   }
+
+  ///
+  /// \brief The solver as Python holds it: built once from a model and what the scene adds to
+  /// it (force elements, loop closures, joint stops), then solved from as many starts as
+  /// wanted. It owns what it was given and keeps the Python model alive; its pinocchio::Data
+  /// and workspace are allocated once, on construction.
+  ///
+  class BoundSolver
+  {
+  public:
+    BoundSolver(
+      const py::object & model_obj,
+      const py::object & elements,
+      const py::object & loops,
+      const py::object & stops,
+      const py::object & joints)
+    : model_obj_(model_obj)
+    , model_(modelFrom(model_obj))
+    , elements_(elementsFrom(model_, elements))
+    , loops_(loopsFrom(model_, loops))
+    , stops_(stopsFrom(model_, stops))
+    , solver_(model_, loops_.get(), stops_.get())
+    , equal_limits_(
+        py::tuple(
+          jointNames(stops_ ? stops_->equalLimitJoints() : std::vector<pinocchio::JointIndex>())))
+    , unapplied_limits_(
+        py::tuple(jointNames(
+          stops_ ? stops_->unappliedLimitJoints() : std::vector<pinocchio::JointIndex>())))
+    {
+      if (!joints.is_none())
+        for (const py::handle & j : joints)
+          joints_.push_back(j.cast<JointField>());
+    }
+
+    /// The run from (q0, v0) (dim nq, nv) as a dict of the Result's fields (names of joints,
+    /// the trace's samples as arrays).
+    py::dict solve(
+      const Eigen::VectorXd & q0,
+      const Eigen::VectorXd & v0,
+      const py::object & settings_obj,
+      const py::object & callback,
+      const py::object & progress)
+    {
+      const Settings & settings = settings_obj.cast<const Settings &>();
+      std::optional<py::error_already_set> error;
+      const AbortCallback hook = pollHook(callback, progress, error);
+      Result result;
+      {
+        py::gil_scoped_release release;
+        result = solver_.solve(q0, v0, settings, elements_.get(), hook);
+      }
+      if (error)
+        throw std::move(*error);
+      py::dict out = toDict(model_, result);
+      out[internedKey("settings")] = settings_obj;
+      out[internedKey("limits")] = py::bool_(stops_ != nullptr);
+      out[internedKey("loops")] = loops_ ? loops_->loops().size() : std::size_t(0);
+      out[internedKey("equal_limits")] = equal_limits_;
+      out[internedKey("unapplied_limits")] = unapplied_limits_;
+      if (!joints_.empty())
+        out[internedKey("joints")] = jointValues(result.q);
+      return out;
+    }
+
+    const py::object & model() const
+    {
+      return model_obj_;
+    }
+
+    /// Joints whose model limits were not applied as stops, by name: equal lower and upper
+    /// limits (taken as no stop), or of several configuration entries (none applies).
+    const py::tuple & equalLimits() const
+    {
+      return equal_limits_;
+    }
+    const py::tuple & unappliedLimits() const
+    {
+      return unapplied_limits_;
+    }
+
+  private:
+    /// How a joint's value is read from q by name (given by the Python layer, which decides
+    /// the layout): kind 0 a number q[iq], 1 the angle atan2(q[iq + 1], q[iq]) of a
+    /// continuous joint, 2 the list q[iq + offsets[k]] (a quaternion w first).
+    using JointField = std::tuple<std::string, int, int, std::vector<int>>;
+
+    py::dict jointValues(const Eigen::VectorXd & q) const
+    {
+      py::dict out;
+      for (const JointField & field : joints_)
+      {
+        const auto & [name, iq, kind, offsets] = field;
+        if (kind == 0)
+          out[py::str(name)] = q[iq];
+        else if (kind == 1)
+          out[py::str(name)] = std::atan2(q[iq + 1], q[iq]);
+        else
+        {
+          py::list values;
+          for (const int k : offsets)
+            values.append(q[iq + k]);
+          out[py::str(name)] = values;
+        }
+      }
+      return out;
+    }
+
+    py::list jointNames(const std::vector<pinocchio::JointIndex> & joints) const
+    {
+      py::list out;
+      for (const pinocchio::JointIndex j : joints)
+        out.append(model_.names[j]);
+      return out;
+    }
+
+    py::object model_obj_; // keeps model_ alive
+    const pinocchio::Model & model_;
+    std::unique_ptr<ForceElements> elements_;
+    std::unique_ptr<LoopConstraints> loops_;
+    std::unique_ptr<JointStops> stops_;
+    Solver solver_;
+    py::tuple equal_limits_, unapplied_limits_;
+    std::vector<JointField> joints_;
+  };
 
   // The time step's settings: dt, dt_safety and dt_growth ('auto' or a number) and their values
   // in effect.
@@ -438,11 +591,28 @@ namespace
   // The solver and the stops it applies.
   void bindSolve(py::module_ & m)
   {
-    m.def(
-      "solve", &solve, py::arg("model"), py::arg("q0"), py::arg("v0"), py::arg("settings"),
-      py::arg("callback") = py::none(), py::arg("elements") = py::none(),
-      py::arg("loops") = py::none(), py::arg("stops") = py::none(),
-      py::arg("progress") = py::none());
+    py::class_<BoundSolver>(
+      m, "Solver",
+      "A kinetic-damping solver for one model and what the scene adds to it (force elements, "
+      "loop closures, joint stops: None for none), reusable across solves.")
+      .def(
+        py::init<
+          const py::object &, const py::object &, const py::object &, const py::object &,
+          const py::object &>(),
+        py::arg("model"), py::arg("elements") = py::none(), py::arg("loops") = py::none(),
+        py::arg("stops") = py::none(), py::arg("joints") = py::none(),
+        "joints: how each joint's value is read from q, [(name, index in q, kind, offsets)] "
+        "(kind 0 q[i], 1 atan2(q[i + 1], q[i]), 2 [q[i + k] for k in offsets]), or None for "
+        "a result without the joints' values.")
+      .def(
+        "solve", &BoundSolver::solve, py::arg("q0"), py::arg("v0"), py::arg("settings"),
+        py::arg("callback") = py::none(), py::arg("progress") = py::none(),
+        "Settle from (q0, v0): a dict of the result's fields (settings: a pinsettle Settings, "
+        "given back in the dict). Ctrl-C or a callback returning True ends the run as "
+        "'aborted'.")
+      .def_property_readonly("model", &BoundSolver::model)
+      .def_property_readonly("equal_limits", &BoundSolver::equalLimits)
+      .def_property_readonly("unapplied_limits", &BoundSolver::unappliedLimits);
 
     m.def(
       "joint_stops",
@@ -474,6 +644,25 @@ namespace
   // Helpers on a model: its kinetic energies, its mimic joints released.
   void bindModelTools(py::module_ & m)
   {
+    m.def(
+      "joint_layout",
+      [](const py::object & model_obj) {
+        const pinocchio::Model & model = modelFrom(model_obj);
+        py::list names, idx_qs, nqs, nvs;
+        for (pinocchio::JointIndex j = 0; j < static_cast<pinocchio::JointIndex>(model.njoints);
+             ++j)
+        {
+          names.append(model.names[j]);
+          idx_qs.append(model.idx_qs[j]);
+          nqs.append(model.nqs[j]);
+          nvs.append(model.nvs[j]);
+        }
+        return py::make_tuple(names, idx_qs, nqs, nvs);
+      },
+      py::arg("model"),
+      "The joints' names, idx_qs, nqs and nvs as lists, in one call (reading each of the "
+      "model's vectors from Python copies it).");
+
     m.def(
       "kinetic_energies",
       [](const py::object & model_obj, const Eigen::VectorXd & q, const Eigen::VectorXd & v) {
@@ -614,6 +803,9 @@ PYBIND11_MODULE(_core, m)
   m.doc() = "pinsettle C++ core: kinetic-damping static equilibrium on Pinocchio's ABA";
   // Registers the Boost.Python converters of pinocchio.Model.
   py::module_::import("pinocchio");
+  // pybind11 finds numpy's C API (and parses numpy's version) on the first array it makes:
+  // 1 ms, done here at import rather than in a user's first solve.
+  (void)py::array_t<double>(0);
   bindSettings(m);
   bindSolve(m);
   bindModelTools(m);

@@ -20,10 +20,10 @@ from ._solve import (
     Trace,
     assess_stability,
     kinetic_energies,
-    solve,
     static_force,
     static_residual,
 )
+from ._solver import Solver, solve
 from ._sweep import distinct_rests, sweep
 from .robots import load_robot, load_urdf, robot_names, robot_urdf
 from .scenes import scene_names, scene_path, scenes_dir
@@ -51,6 +51,7 @@ __all__ = [
     "scene_names",
     "scene_path",
     "scenes_dir",
+    "Solver",
     "solve",
     "static_force",
     "static_residual",

@@ -91,17 +91,35 @@ class _Progress(TypedDict):
     residual: float  # nan before the first assessment
     wall_time: float
 
-def solve(
+class Solver:
+    """A kinetic-damping solver for one model and what the scene adds to it, reusable."""
+
+    def __init__(
+        self,
+        model: pinocchio.Model,
+        elements: _Elements | None = ...,
+        loops: _Loops | None = ...,
+        stops: _Stops | None = ...,
+        joints: list[tuple[str, int, int, list[int]]] | None = ...,
+    ) -> None: ...
+    def solve(
+        self,
+        q0: npt.ArrayLike,
+        v0: npt.ArrayLike,
+        settings: Settings,
+        callback: Callable[[], bool] | None = ...,
+        progress: Callable[[_Progress], object] | None = ...,
+    ) -> dict[str, Any]: ...
+    @property
+    def model(self) -> pinocchio.Model: ...
+    @property
+    def equal_limits(self) -> tuple[str, ...]: ...
+    @property
+    def unapplied_limits(self) -> tuple[str, ...]: ...
+
+def joint_layout(
     model: pinocchio.Model,
-    q0: npt.ArrayLike,
-    v0: npt.ArrayLike,
-    settings: Settings,
-    callback: Callable[[], bool] | None = ...,
-    elements: _Elements | None = ...,
-    loops: _Loops | None = ...,
-    stops: _Stops | None = ...,
-    progress: Callable[[_Progress], object] | None = ...,
-) -> dict[str, Any]: ...
+) -> tuple[list[str], list[int], list[int], list[int]]: ...
 def joint_stops(model: pinocchio.Model, stops: _Stops | None) -> _JointStops: ...
 def kinetic_energies(
     model: pinocchio.Model, q: npt.ArrayLike, v: npt.ArrayLike

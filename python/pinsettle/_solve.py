@@ -4,7 +4,6 @@ settings are in ``_settings``)."""
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -14,8 +13,8 @@ import pinocchio
 
 from . import _core
 from ._checks import as_flag, as_vector
-from ._scene import Scene, has_mimic_joints, joint_values
-from ._settings import Settings, make_settings
+from ._scene import Scene, has_mimic_joints
+from ._settings import Settings
 
 
 @dataclass(frozen=True)
@@ -170,6 +169,15 @@ class Result:
     @property
     def converged(self) -> bool:
         return self.status == "converged"
+
+    @classmethod
+    def _of_fields(cls, fields: dict[str, Any]) -> Result:
+        """The Result holding ``fields``, every field given (as a solve has them). Set at once:
+        the frozen dataclass's ``__init__`` sets its 38 fields one ``object.__setattr__`` at a
+        time, 10 us of a 100 us UR5 solve."""
+        result = object.__new__(cls)
+        object.__setattr__(result, "__dict__", fields)
+        return result
 
     def summary(self) -> str:
         """A readable report with the final joint values by name."""
@@ -419,238 +427,3 @@ def assess_stability(model: Any, q: Any, *, limits: bool | None = None) -> Stabi
         stops = (True, []) if _limits_flag(limits, True) else None
         raw = _core.stiffness(model, as_vector(q, "q", model.nq, "model.nq"), None, None, stops)
     return StabilityReport(**raw)
-
-
-def solve(
-    model: Any,
-    q0: Any = None,
-    settings: Settings | Mapping[str, Any] | None = None,
-    *,
-    v0: Any = None,
-    callback: Callable[[], bool] | None = None,
-    limits: bool | None = None,
-    progress: Callable[[Progress], object] | None = None,
-    **overrides: Any,
-) -> Result:
-    """Settle a mechanism by kinetic damping and return where it comes to rest.
-
-    Args:
-        model: a ``pinocchio.Model`` (from the ``pin`` package) or a ``pinsettle.Scene``.
-        q0: start configuration (dim model.nq, the full model for a scene); the neutral
-            configuration (a scene's start) when None.
-        settings: a ``Settings`` (or a dict of fields); never modified. For a scene, its
-            ``[solver]`` settings when None.
-        v0: start joint velocity (dim model.nv); zero when None.
-        callback: called every ``check_every`` steps without arguments; returning True stops the
-            run with status 'aborted'. Ctrl-C does the same.
-        limits: whether the model's position limits are joint stops. None: yes for a
-            ``pinocchio.Model``, the scene's own setting (``Scene.limits``, ``[model] limits``)
-            for a scene; True or False overrides it. Stops set on a scene (``set_limit``,
-            ``[[limit]]``) apply either way.
-        progress: called every ``check_every`` steps with a ``Progress`` (steps, simulated
-            time, kinetic energy, damping events, residual, wall time); its return value is
-            ignored, an exception from it ends the run and is raised here. None (the default)
-            costs nothing.
-        **overrides: any ``Settings`` field, e.g. ``kt=0.3``.
-
-    Raises:
-        TypeError: ``model`` is neither a ``pinocchio.Model`` nor a ``Scene``; an unknown
-            setting or a value of the wrong type.
-        ValueError: a setting out of range, or a ``q0``/``v0`` of the wrong size, with a
-            non-finite entry or a non-normalised quaternion; the message names it. A
-            ``SceneError`` (a ValueError) for joint stops on a scene with loops (not supported
-            yet).
-    """
-    if callback is not None and not callable(callback):
-        raise TypeError(f"callback must be callable or None, got {type(callback).__name__}")
-    if isinstance(model, pinocchio.Model) and has_mimic_joints(model):
-        return _solve_coupled(model, q0, settings, v0, callback, limits, progress, overrides)
-    request = _Request(q0, settings, v0, callback, limits, _progress_reporter(progress), overrides)
-    run = _run_scene(model, request) if isinstance(model, Scene) else _run_model(model, request)
-    if run.unapplied:
-        _warn_unapplied(run.unapplied)
-    return run.result()
-
-
-def _solve_coupled(
-    model: pinocchio.Model,
-    q0: Any,
-    settings: Settings | Mapping[str, Any] | None,
-    v0: Any,
-    callback: Callable[[], bool] | None,
-    limits: bool | None,
-    progress: Callable[[Progress], object] | None,
-    overrides: dict[str, Any],
-) -> Result:
-    """A model with mimic joints: each follower coupled to its leader (a constraint, as loops
-    are), solved as a Scene; the answer in the model's own coordinates."""
-    scene = Scene(model)
-    result = solve(
-        scene,
-        None if q0 is None else scene.from_mimic_q(as_vector(q0, "q0", model.nq, "model.nq")),
-        settings,
-        v0=None if v0 is None else scene.from_mimic_v(as_vector(v0, "v0", model.nv, "model.nv")),
-        callback=callback,
-        limits=limits,
-        progress=progress,
-        **overrides,
-    )
-    trace = result.trace
-    if trace is not None and trace.q is not None:
-        trace = dataclasses.replace(trace, q=scene.to_mimic_q(trace.q))
-    return dataclasses.replace(
-        result, q=scene.to_mimic_q(result.q), v=scene.to_mimic_v(result.v), trace=trace
-    )
-
-
-@dataclass
-class _Request:
-    """What solve was asked, for a scene or a model alike (report: the core's progress hook)."""
-
-    q0: Any
-    settings: Settings | Mapping[str, Any] | None
-    v0: Any
-    callback: Callable[[], bool] | None
-    limits: bool | None
-    report: Callable[[Mapping[str, Any]], None] | None
-    overrides: dict[str, Any]
-
-
-@dataclass
-class _Run:
-    """What the core returned for a run, with what the Result needs besides: the settings,
-    the stops given, the limit notes, the model solved and the one that names the joints."""
-
-    raw: dict[str, Any]
-    settings: Settings
-    stops: tuple[bool, list[tuple[int, float, float]]] | None
-    equal: list[str]
-    unapplied: list[str]
-    solved: Any
-    naming: Any
-
-    def result(self) -> Result:
-        raw = self.raw
-        trace = raw.pop("trace")
-        if trace is not None:
-            trace["event_kind"] = tuple(trace["event_kind"])
-        contacts = raw.pop("stop_contacts")
-        clamped = {str(name): float(distance) for name, distance in raw.pop("start_clamped")}
-        named = {str(name) for name, _, _ in contacts} | set(clamped)
-        return Result(
-            **raw,
-            trace=None if trace is None else Trace(**trace),
-            settings=self.settings,
-            joints=joint_values(self.naming, raw["q"]),
-            limits=self.stops is not None,
-            at_limit={str(name): str(side) for name, side, _ in contacts},
-            limit_reactions={str(name): float(reaction) for name, _, reaction in contacts},
-            start_clamped=clamped,
-            equal_limits=tuple(self.equal),
-            unapplied_limits=tuple(self.unapplied),
-            units={name: _unit(self.solved, name) for name in named},
-        )
-
-
-def _run_scene(scene: Scene, request: _Request) -> _Run:
-    """A scene solved on its compiled model (locked joints removed), the answer back in the
-    scene's full model."""
-    full = scene.model
-    s = make_settings(
-        scene.settings if request.settings is None else request.settings, request.overrides
-    )
-    s.check()
-    q_full = scene.q0() if request.q0 is None else as_vector(request.q0, "q0", full.nq, "model.nq")
-    compiled = scene.compile(None if request.q0 is None else q_full)
-    v_full = (
-        np.zeros(full.nv)
-        if request.v0 is None
-        else as_vector(request.v0, "v0", full.nv, "model.nv")
-    )
-    locked_v = np.delete(v_full, compiled.v_index)
-    if np.any(locked_v != 0.0):
-        raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
-    stops = compiled.stops_for(_limits_flag(request.limits, scene.limits))
-    equal, unapplied = compiled.limit_notes(stops)
-    raw = _core.solve(
-        compiled.model,
-        q_full[compiled.q_index],
-        v_full[compiled.v_index],
-        s,
-        request.callback,
-        compiled.elements,
-        compiled.loops,
-        stops,
-        progress=request.report,
-    )
-    raw["q"] = compiled.full_q(raw["q"])
-    raw["loops"] = len(scene.loops)
-    raw["v"] = compiled.full_v(raw["v"], full.nv)
-    if raw["trace"] is not None:
-        if raw["trace"]["q"] is not None:
-            raw["trace"]["q"] = np.array([compiled.full_q(row) for row in raw["trace"]["q"]])
-        raw["trace"]["event_joint"] = _full_joints(
-            compiled.model, full, raw["trace"]["event_joint"]
-        )
-    return _Run(raw, s, stops, equal, unapplied, compiled.model, full)
-
-
-def _run_model(model: Any, request: _Request) -> _Run:
-    """A pinocchio.Model solved as it is, its position limits as stops unless limits=False."""
-    _check_model(model)
-    if model.nv == 0:
-        raise ValueError("model has no degree of freedom: nothing to settle")
-    s = make_settings(request.settings, request.overrides)
-    s.check()
-    q = (
-        pinocchio.neutral(model)
-        if request.q0 is None
-        else as_vector(request.q0, "q0", model.nq, "model.nq")
-    )
-    v = (
-        np.zeros(model.nv)
-        if request.v0 is None
-        else as_vector(request.v0, "v0", model.nv, "model.nv")
-    )
-    stops: tuple[bool, list[tuple[int, float, float]]] | None = (
-        (True, []) if _limits_flag(request.limits, True) else None
-    )
-    equal: list[str] = []
-    unapplied: list[str] = []
-    if stops is not None:
-        found = _core.joint_stops(model, stops)
-        equal = [str(name) for name in found["equal_limits"]]
-        unapplied = [str(name) for name in found["unapplied_limits"]]
-    raw = _core.solve(model, q, v, s, request.callback, None, None, stops, progress=request.report)
-    raw["loops"] = 0
-    return _Run(raw, s, stops, equal, unapplied, model, model)
-
-
-def _warn_unapplied(unapplied: list[str]) -> None:
-    """The model's limits that no stop applies (joints of several configuration entries)."""
-    warnings.warn(
-        "position limits of "
-        + ", ".join(repr(name) for name in unapplied)
-        + " are not applied: stops act on joints of one configuration entry (revolute, "
-        "prismatic, helical), not on planar, spherical, free-flyer or continuous joints; "
-        "pass limits=False to solve without the model's limits",
-        UserWarning,
-        stacklevel=3,  # the caller of solve
-    )
-
-
-def _full_joints(reduced: pinocchio.Model, full: pinocchio.Model, joints: Any) -> np.ndarray:
-    """Joint indices of the reduced model (locked joints removed) as indices of the full
-    model, by name; -1 stays -1."""
-    indices: np.ndarray = np.asarray(joints, dtype=np.int64)
-    if reduced is full:
-        return indices
-    ids = [full.getJointId(name) for name in reduced.names]
-    return np.array([ids[j] if j >= 0 else -1 for j in indices], dtype=np.int64)
-
-
-def _unit(model: pinocchio.Model, name: str) -> str:
-    """'m' for a prismatic joint, 'rad' for a revolute or helical one."""
-    kind = str(model.joints[model.getJointId(name)].shortname())
-    prismatic = kind in ("JointModelPX", "JointModelPY", "JointModelPZ") or "Prismatic" in kind
-    return "m" if prismatic else "rad"

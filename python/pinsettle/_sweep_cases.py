@@ -23,7 +23,8 @@ from . import _core
 from ._checks import unknown_key_message
 from ._scene import JointLoad, PointLoad, Scene, SceneError
 from ._settings import make_settings
-from ._solve import Result, solve
+from ._solve import Result
+from ._solver import Solver
 
 #: A pandas.DataFrame (pandas is optional: no static import here).
 DataFrame = Any
@@ -603,6 +604,7 @@ class Runner:
         self.continuation = continuation
         self._variants: OrderedDict[Changes, Scene | SceneError] = OrderedDict()
         self._lock = threading.Lock()
+        self._local = threading.local()  # each thread's solvers
         base = self.variant(())
         assert isinstance(base, Scene)
         self.base = base
@@ -635,9 +637,23 @@ class Runner:
         if isinstance(scene, Exception):
             return scene
         try:
-            return solve(scene, q0, self.settings, callback=callback, limits=self.limits)
+            return self.solver(changes, scene).solve(q0, callback=callback)
         except Exception as error:  # a case's bad value: recorded, the sweep goes on
             return error
+
+    def solver(self, changes: Changes, scene: Scene) -> Solver:
+        """This thread's solver of the scene with ``changes``: made once and kept (the last
+        ``CACHE``), as a solver runs one solve at a time and each worker thread needs its own."""
+        solvers: OrderedDict[Changes, Solver] | None = getattr(self._local, "solvers", None)
+        if solvers is None:
+            solvers = self._local.solvers = OrderedDict()
+        if changes in solvers:
+            solvers.move_to_end(changes)
+            return solvers[changes]
+        made = solvers[changes] = Solver(scene, self.settings, limits=self.limits)
+        if len(solvers) > self.CACHE:
+            solvers.popitem(last=False)
+        return made
 
     def outputs(self, result: Result | Exception) -> dict[str, Any]:
         """A case's columns: its outcome, joint values by name, or its error."""

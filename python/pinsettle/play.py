@@ -53,7 +53,8 @@ from ._play_timeline import (
     speed_label,
 )
 from ._scene import Scene, load_scene
-from ._solve import Result, solve
+from ._solve import Result
+from ._solver import solve
 from .scenes import scene_path
 
 __all__ = [

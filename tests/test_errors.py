@@ -99,7 +99,7 @@ def test_setting_overflowing_int(pendulum):
 @pytest.mark.parametrize("key", ["stifness", "kk"])
 def test_unknown_setting_lists_the_known_ones(pendulum, key):
     with pytest.raises(
-        TypeError, match=rf"unknown setting '{key}'.*known settings: dt, dt_safety, kt, "
+        TypeError, match=rf"unknown setting '{key}'.*known settings: dt, dt_safety, dt_growth, kt, "
     ):
         pinsettle.solve(pendulum, [1.0], **{key: 1})
     with pytest.raises(TypeError, match=rf"unknown setting '{key}'"):

@@ -156,7 +156,7 @@ CASES: dict[str, tuple[str, type[Exception], list[str]]] = {
     "unknown-solver-setting": (
         HEAD + "[solver]\ndamping = 0.1\n",
         pinsettle.SceneError,
-        ["[solver]", "unknown key 'damping'", "known keys: dt, dt_safety, kt"],
+        ["[solver]", "unknown key 'damping'", "known keys: dt, dt_safety, dt_growth, kt"],
     ),
     # -- unknown joints and frames
     "start-unknown-joint": (

@@ -15,6 +15,7 @@
 #include <pybind11/stl.h>
 
 #include "pinsettle/constraint-set.hpp"
+#include "pinsettle/setting-fields.hpp"
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"
 #include "pinsettle/loops.hpp"
@@ -502,90 +503,103 @@ namespace
     std::vector<JointField> joints_;
   };
 
-  // The time step's settings: dt, dt_safety and dt_growth ('auto' or a number) and their values
-  // in effect.
-  void bindStepSettings(py::class_<Settings> & settings)
+  const char * kindName(SettingKind kind)
   {
-    settings
-      .def_property(
-        "dt", [](const Settings & s) { return autoOrNumber(s.dt); },
-        [](Settings & s, const py::object & value) {
-          s.dt = parseAutoOrNumber(value, "dt", "a finite number > 0 (seconds)", [](double x) {
-            return std::isfinite(x) && x > 0.;
-          });
-        },
-        "Time step (s) > 0, or 'auto' (the default): dt_safety * 2 / omega_max.")
-      .def_property(
-        "dt_safety", [](const Settings & s) { return autoOrNumber(s.dt_safety); },
-        [](Settings & s, const py::object & value) {
-          s.dt_safety = parseAutoOrNumber(
-            value, "dt_safety", "a number in (0, 1]", [](double x) { return x > 0. && x <= 1.; });
-        },
-        "Fraction of the stability limit used by dt='auto', in (0, 1], or 'auto' (the default): "
-        "0.3 with backtrack and the exact energy, 0.2 otherwise (measured).")
-      .def_property_readonly(
-        "effective_dt_safety", &effectiveDtSafety,
-        "The fraction dt='auto' uses: dt_safety, or for 'auto' that of the backtrack setting.")
-      .def_property(
-        "dt_growth", [](const Settings & s) { return autoOrNumber(s.dt_growth); },
-        [](Settings & s, const py::object & value) {
-          s.dt_growth = parseAutoOrNumber(value, "dt_growth", "a finite number >= 1", [](double x) {
-            return std::isfinite(x) && x >= 1.;
-          });
-        },
-        "Largest factor dt='auto' grows by between damping events, >= 1 (1: fixed), or 'auto' "
-        "(the default): 2.5 with backtrack, the exact energy and scale_stiff_modes, 1 otherwise "
-        "(measured).")
-      .def_property_readonly(
-        "effective_dt_growth", &effectiveDtGrowth,
-        "The growth dt='auto' uses: dt_growth, or for 'auto' that of the other settings.");
+    switch (kind)
+    {
+    case SettingKind::Number:
+      return "number";
+    case SettingKind::Integer:
+      return "integer";
+    case SettingKind::Switch:
+      return "switch";
+    case SettingKind::AutoNumber:
+      return "auto_number";
+    case SettingKind::Choice:
+      return "choice";
+    }
+    return "unknown";
   }
 
-  // The damping, stopping and trace settings: plain fields.
-  void bindRuleSettings(py::class_<Settings> & settings)
+  // A setting's value as Python sees it: 'auto' for an AutoNumber at 0, the energy by name.
+  py::object getSetting(const SettingField & field, const Settings & s)
   {
-    settings.def_readwrite("polish", &Settings::polish, "Newton polish after convergence.")
-      .def_readwrite(
-        "newton_takeover", &Settings::newton_takeover,
-        "Try Newton at damping events; a rest it reaches at round-off ends the run.")
-      .def_readwrite(
-        "scale_stiff_modes", &Settings::scale_stiff_modes,
-        "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).")
-      .def_readwrite(
-        "scale_joint_inertia", &Settings::scale_joint_inertia,
-        "With dt='auto', on a tree (no loops): a fictitious inertia per joint that brings "
-        "every joint's frequency down to the slowest one's (equilibria unchanged).")
-      .def_readwrite("kt", &Settings::kt, "Velocity scale at each energy peak, in [0, 1).")
-      .def_readwrite("err", &Settings::err, "Relative peak threshold, >= 0.")
-      .def_readwrite("ds", &Settings::ds, "Stopping window length (steps), >= 1.")
-      .def_readwrite(
-        "max_e", &Settings::max_e, "Bound on the sum of the last ds energy samples, >= 0.")
-      .def_readwrite("max_steps", &Settings::max_steps, "Largest number of steps, >= 1.")
-      .def_readwrite("max_time", &Settings::max_time, "Wall-clock budget (s), > 0; inf: none.")
-      .def_property(
-        "energy", [](const Settings & s) { return std::string(toString(s.energy)); },
-        [](Settings & s, const std::string & name) { s.energy = energyMeasureFromString(name); },
-        "Energy signal of the peak detector: 'exact' or 'simplified'.")
-      .def_readwrite("backtrack", &Settings::backtrack, "Back up to the interpolated peak.")
-      .def_readwrite(
-        "trace_every", &Settings::trace_every, "Trace a sample every N steps; 0: no trace.")
-      .def_readwrite("trace_capacity", &Settings::trace_capacity, "Most trace samples kept.")
-      .def_readwrite(
-        "trace_configurations", &Settings::trace_configurations,
-        "Record q in each trace sample (for playback).")
-      .def_readwrite(
-        "check_every", &Settings::check_every, "Steps between clock and Ctrl-C checks, >= 1.");
+    return std::visit(
+      [&](auto member) -> py::object {
+        const auto value = s.*member;
+        using T = std::decay_t<decltype(value)>;
+        if constexpr (std::is_same_v<T, EnergyMeasure>)
+          return py::str(toString(value));
+        else if constexpr (std::is_same_v<T, double>)
+          return field.kind == SettingKind::AutoNumber ? autoOrNumber(value)
+                                                       : py::object(py::float_(value));
+        else
+          return py::cast(value);
+      },
+      field.member);
   }
 
-  // Settings: each setting a property, the auto ones read and written as 'auto' or a number.
+  // Set a setting from Python: an AutoNumber takes 'auto' or a number its rule accepts (checked
+  // here, as 0 would mean 'auto'); the others take their type, checked by checkSettings.
+  void setSetting(const SettingField & field, Settings & s, const py::object & value)
+  {
+    std::visit(
+      [&](auto member) {
+        using T = std::decay_t<decltype(s.*member)>;
+        if constexpr (std::is_same_v<T, EnergyMeasure>)
+          s.*member = energyMeasureFromString(value.cast<std::string>());
+        else if constexpr (std::is_same_v<T, double>)
+          s.*member = field.kind == SettingKind::AutoNumber
+                        ? parseAutoOrNumber(value, field.name, field.expected, field.accepts)
+                        : value.cast<double>();
+        else
+          s.*member = value.cast<T>();
+      },
+      field.member);
+  }
+
+  // Settings: one property per field of settingFields(), with its help as the docstring; the
+  // list itself as Settings.fields() for the Python layer (types, stubs, command-line flags).
   void bindSettings(py::module_ & m)
   {
     py::class_<Settings> settings(
       m, "Settings", "Solver settings (inputs only; see pinsettle.Settings).");
     settings.def(py::init<>()).def(py::init<const Settings &>(), py::arg("other"));
-    bindStepSettings(settings);
-    bindRuleSettings(settings);
-    settings.def("check", &checkSettings, "Raise ValueError naming the first invalid setting.");
+    for (const SettingField & field : settingFields())
+      settings.def_property(
+        field.name, py::cpp_function([&field](const Settings & s) { return getSetting(field, s); }),
+        py::cpp_function(
+          [&field](Settings & s, const py::object & value) { setSetting(field, s, value); }),
+        field.help);
+    settings
+      .def_property_readonly(
+        "effective_dt_safety", &effectiveDtSafety,
+        "The fraction dt='auto' uses: dt_safety, or for 'auto' that of the backtrack setting.")
+      .def_property_readonly(
+        "effective_dt_growth", &effectiveDtGrowth,
+        "The growth dt='auto' uses: dt_growth, or for 'auto' that of the other settings.")
+      .def("check", &checkSettings, "Raise ValueError naming the first invalid setting.")
+      .def_static(
+        "fields",
+        []() {
+          const Settings defaults;
+          py::list out;
+          for (const SettingField & field : settingFields())
+          {
+            py::dict d;
+            d["name"] = field.name;
+            d["kind"] = kindName(field.kind);
+            d["expected"] = field.expected;
+            d["help"] = field.help;
+            d["default"] = getSetting(field, defaults);
+            d["command_line"] = field.command_line;
+            out.append(d);
+          }
+          return out;
+        },
+        "Every setting, declared once: name, kind ('number', 'integer', 'switch', "
+        "'auto_number', 'choice'), what a value must be, its help, its default and whether "
+        "the command line has a flag for it.");
   }
 
   // The solver and the stops it applies.

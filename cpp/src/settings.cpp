@@ -3,12 +3,14 @@
 //
 
 #include "pinsettle/result.hpp"
+#include "pinsettle/setting-fields.hpp"
 #include "pinsettle/settings.hpp"
 
 #include <cmath>
 #include <cstdint>
 #include <sstream>
 #include <stdexcept>
+#include <type_traits>
 #include <variant>
 
 namespace pinsettle
@@ -66,36 +68,50 @@ namespace pinsettle
 
   namespace
   {
-    // One field's rule: its name, what it must be (the message's words), whether it is, and the
-    // value given (printed as given: an integer field without a decimal point).
-    struct FieldRule
+    bool finiteAtLeast0(double x)
     {
-      const char * name;
-      const char * expected;
-      bool valid;
-      std::variant<double, std::int64_t> given;
-    };
+      return std::isfinite(x) && x >= 0.;
+    }
 
-    bool finiteAtLeast(double value, double low)
+    bool finiteAbove0(double x)
     {
-      return std::isfinite(value) && value >= low;
+      return std::isfinite(x) && x > 0.;
+    }
+
+    bool finiteAtLeast1(double x)
+    {
+      return std::isfinite(x) && x >= 1.;
     }
 
     // NaN fails every comparison, so it is outside every range.
-    bool inClosedRange(double value, double low, double high)
+    bool inUnitHalfOpen(double x)
     {
-      return value >= low && value <= high;
+      return x >= 0. && x < 1.;
     }
 
-    bool inHalfOpenRange(double value, double low, double high)
+    bool inUnitClosedAbove0(double x)
     {
-      return value >= low && value < high;
+      return x > 0. && x <= 1.;
     }
 
-    // 0 asks for the measured default.
-    bool zeroOrFiniteAtLeast(double value, double low)
+    bool atLeast0(double x)
     {
-      return value == 0. || finiteAtLeast(value, low);
+      return x >= 0.;
+    }
+
+    bool atLeast1(double x)
+    {
+      return x >= 1.;
+    }
+
+    bool atLeast2(double x)
+    {
+      return x >= 2.;
+    }
+
+    bool above0(double x) // +inf passes: no limit
+    {
+      return x > 0.;
     }
 
     bool isKnownEnergyMeasure(EnergyMeasure energy)
@@ -103,42 +119,107 @@ namespace pinsettle
       return energy == EnergyMeasure::Exact || energy == EnergyMeasure::Simplified;
     }
 
-    [[noreturn]] void fail(const FieldRule & rule)
+    // Whether s's field passes its rule, and the value as the message prints it (an integer
+    // without a decimal point).
+    bool passes(const SettingField & field, const Settings & s, std::ostringstream & given)
     {
-      std::ostringstream msg;
-      msg.precision(17);
-      msg << rule.name << " must be " << rule.expected << ", got ";
-      std::visit([&msg](auto value) { msg << value; }, rule.given);
-      throw std::invalid_argument(msg.str());
+      return std::visit(
+        [&](auto member) -> bool {
+          const auto value = s.*member;
+          using T = std::decay_t<decltype(value)>;
+          if constexpr (std::is_same_v<T, EnergyMeasure>)
+          {
+            given << static_cast<int>(value);
+            return isKnownEnergyMeasure(value);
+          }
+          else if constexpr (std::is_same_v<T, bool>)
+            return true;
+          else
+          {
+            given << value;
+            const double x = static_cast<double>(value);
+            if (field.kind == SettingKind::AutoNumber && x == 0.)
+              return true;
+            return field.accepts == nullptr || field.accepts(x);
+          }
+        },
+        field.member);
     }
   } // namespace
 
+  const std::vector<SettingField> & settingFields()
+  {
+    using K = SettingKind;
+    static const std::vector<SettingField> fields = {
+      {"dt", K::AutoNumber, &Settings::dt, "a finite number > 0 (seconds)",
+       "Time step (s), or 'auto' (the default): dt_safety times the stability limit 2 / "
+       "omega_max, re-estimated as the mechanism moves.",
+       finiteAbove0, true},
+      {"dt_safety", K::AutoNumber, &Settings::dt_safety, "a number in (0, 1]",
+       "Fraction of the stability limit dt='auto' uses, or 'auto' (the default): 0.3 with "
+       "backtrack and the exact energy, 0.2 otherwise (measured).",
+       inUnitClosedAbove0, true},
+      {"dt_growth", K::AutoNumber, &Settings::dt_growth, "a finite number >= 1",
+       "Largest factor dt='auto' grows by between damping events (1: fixed), or 'auto' (the "
+       "default): 2.5 with backtrack, the exact energy and scale_stiff_modes, 1 otherwise "
+       "(measured).",
+       finiteAtLeast1, true},
+      {"kt", K::Number, &Settings::kt, "in [0, 1)",
+       "Velocity scale at each energy peak (0, the default: stopped dead).", inUnitHalfOpen, true},
+      {"err", K::Number, &Settings::err, "a finite number >= 0",
+       "Relative peak threshold of the energy signal.", finiteAtLeast0, true},
+      {"ds", K::Integer, &Settings::ds, "an integer >= 1 (steps)",
+       "Length of the stopping window (steps).", atLeast1, true},
+      {"max_e", K::Number, &Settings::max_e, "a finite number >= 0",
+       "Bound on the sum of the last ds energy samples (J for the exact measure).", finiteAtLeast0,
+       true},
+      {"max_steps", K::Integer, &Settings::max_steps, "an integer >= 1", "Largest number of steps.",
+       atLeast1, true},
+      {"max_time", K::Number, &Settings::max_time, "a number > 0 (seconds; inf for no limit)",
+       "Wall-clock budget (s); inf: none.", above0, true},
+      {"energy", K::Choice, &Settings::energy, "\"exact\" or \"simplified\"",
+       "Energy signal of the peak detector and the stopping rule.", nullptr, true},
+      {"backtrack", K::Switch, &Settings::backtrack, "true or false",
+       "Back up to the interpolated peak before damping.", nullptr, true},
+      {"polish", K::Switch, &Settings::polish, "true or false", "Newton polish after convergence.",
+       nullptr, true},
+      {"newton_takeover", K::Switch, &Settings::newton_takeover, "true or false",
+       "With the polish: Newton tried at damping events; a rest it reaches at round-off ends "
+       "the run.",
+       nullptr, true},
+      {"scale_stiff_modes", K::Switch, &Settings::scale_stiff_modes, "true or false",
+       "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).", nullptr,
+       true},
+      {"scale_joint_inertia", K::Switch, &Settings::scale_joint_inertia, "true or false",
+       "With dt='auto', on a tree: a fictitious inertia per joint that brings every joint's "
+       "rate down towards the slowest one's (equilibria unchanged).",
+       nullptr, true},
+      {"trace_every", K::Integer, &Settings::trace_every, "an integer >= 0 (0 disables the trace)",
+       "Record a trace sample every N steps; 0: no trace.", atLeast0, false},
+      {"trace_capacity", K::Integer, &Settings::trace_capacity, "an integer >= 2",
+       "Most trace samples kept (when full, every other one is dropped).", atLeast2, false},
+      {"trace_configurations", K::Switch, &Settings::trace_configurations, "true or false",
+       "Record q in each trace sample (for playback).", nullptr, false},
+      {"check_every", K::Integer, &Settings::check_every, "an integer >= 1 (steps)",
+       "Steps between checks of the clock, the callback and Ctrl-C.", atLeast1, false},
+    };
+    return fields;
+  }
+
   void checkSettings(const Settings & s)
   {
-    // In this order: the first field that breaks its rule is the one reported.
-    const FieldRule rules[] = {
-      {"dt", "a finite number > 0 (seconds), or 0 for the automatic step", finiteAtLeast(s.dt, 0.),
-       s.dt},
-      {"dt_safety", "in (0, 1], or 0 for the measured default", inClosedRange(s.dt_safety, 0., 1.),
-       s.dt_safety},
-      {"dt_growth", "a finite number >= 1, or 0 for the measured default",
-       zeroOrFiniteAtLeast(s.dt_growth, 1.), s.dt_growth},
-      {"kt", "in [0, 1)", inHalfOpenRange(s.kt, 0., 1.), s.kt},
-      {"err", "a finite number >= 0", finiteAtLeast(s.err, 0.), s.err},
-      {"ds", "an integer >= 1 (steps)", s.ds >= 1, s.ds},
-      {"max_e", "a finite number >= 0", finiteAtLeast(s.max_e, 0.), s.max_e},
-      {"max_steps", "an integer >= 1", s.max_steps >= 1, s.max_steps},
-      // NaN fails too; +inf means no limit
-      {"max_time", "a number > 0 (seconds; inf for no limit)", s.max_time > 0., s.max_time},
-      {"trace_every", "an integer >= 0 (0 disables the trace)", s.trace_every >= 0, s.trace_every},
-      {"trace_capacity", "an integer >= 2", s.trace_capacity >= 2, s.trace_capacity},
-      {"check_every", "an integer >= 1 (steps)", s.check_every >= 1, s.check_every},
-      {"energy", "\"exact\" or \"simplified\"", isKnownEnergyMeasure(s.energy),
-       std::int64_t{static_cast<int>(s.energy)}},
-    };
-    for (const FieldRule & rule : rules)
-      if (!rule.valid)
-        fail(rule);
+    for (const SettingField & field : settingFields())
+    {
+      std::ostringstream given;
+      given.precision(17);
+      if (passes(field, s, given))
+        continue;
+      std::ostringstream msg;
+      msg << field.name << " must be " << field.expected
+          << (field.kind == SettingKind::AutoNumber ? ", or 0 for 'auto'" : "") << ", got "
+          << given.str();
+      throw std::invalid_argument(msg.str());
+    }
   }
 
 } // namespace pinsettle

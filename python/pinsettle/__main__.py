@@ -19,49 +19,13 @@ import numpy as np
 import pinocchio
 
 import pinsettle
-from pinsettle._cli_flags import Flag, add_flags, flag, switch
+from pinsettle._cli_flags import Flag, add_flags, flag, setting_flags
 from pinsettle._progress import StatusLine, status_line
-from pinsettle._settings import SETTING_TYPES
+from pinsettle._settings import SETTING_FIELDS, SETTING_TYPES
 
-
-def _step(text: str) -> float | str:
-    if text == "auto":
-        return text
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or seconds, got '{text}'") from None
-
-
-#: The solver settings' flags (a flag's name is its setting's, as _setting_overrides reads it).
-SETTING_FLAGS = (
-    flag("--energy", choices=["exact", "simplified"], help="peak-detector signal"),
-    flag("--kt", type=float, help="velocity scale at each energy peak, in [0, 1)"),
-    flag("--dt", type=_step, help="time step (s), or 'auto' (the default)"),
-    flag("--dt-safety", type=float, help="fraction of the stable step (dt auto)"),
-    flag("--dt-growth", type=float, help="largest growth of the step between peaks (dt auto)"),
-    switch("--polish", help="Newton polish after convergence (default: on)"),
-    switch(
-        "--newton-takeover",
-        help="with the polish, Newton tried at damping events may end the run at its rest "
-        "(default: on)",
-    ),
-    switch(
-        "--scale-stiff-modes",
-        help="with dt auto, slow modes far faster than the rest (default: on)",
-    ),
-    switch(
-        "--scale-joint-inertia",
-        help="with dt auto, raise each joint's inertia towards the slowest joint's rate "
-        "(default: off)",
-    ),
-    flag("--err", type=float, help="relative peak threshold"),
-    flag("--ds", type=int, help="stopping window (steps)"),
-    flag("--max-e", type=float, help="bound on the energy summed over the window"),
-    flag("--max-steps", type=int, help="largest number of steps"),
-    flag("--max-time", type=float, help="wall-clock budget (s)"),
-    switch("--backtrack", help="back up to the interpolated peak before damping (default: on)"),
-)
+#: The solver settings' flags, made from the settings' one declaration (a flag's name is its
+#: setting's, as _setting_overrides reads it).
+SETTING_FLAGS = setting_flags(SETTING_FIELDS)
 
 #: How a model file (URDF, MJCF) becomes a scene.
 MODEL_FILE_FLAGS = (

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -55,3 +56,33 @@ def check_flags(args: argparse.Namespace, flags: Iterable[Flag]) -> None:
         message = None if item.check is None else item.check(args)
         if message is not None:
             raise ValueError(message)
+
+
+def _auto_or_number(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number, got '{text}'") from None
+
+
+def setting_flags(fields: Iterable[Mapping[str, Any]]) -> tuple[Flag, ...]:
+    """A flag for each setting the command line takes (``_core.Settings.fields()``):
+    --NAME-WITH-DASHES, its type from the setting's kind, its help the setting's own; a switch
+    is --NAME / --no-NAME and says its default."""
+    out = []
+    for field in fields:
+        if not field["command_line"]:
+            continue
+        name, text = "--" + field["name"].replace("_", "-"), str(field["help"])
+        kind = field["kind"]
+        if kind == "switch":
+            default = "on" if field["default"] else "off"
+            out.append(switch(name, help=f"{text} (default: {default})"))
+        elif kind == "choice":
+            out.append(flag(name, choices=re.findall(r'"(\w+)"', field["expected"]), help=text))
+        else:
+            kinds = {"number": float, "integer": int, "auto_number": _auto_or_number}
+            out.append(flag(name, type=kinds[kind], help=text))
+    return tuple(out)

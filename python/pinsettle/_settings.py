@@ -14,28 +14,42 @@ import numpy as np
 from . import _core
 from ._checks import unknown_key_message
 
-#: Settings keys with the Python type each one takes (used for clear messages).
-SETTING_TYPES: dict[str, str] = {
-    "dt": "float or 'auto'",
-    "dt_safety": "float or 'auto'",
-    "kt": "float",
-    "err": "float",
-    "ds": "int",
-    "max_e": "float",
-    "max_steps": "int",
-    "max_time": "float",
-    "energy": "str ('exact' or 'simplified')",
-    "backtrack": "bool",
-    "polish": "bool",
-    "newton_takeover": "bool",
-    "scale_stiff_modes": "bool",
-    "scale_joint_inertia": "bool",
-    "dt_growth": "float or 'auto'",
-    "trace_every": "int",
-    "trace_capacity": "int",
-    "trace_configurations": "bool",
-    "check_every": "int",
+#: Every setting as the core declares it (``_core.Settings.fields()``: name, kind, what a
+#: value must be, help, default, whether the command line has a flag), in the core's order.
+SETTING_FIELDS: list[dict[str, Any]] = _core.Settings.fields()
+
+#: The Python type each kind of setting takes, as messages and type stubs say it.
+_KIND_TYPES = {
+    "number": ("float", "float"),
+    "integer": ("int", "int"),
+    "switch": ("bool", "bool"),
+    "auto_number": ("float or 'auto'", "float | str"),
+    "choice": ("str", "str"),
 }
+
+
+def _type_text(field: dict[str, Any]) -> str:
+    if field["kind"] == "choice":  # the names it takes, as Python writes them
+        return "str (" + str(field["expected"]).replace('"', "'") + ")"
+    return _KIND_TYPES[field["kind"]][0]
+
+
+#: Settings keys with the Python type each one takes (used for clear messages).
+SETTING_TYPES: dict[str, str] = {f["name"]: _type_text(f) for f in SETTING_FIELDS}
+
+
+def settings_stub() -> str:
+    """The type stub of ``_core.Settings``'s fields (``_core.pyi`` holds it; a test keeps the
+    two equal)."""
+    return "".join(f"    {f['name']}: {_KIND_TYPES[f['kind']][1]}\n" for f in SETTING_FIELDS)
+
+
+def _fields_doc() -> str:
+    lines = []
+    for f in SETTING_FIELDS:
+        lines.append(f"``{f['name']}`` ({SETTING_TYPES[f['name']]}, default {f['default']!r}):")
+        lines.append(f"    {f['help']}")
+    return "\n    ".join(lines)
 
 
 class Settings(_core.Settings):
@@ -45,31 +59,10 @@ class Settings(_core.Settings):
     type raises ``TypeError``, a value out of range raises ``ValueError`` when solving (or on
     ``check()``), naming the field and its allowed range.
 
-    Fields: ``dt`` time step (s), or 'auto' (the default: ``dt_safety`` times the stability
-    limit 2 / omega_max of the mechanism linearised where it is, re-estimated as it moves);
-    ``dt_safety`` in (0, 1], or 'auto' (the default: 0.3 with ``backtrack`` and the exact
-    energy, 0.2 otherwise, measured; ``effective_dt_safety`` gives the value in use);
-    ``dt_growth`` >= 1, or 'auto' (the default: 2.5 with ``backtrack``, the exact energy and
-    ``scale_stiff_modes``, 1 otherwise, measured): the largest factor the automatic step grows
-    to between damping events, 5 % a step, never past the stability limit
-    (``effective_dt_growth``);
-    ``scale_stiff_modes`` (with 'auto': modes over 100x faster than the rest, or 30x faster
-    than the slowest, get a larger effective mass, equilibria unchanged, where the longer step
-    pays for the costlier one);
-    ``scale_joint_inertia`` (off by default; with 'auto' and the exact energy, on a tree: each
-    joint gets a fictitious inertia that brings its own rate, stiffness or pull over inertia,
-    down towards the slowest joint's, re-chosen at each estimate; equilibria and stability
-    unchanged, ``Result.scaled_joints`` counts the joints given one);
-    ``polish`` (Newton steps after convergence); ``newton_takeover`` (on by default; with
-    ``polish``: at a damping event, at most once every max(1, nv^2 / 4) steps, the polish's
-    Newton from where the mechanism stands; a rest it reaches at round-off within the polish's
-    reach and 0.1 (rad or m), stable or neutral as where it started, ends the run); ``kt``
-    velocity scale at each energy peak, in [0, 1); ``err`` relative peak threshold; ``ds``
-    stopping window (steps); ``max_e`` bound on the sum of the last ``ds`` energy samples (J for
-    the exact measure); ``max_steps``; ``max_time`` (s); ``energy`` ('exact' or 'simplified');
-    ``backtrack`` (back up to the interpolated peak before damping; on by default);
-    ``trace_every`` (0: no trace); ``trace_capacity``; ``trace_configurations`` (record q in the
-    trace, for playback); ``check_every`` (steps between checks of the clock and Ctrl-C).
+    The fields (each declared once, in the core: ``_core.Settings.fields()``), what each
+    takes, its default and what it does are listed below; ``effective_dt_safety`` and
+    ``effective_dt_growth`` give the values 'auto' stands for. docs/settings.md says how the
+    defaults were measured.
     """
 
     def __init__(self, **fields: Any) -> None:
@@ -94,6 +87,9 @@ class Settings(_core.Settings):
         return all(getattr(self, k) == getattr(other, k) for k in SETTING_TYPES)
 
     __hash__ = None  # type: ignore[assignment]
+
+
+Settings.__doc__ = f"{(Settings.__doc__ or '').rstrip()}\n\n    {_fields_doc()}\n"
 
 
 def set_setting(settings: _core.Settings, key: str, value: Any) -> None:

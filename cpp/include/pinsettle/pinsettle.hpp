@@ -15,6 +15,7 @@
 #include "pinsettle/monitors.hpp"
 #include "pinsettle/prebuilt.hpp"
 #include "pinsettle/result.hpp"
+#include "pinsettle/setting-fields.hpp"
 #include "pinsettle/settings.hpp"
 #include "pinsettle/solver.hpp"
 #include "pinsettle/stability.hpp"

@@ -40,6 +40,16 @@ def exercise(ur5, scenes) -> None:
     pinsettle.assess_stability(ur5, r.q)
     pinsettle.static_force(ur5, r.q)
     pinsettle.kinetic_energies(ur5, r.q, np.ones(ur5.nv))
+    # A kept solver (the binding's Solver owns the elements, loops and stops it was given), reused
+    # from other starts, on a model and on a scene; and the settings' declared fields.
+    solver = pinsettle.Solver(ur5)
+    solver.solve()
+    solver.solve(r.q, v0=np.full(ur5.nv, 0.1))
+    for scene in scenes[:2]:
+        kept = pinsettle.Solver(scene)
+        kept.solve()
+        kept.solve(scene.q0())
+    pinsettle.Settings.fields()
     # Errors thrown in C++ and turned into Python exceptions.
     for bad in [{"kt": 2.0}, {"dt": -1.0}, {"max_steps": 0}]:
         expect(ValueError, pinsettle.solve, ur5, **bad)

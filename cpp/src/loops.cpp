@@ -3,15 +3,16 @@
 //
 
 // constraintDynamics is marked "unsupported, the API will change"; it is the constrained
-// forward dynamics Pinocchio ships, and only this file calls it.
+// forward dynamics Pinocchio ships, and only this file calls it (through prebuilt-constrained.hpp:
+// pinocchio_default's instantiation, not compiled here).
 #define PINOCCHIO_DISABLE_UNSUPPORTED_WARNINGS
 
 #include "pinsettle/loops.hpp"
 #include "pinsettle/statics.hpp"
 #include "loop-stepper.hpp"
+#include "prebuilt-constrained.hpp"
 
 #include <pinocchio/algorithm/aba.hpp>
-#include <pinocchio/algorithm/constrained-dynamics.hpp>
 #include "pinsettle/prebuilt.hpp"
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
@@ -846,8 +847,8 @@ namespace pinsettle
 
     const pinocchio::Model & model;
     const LoopConstraints & loops;
-    std::vector<ConstraintModel> constraint_models;
-    std::vector<ConstraintData> constraint_datas;
+    prebuilt::ConstraintModelVector constraint_models;
+    prebuilt::ConstraintDataVector constraint_datas;
     pinocchio::ProximalSettings prox;
     Eigen::VectorXd tau, zero, velocity;
     // Couplings only: the allowed motions N and the reduced dynamics' workspace.
@@ -875,7 +876,7 @@ namespace pinsettle
     Impl & d = *impl_;
     if (d.constraint_models.empty()) // couplings only: no constraint data to set up
       return;
-    pinocchio::initConstraintDynamics(d.model, data, d.constraint_models, d.constraint_datas);
+    prebuilt::initConstraintDynamics(d.model, data, d.constraint_models, d.constraint_datas);
     // Redundant equations make the Delassus matrix J M^-1 J^T singular; the proximal iterations
     // of constraintDynamics handle that with a regularisation mu, here 1e-12 of the matrix's
     // scale (its largest diagonal entry), so that one or two iterations converge.
@@ -923,7 +924,7 @@ namespace pinsettle
       d.tau += pinocchio::computeGeneralizedGravity(model, data, q);
       d.tau -= pinocchio::rnea(model, data, q, d.zero, d.zero, *fext);
     }
-    pinocchio::constraintDynamics(
+    prebuilt::constraintDynamics(
       model, data, q, v, d.tau, d.constraint_models, d.constraint_datas, d.prox);
     // Body velocities in their own frames, as aba leaves them for the energy measures.
     for (pinocchio::JointIndex i = 1; i < static_cast<pinocchio::JointIndex>(model.njoints); ++i)

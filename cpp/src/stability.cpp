@@ -126,7 +126,7 @@ namespace pinsettle
     {
       dq[k] = h;
       pinocchio::integrate(model, q, dq, q_plus);
-      pinocchio::integrate(model, q, -dq, q_minus);
+      pinocchio::integrate(model, q, (-dq).eval(), q_minus);
       dq[k] = 0.;
       if (varying)
         K.col(k) = (computeStaticForce(model, data, q_plus, forces)

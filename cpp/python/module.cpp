@@ -249,7 +249,10 @@ namespace
   // where a key made from its C string each time is a measurable part of a short solve.
   py::handle internedKey(const char * name)
   {
-    static std::unordered_map<const char *, PyObject *> keys; // used with the GIL held
+    // Made once and never destroyed, as the interpreter keeps the strings to its end: a map
+    // destroyed at exit would drop its references without releasing them (LeakSanitizer finds
+    // them). Used with the GIL held.
+    static auto & keys = *new std::unordered_map<const char *, PyObject *>();
     const auto found = keys.try_emplace(name, nullptr);
     if (found.second)
       found.first->second = PyUnicode_InternFromString(name);

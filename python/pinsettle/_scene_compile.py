@@ -6,6 +6,7 @@ an element on a locked joint, a spring or loop with both ends on one body.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, Protocol
 
 import numpy as np
@@ -206,18 +207,12 @@ class _Compiled:
         own = self._own_stops if limits else {}
         return (limits, [(j, *_effective_stop(lim, own)) for j, lim in self._set_stops])
 
-    def limit_notes(
-        self, stops: tuple[bool, list[tuple[int, float, float]]] | None
-    ) -> tuple[list[str], list[str]]:
-        """Joints whose equal model limits were taken as no stop (and that no stop set
-        overrides), and joints of several configuration entries whose model limits no stop
-        applies."""
-        if stops is None:
-            return [], []
+    def unset_equal_limits(self, equal: Iterable[str]) -> list[str]:
+        """Of the joints whose equal model limits the core took as no stop (``equal``, as
+        ``_core.Solver.equal_limits`` lists them), those that no stop set on the scene
+        overrides."""
         set_by_name = {lim.joint for _, lim in self._set_stops}
-        found = _core.joint_stops(self.model, stops)
-        equal = [str(name) for name in found["equal_limits"] if name not in set_by_name]
-        return equal, [str(name) for name in found["unapplied_limits"]]
+        return [str(name) for name in equal if name not in set_by_name]
 
     def full_q(self, q: np.ndarray) -> np.ndarray:
         out: np.ndarray = self.q_ref.copy()

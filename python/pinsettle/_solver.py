@@ -19,18 +19,15 @@ from ._scene_values import JointReader
 from ._settings import Settings, make_settings
 from ._solve import Progress, Result, Trace, _limits_flag, _progress_reporter
 
-Stops = tuple[bool, list[tuple[int, float, float]]] | None
-
 
 @dataclass
 class _Mechanism:
     """What one core solver was built from: the compiled scene (the model it solves, locked
-    joints removed; None for a user's model, solved as it is), the stops given and the limit
-    notes, and the core solver."""
+    joints removed; None for a user's model, solved as it is), the limit notes, and the core
+    solver."""
 
     core: Any  # _core.Solver
     compiled: Any  # the scene's _Compiled, or None
-    stops: Stops
     equal: tuple[str, ...]
     unapplied: tuple[str, ...]
 
@@ -273,19 +270,20 @@ def solve(
 def _model_mechanism(model: pinocchio.Model, limits: bool, reader: JointReader) -> _Mechanism:
     """A pinocchio.Model solved as it is, its position limits as stops unless limits=False;
     the core names the joints' values."""
-    stops: Stops = (True, []) if limits else None
-    core = _core.Solver(model, None, None, stops, reader.fields())
+    core = _core.Solver(model, None, None, (True, []) if limits else None, reader.fields())
     equal = tuple(str(name) for name in core.equal_limits)
     unapplied = tuple(str(name) for name in core.unapplied_limits)
-    return _Mechanism(core, None, stops, equal, unapplied)
+    return _Mechanism(core, None, equal, unapplied)
 
 
 def _scene_mechanism(scene: Scene, compiled: Any, limits: bool) -> _Mechanism:
-    """A scene's compiled model with its elements, loops and stops."""
+    """A scene's compiled model with its elements, loops and stops (the limit notes as the
+    core found them, less the joints the scene sets stops on)."""
     stops = compiled.stops_for(limits)
-    equal, unapplied = compiled.limit_notes(stops)
     core = _core.Solver(compiled.model, compiled.elements, compiled.loops, stops)
-    return _Mechanism(core, compiled, stops, tuple(equal), tuple(unapplied))
+    equal = tuple(compiled.unset_equal_limits(core.equal_limits))
+    unapplied = tuple(str(name) for name in core.unapplied_limits)
+    return _Mechanism(core, compiled, equal, unapplied)
 
 
 def _warn_unapplied(unapplied: tuple[str, ...], stacklevel: int) -> None:

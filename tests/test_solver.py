@@ -75,6 +75,18 @@ def test_a_run_does_not_change_the_next():
     _same(first, solver.solve(q1))
 
 
+def test_each_result_has_settings_of_its_own():
+    # A kept solver's results do not share its settings: changing one result's changes neither
+    # the solver's nor another result's.
+    for mechanism in (pinsettle.load_robot("ur5"), MECHANISMS["fourbar_stop"]()):
+        solver = pinsettle.Solver(mechanism, kt=0.3)
+        first, second = solver.solve(), solver.solve()
+        assert first.settings is not second.settings and first.settings == solver.settings
+        first.settings.kt = 0.9
+        assert solver.settings.kt == 0.3 and second.settings.kt == 0.3
+        assert solver.solve().settings.kt == 0.3
+
+
 def _all_kinds() -> pinocchio.Model:
     """A tree of every joint layout the names give: free-flyer, spherical, continuous,
     revolute, prismatic, planar."""

@@ -138,7 +138,8 @@ class Solver:
         model = self._naming
         q = self._q0 if q0 is None else as_vector(q0, "q0", model.nq, "model.nq")
         v = self._zero_v if v0 is None else as_vector(v0, "v0", model.nv, "model.nv")
-        return self._result(self._mechanism.core.solve(q, v, self._settings, callback, report))
+        core = self._mechanism.core  # the Result gets settings of its own, as below
+        return self._result(core.solve(q, v, self._settings._copy(), callback, report))
 
     def _solve_scene(
         self,
@@ -157,7 +158,11 @@ class Solver:
         if v0 is not None and np.any(np.delete(v_full, compiled.v_index) != 0.0):
             raise ValueError("v0 must be zero on the locked joints " + ", ".join(scene.locked))
         raw = mechanism.core.solve(
-            q_full[compiled.q_index], v_full[compiled.v_index], self._settings, callback, report
+            q_full[compiled.q_index],
+            v_full[compiled.v_index],
+            self._settings._copy(),  # the Result's own: changing it changes no other solve
+            callback,
+            report,
         )
         raw["q"] = compiled.full_q(raw["q"])
         raw["v"] = compiled.full_v(raw["v"], full.nv)

@@ -34,6 +34,7 @@
 #include <algorithm>
 #include <chrono>
 #include <iostream>
+#include <stdexcept>
 #include <utility>
 
 namespace
@@ -185,6 +186,13 @@ namespace
     Solve out;
     out.result = solver.solve(q0, settings, forces);
     profile.active = false;
+    // Every solve makes a first step estimate. None seen means the library made its calls inside
+    // one translation unit, where ld --wrap does not reach them: the parts would all be wrong.
+    if (profile.setup < 0.)
+      throw std::runtime_error(
+        "no call of pinsettle::computeTimeScale reached this program's wrapper: the library "
+        "calls it from inside stability.cpp's translation unit (CMakeLists.txt: stability.cpp "
+        "must share its unity group with none of its callers)");
     out.profile = profile;
     return out;
   }

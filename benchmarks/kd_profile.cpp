@@ -231,18 +231,18 @@ namespace
     for (int r = 0; repeatAgain(spec, r, spent); ++r)
     {
       Solve plain = profiledSolve(model, spec.q0, forces, false, spec.max_time);
-      out.wall.push_back(plain.result.wall_time);
+      out.wall.push_back(plain.result.info.wall_time);
       out.setup.push_back(plain.profile.setup);
       out.estimates.push_back(plain.profile.estimate_seconds);
       out.assess.push_back(plain.profile.assess_seconds);
-      spent += plain.result.wall_time;
+      spent += plain.result.info.wall_time;
       // A bare step (aba + integrate) from the start, at a tenth of the solver's final step (a
       // fixed step that large may blow up; ABA costs the same whatever the step), timed over
       // the solve's steps, at least kMinBareSteps and at most kBareSteps.
       const long steps =
-        std::clamp<long>(static_cast<long>(plain.result.steps), kMinBareSteps, kBareSteps);
+        std::clamp<long>(static_cast<long>(plain.result.info.steps), kMinBareSteps, kBareSteps);
       out.bare.push_back(
-        bench::timeBareAbaStep(model, spec.q0, steps, 0.1 * plain.result.dt, "bare step"));
+        bench::timeBareAbaStep(model, spec.q0, steps, 0.1 * plain.result.info.dt, "bare step"));
       out.last = std::move(plain);
     }
     return out;
@@ -271,12 +271,12 @@ namespace
     for (int r = 0; repeatAgain(spec, r, spent); ++r)
     {
       Solve polished = profiledSolve(model, spec.q0, forces, true, spec.max_time);
-      out.wall.push_back(polished.result.wall_time);
+      out.wall.push_back(polished.result.info.wall_time);
       out.setup.push_back(polished.profile.setup);
       out.estimates.push_back(polished.profile.estimate_seconds);
       out.assess.push_back(polished.profile.assess_seconds);
       out.stiffness.push_back(polished.profile.stiffness_seconds);
-      spent += polished.result.wall_time;
+      spent += polished.result.info.wall_time;
       out.last = std::move(polished);
     }
     return out;
@@ -285,8 +285,8 @@ namespace
   void printPlain(const PlainSolves & plain)
   {
     const pinsettle::Result & r = plain.last.result;
-    std::cout << "{\"status\": \"" << pinsettle::toString(r.status) << "\", \"steps\": " << r.steps
-              << ", \"dt_estimates\": " << r.dt_estimates
+    std::cout << "{\"status\": \"" << pinsettle::toString(r.status)
+              << "\", \"steps\": " << r.info.steps << ", \"dt_estimates\": " << r.info.dt_estimates
               << ", \"residual\": " << bench::number(r.residual)
               << ", \"wall\": " << list(plain.wall) << ", \"setup\": " << list(plain.setup)
               << ", \"estimates\": " << list(plain.estimates)
@@ -306,9 +306,9 @@ namespace
               << ", \"polish_assessment_count\": " << polished.profile.assessments
               << ", \"polish_stiffness\": " << list(polish.stiffness)
               << ", \"polish_stiffness_count\": " << polished.profile.stiffness
-              << ", \"polish_iterations\": " << polished.result.polish_iterations
-              << ", \"polished\": " << (polished.result.polished ? "true" : "false")
-              << ", \"polish_steps\": " << polished.result.steps
+              << ", \"polish_iterations\": " << polished.result.info.polish_iterations
+              << ", \"polished\": " << (polished.result.info.polished ? "true" : "false")
+              << ", \"polish_steps\": " << polished.result.info.steps
               << ", \"polish_residual\": " << bench::number(polished.result.residual)
               << ", \"polish_q\": " << bench::jsonVector(polished.result.q);
   }

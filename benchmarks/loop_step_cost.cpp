@@ -139,9 +139,9 @@ namespace
     settings.energy = measure;
     pinsettle::Solver solver(model, &loops);
     const pinsettle::Result result = solver.solve(q0, settings);
-    settled_steps = static_cast<long>(result.steps);
+    settled_steps = static_cast<long>(result.info.steps);
     constraint_error = result.constraint_error;
-    return result.wall_time / static_cast<double>(result.steps);
+    return result.info.wall_time / static_cast<double>(result.info.steps);
   }
 
   struct Options

@@ -88,10 +88,10 @@ namespace
     settings.energy = measure;
     pinsettle::Solver solver(model, nullptr, stops);
     const pinsettle::Result result = solver.solve(start(model), settings, forces);
-    settled_steps = static_cast<long>(result.steps);
+    settled_steps = static_cast<long>(result.info.steps);
     if (stops != nullptr)
       stop_contacts = static_cast<long>(result.stop_contacts.size());
-    return result.wall_time / static_cast<double>(result.steps);
+    return result.info.wall_time / static_cast<double>(result.info.steps);
   }
 
   struct Options

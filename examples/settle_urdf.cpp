@@ -34,8 +34,9 @@ int main(int argc, char ** argv)
     const pinsettle::Result result = solver.solve(q0, settings);
 
     std::cout << "status    " << pinsettle::toString(result.status) << "\n"
-              << "steps     " << result.steps << " (" << result.peaks << " damping events)\n"
-              << "wall time " << result.wall_time * 1e3 << " ms\n"
+              << "steps     " << result.info.steps << " (" << result.info.peaks
+              << " damping events)\n"
+              << "wall time " << result.info.wall_time * 1e3 << " ms\n"
               << "residual  " << result.residual << " N m\n";
     for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
       std::cout << "  " << model.names[j] << " "

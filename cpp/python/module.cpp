@@ -203,14 +203,14 @@ namespace
   // The trace as arrays: samples (step, time, energies, optionally q) and events.
   py::dict traceToDict(const Result & r)
   {
-    const Eigen::Index n = static_cast<Eigen::Index>(r.trace.size());
+    const Eigen::Index n = static_cast<Eigen::Index>(r.trace.samples.size());
     Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> step(n);
     Eigen::VectorXd time(n), energy(n), simplified(n);
-    const bool with_q = r.trace.front().q.size() > 0;
+    const bool with_q = r.trace.samples.front().q.size() > 0;
     Eigen::MatrixXd q(with_q ? n : 0, with_q ? r.q.size() : 0);
     for (Eigen::Index k = 0; k < n; ++k)
     {
-      const TraceSample & s = r.trace[static_cast<std::size_t>(k)];
+      const TraceSample & s = r.trace.samples[static_cast<std::size_t>(k)];
       step[k] = s.step;
       time[k] = s.time;
       energy[k] = s.energy;
@@ -218,14 +218,14 @@ namespace
       if (with_q)
         q.row(k) = s.q.transpose();
     }
-    const Eigen::Index m = static_cast<Eigen::Index>(r.events.size());
+    const Eigen::Index m = static_cast<Eigen::Index>(r.trace.events.size());
     Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> event_step(m);
     Eigen::VectorXd event_time(m);
     Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> event_joint(m);
     py::list event_kind;
     for (Eigen::Index k = 0; k < m; ++k)
     {
-      const TraceEvent & e = r.events[static_cast<std::size_t>(k)];
+      const TraceEvent & e = r.trace.events[static_cast<std::size_t>(k)];
       event_step[k] = e.step;
       event_time[k] = e.time;
       event_kind.append(toString(e.kind));
@@ -236,7 +236,7 @@ namespace
     trace["time"] = time;
     trace["kinetic_energy"] = energy;
     trace["simplified_kinetic_energy"] = simplified;
-    trace["stride"] = r.trace_stride;
+    trace["stride"] = r.trace.stride;
     trace["q"] = with_q ? py::object(py::cast(q)) : py::object(py::none());
     trace["event_step"] = event_step;
     trace["event_time"] = event_time;
@@ -286,7 +286,7 @@ namespace
       reactions[name] = contact.reaction;
       units[name] = internedKey(unitOf(model, contact.joint));
     }
-    for (const std::pair<pinocchio::JointIndex, double> & c : r.start_clamped)
+    for (const std::pair<pinocchio::JointIndex, double> & c : r.info.start_clamped)
     {
       const py::str name(model.names[c.first]);
       clamped[name] = c.second;
@@ -306,30 +306,30 @@ namespace
     field("q") = toArray(r.q);
     field("v") = toArray(r.v);
     field("status") = internedKey(toString(r.status));
-    field("steps") = r.steps;
-    field("peaks") = r.peaks;
-    field("pushes") = r.pushes;
+    field("steps") = r.info.steps;
+    field("peaks") = r.info.peaks;
+    field("pushes") = r.info.pushes;
     field("stability") = internedKey(toString(r.stability));
-    field("min_stiffness_eigenvalue") = r.min_stiffness_eigenvalue;
-    field("neutral_directions") = r.neutral_directions;
-    field("sim_time") = r.sim_time;
-    field("wall_time") = r.wall_time;
-    field("kinetic_energy") = r.kinetic_energy;
-    field("simplified_kinetic_energy") = r.simplified_kinetic_energy;
+    field("min_stiffness_eigenvalue") = r.info.min_stiffness_eigenvalue;
+    field("neutral_directions") = r.info.neutral_directions;
+    field("sim_time") = r.info.sim_time;
+    field("wall_time") = r.info.wall_time;
+    field("kinetic_energy") = r.info.kinetic_energy;
+    field("simplified_kinetic_energy") = r.info.simplified_kinetic_energy;
     field("residual") = r.residual;
-    field("residual_before_polish") = r.residual_before_polish;
-    field("polish_iterations") = r.polish_iterations;
-    field("polished") = r.polished;
-    field("dt") = r.dt;
-    field("dt_estimates") = r.dt_estimates;
-    field("dt_reductions") = r.dt_reductions;
-    field("scaled_modes") = r.scaled_modes;
-    field("scaled_joints") = r.scaled_joints;
-    field("mobility") = r.mobility;
-    field("assembly_distance") = r.assembly_distance;
+    field("residual_before_polish") = r.info.residual_before_polish;
+    field("polish_iterations") = r.info.polish_iterations;
+    field("polished") = r.info.polished;
+    field("dt") = r.info.dt;
+    field("dt_estimates") = r.info.dt_estimates;
+    field("dt_reductions") = r.info.dt_reductions;
+    field("scaled_modes") = r.info.scaled_modes;
+    field("scaled_joints") = r.info.scaled_joints;
+    field("mobility") = r.info.mobility;
+    field("assembly_distance") = r.info.assembly_distance;
     field("constraint_error") = r.constraint_error;
     field("reason") = r.reason;
-    field("trace") = r.trace.empty() ? py::object(py::none()) : py::object(traceToDict(r));
+    field("trace") = r.trace.samples.empty() ? py::object(py::none()) : py::object(traceToDict(r));
     return out;
   }
 

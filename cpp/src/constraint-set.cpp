@@ -43,29 +43,29 @@ namespace pinsettle
   ConstraintSet::~ConstraintSet() = default;
 
   void ConstraintSet::start(
-    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Result & result)
+    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Info & info)
   {
-    result.mobility = model_.nv;
+    info.mobility = model_.nv;
     if (loops_ != nullptr)
-      assemble(data, q, v, result);
+      assemble(data, q, v, info);
     if (stops_ == nullptr)
       return;
     if (hold_)
       hold_->start();
-    clampToStops(*stops_, q, &result.start_clamped);
+    clampToStops(*stops_, q, &info.start_clamped);
     pinsettle::enforceStops(*stops_, q, v);
-    if (loops_ != nullptr && !result.start_clamped.empty())
+    if (loops_ != nullptr && !info.start_clamped.empty())
       closeLoopsOnStops(data, q, v);
   }
 
   void ConstraintSet::assemble(
-    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Result & result)
+    pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Info & info)
   {
     // Closed mechanism: start assembled, with a velocity the loops allow.
-    result.assembly_distance = assembleLoops(model_, data, *loops_, q);
+    info.assembly_distance = assembleLoops(model_, data, *loops_, q);
     const LoopMotion motion = computeLoopMotion(model_, data, *loops_, q);
-    result.mobility = static_cast<int>(motion.basis.cols());
-    if (result.mobility == 0)
+    info.mobility = static_cast<int>(motion.basis.cols());
+    if (info.mobility == 0)
     {
       std::ostringstream msg;
       msg << "the loops leave the mechanism no degree of freedom (" << motion.rank

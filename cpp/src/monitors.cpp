@@ -24,20 +24,14 @@ namespace pinsettle
     abort_ = abort ? &abort : nullptr;
   }
 
-  bool RunClock::mustStop(RunProgress & progress, Status & status) const
+  std::optional<Status> RunClock::mustStop(RunProgress & progress) const
   {
     progress.wall_time = elapsed();
     if (check_clock_ && progress.wall_time > max_time_)
-    {
-      status = Status::TimeLimit;
-      return true;
-    }
+      return Status::TimeLimit;
     if (abort_ != nullptr && (*abort_)(progress))
-    {
-      status = Status::Aborted;
-      return true;
-    }
-    return false;
+      return Status::Aborted;
+    return std::nullopt;
   }
 
   double RunClock::elapsed() const
@@ -212,11 +206,11 @@ namespace pinsettle
         TraceSample{step, time, e_exact, e_simple, configurations_ ? q : Eigen::VectorXd()});
   }
 
-  void TraceRecorder::finish(Result & result)
+  void TraceRecorder::finish(Trace & trace)
   {
-    result.trace = std::move(samples_);
-    result.events = std::move(events_);
-    result.trace_stride = stride_;
+    trace.samples = std::move(samples_);
+    trace.events = std::move(events_);
+    trace.stride = stride_;
     samples_.clear();
     events_.clear();
   }

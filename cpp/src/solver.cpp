@@ -235,20 +235,25 @@ namespace pinsettle
   : data(model)
   , model_(model)
   , constraints_(model, loops, stops)
-  , q_(model.nq)
-  , v_(model.nv)
-  , dq_(model.nv)
-  , q_next_(model.nq)
-  , tau_(Eigen::VectorXd::Zero(model.nv))
-  , q_before_(model.nq)
-  , q_before2_(model.nq)
-  , fext_(model.joints.size(), pinocchio::Force::Zero())
+  , work_(model)
   , window_(1, 0.)
   , step_control_(model, constraints_.loops())
   {
   }
 
   Solver::~Solver() = default;
+
+  Solver::Workspace::Workspace(const pinocchio::Model & model)
+  : q(model.nq)
+  , v(model.nv)
+  , dq(model.nv)
+  , q_next(model.nq)
+  , tau(Eigen::VectorXd::Zero(model.nv))
+  , q_before(model.nq)
+  , q_before2(model.nq)
+  , fext(model.joints.size(), pinocchio::Force::Zero())
+  {
+  }
 
   Eigen::VectorXd Solver::staticForce(const Eigen::VectorXd & q, const ForceModel * forces)
   {
@@ -279,44 +284,48 @@ namespace pinsettle
     RunClock clock; // the wall time includes the checks and the set-up
     Result result;
     start(q0, v0, settings, forces, result);
-    result.reason =
-      explainFreeFall(model_, data, q_, forces_, constraints_.loops(), constraints_.stops());
-    if (!result.reason.empty())
-    {
-      // The trace holds the one state of the run, so that playback shows where it would fall.
-      const std::pair<double, double> e = computeKineticEnergies(model_, data, q_, v_);
-      trace_.sample(step_, time_, e.first, e.second, q_);
-      finish(Status::NoEquilibrium, result);
-      result.wall_time = clock.elapsed();
-      return result;
-    }
-    clock.configure(settings, abort);
+    const Status status =
+      isFallingFreely(result) ? Status::NoEquilibrium : runLoop(clock, abort, result);
+    finish(status, result);
+    result.info.wall_time = clock.elapsed();
+    return result;
+  }
+
+  bool Solver::isFallingFreely(Result & result)
+  {
+    result.reason = explainFreeFall(
+      model_, data, work_.q, state_.forces, constraints_.loops(), constraints_.stops());
+    if (result.reason.empty())
+      return false;
+    // The trace holds the one state of the run, so that playback shows where it would fall.
+    const std::pair<double, double> e = computeKineticEnergies(model_, data, work_.q, work_.v);
+    trace_.sample(state_.step, state_.time, e.first, e.second, work_.q);
+    return true;
+  }
+
+  Status Solver::runLoop(RunClock & clock, const AbortCallback & abort, Result & result)
+  {
+    clock.configure(*state_.settings, abort);
     RunProgress progress;
     progress.compute_residual = [this]() { return progressResidual(); };
     double energy = 0.; // of the last step, for the progress
-
-    // A run that stops after evaluating the dynamics of a step counts that step.
-    Status status = Status::MaxSteps;
-    for (; step_ < settings.max_steps; ++step_)
+    for (; state_.step < state_.settings->max_steps; ++state_.step)
     {
-      if (clock.isDue(step_))
+      if (clock.isDue(state_.step))
       {
         if (abort)
           measureProgress(energy, result, progress);
-        if (clock.mustStop(progress, status))
-          break;
+        if (const std::optional<Status> stop = clock.mustStop(progress))
+          return *stop;
         reestimateStep();
       }
       if (const std::optional<Status> end = takeStep(result, energy))
       {
-        status = *end;
-        ++step_; // the step that ended the run counts
-        break;
+        ++state_.step; // a run that stops after evaluating the dynamics of a step counts it
+        return *end;
       }
     }
-    finish(status, result);
-    result.wall_time = clock.elapsed();
-    return result;
+    return Status::MaxSteps;
   }
 
   std::optional<Status> Solver::takeStep(Result & result, double & energy)
@@ -325,7 +334,7 @@ namespace pinsettle
     energy = e.exact;
     if (guard_.isDiverging(e.exact, e.simplified, data.ddq, peaks_.hasPrevious()))
       return rollBack(result) ? std::nullopt : std::optional<Status>(Status::Diverged);
-    trace_.sample(step_, time_, e.exact, e.simplified, q_);
+    trace_.sample(state_.step, state_.time, e.exact, e.simplified, work_.q);
     if (isRunaway(e, result))
       return Status::NoEquilibrium;
     if (isAssessedAtRest(e))
@@ -346,7 +355,7 @@ namespace pinsettle
       return std::nullopt; // the next pass evaluates the dynamics at the damped state
     }
     peaks_.record(e.signal);
-    if (settings_->backtrack)
+    if (state_.settings->backtrack)
       keepConfiguration(e.exact + e.added);
     if (!integrate() && !rollBack(result))
       return Status::Diverged;
@@ -355,10 +364,10 @@ namespace pinsettle
 
   void Solver::measureProgress(double energy, const Result & result, RunProgress & progress)
   {
-    progress.steps = step_;
-    progress.sim_time = time_;
+    progress.steps = state_.step;
+    progress.sim_time = state_.time;
     progress.kinetic_energy = energy;
-    progress.peaks = result.peaks;
+    progress.peaks = result.info.peaks;
   }
 
   double Solver::progressResidual()
@@ -366,7 +375,8 @@ namespace pinsettle
     // In a Data of its own: the run's scratch carries state between steps.
     if (!progress_data_)
       progress_data_ = std::make_unique<pinocchio::Data>(model_);
-    return residualOf(q_, constraints_.computeStaticForce(*progress_data_, q_, forces_));
+    return residualOf(
+      work_.q, constraints_.computeStaticForce(*progress_data_, work_.q, state_.forces));
   }
 
   void Solver::start(
@@ -386,26 +396,19 @@ namespace pinsettle
     if (forces != nullptr && forces->empty())
       forces = nullptr; // nothing to apply: step exactly like the bare core
 
-    settings_ = &settings;
-    forces_ = forces;
-    use_fext_ = forces != nullptr && forces->hasExternalForces();
-    kt_ = settings.kt;
-    step_ = 0;
-    time_ = 0.;
-    q_ = q0;
-    pinocchio::normalize(model_, q_); // q0 is normalised within 1e-6; make it exact
-    v_ = v0;
-    tau_.setZero();
-    constraints_.start(data, q_, v_, result);
-    impacts_ = 0;
-    stationary_ = false;
-    newton_tried_at_ = 0;
-    settled_by_newton_ = false;
-    // Nothing of a previous run is read in this one (a solver is reused across solves).
-    locked_ = nullptr;
-    q_before_ = q_;
-    q_before2_ = q_;
-    exact_before_ = 0.;
+    // Set whole: nothing of a previous run is read in this one (a solver is reused).
+    state_ = RunState();
+    state_.settings = &settings;
+    state_.forces = forces;
+    state_.use_fext = forces != nullptr && forces->hasExternalForces();
+    state_.kt = settings.kt;
+    work_.q = q0;
+    pinocchio::normalize(model_, work_.q); // q0 is normalised within 1e-6; make it exact
+    work_.v = v0;
+    work_.tau.setZero();
+    constraints_.start(data, work_.q, work_.v, result.info);
+    work_.q_before = work_.q;
+    work_.q_before2 = work_.q;
 
     peaks_ = PeakDetector(settings.err);
     window_ = StoppingWindow(settings.ds, settings.max_e);
@@ -416,15 +419,15 @@ namespace pinsettle
     runaway_.start(model_.nv, RunawayMonitor::kFirstSample, std::max(10. * settings.max_e, 1e-30));
     step_control_.start(settings, forces);
     if (step_control_.isAutomatic())
-      runaway_.addRemoved(step_control_.estimate(data, q_, v_, step_));
-    guard_.start(q_, v_, time_);
+      runaway_.addRemoved(step_control_.estimate(data, work_.q, work_.v, state_.step));
+    guard_.start(work_.q, work_.v, state_.time);
   }
 
   void Solver::reestimateStep()
   {
-    if (!step_control_.isEstimateDue(q_, step_))
+    if (!step_control_.isEstimateDue(work_.q, state_.step))
       return;
-    const double loss = step_control_.estimate(data, q_, v_, step_);
+    const double loss = step_control_.estimate(data, work_.q, work_.v, state_.step);
     runaway_.addRemoved(loss);
     // Added inertia taken away takes its share of the energy at once: that drop is no peak of
     // the motion, and stopping there would stop a fall at such estimates.
@@ -434,16 +437,16 @@ namespace pinsettle
 
   Solver::StepEnergies Solver::evaluateDynamics()
   {
-    if (forces_ != nullptr)
+    if (state_.forces != nullptr)
     {
-      tau_.setZero();
-      if (use_fext_)
-        for (pinocchio::Force & f : fext_)
+      work_.tau.setZero();
+      if (state_.use_fext)
+        for (pinocchio::Force & f : work_.fext)
           f.setZero();
-      forces_->computeForces(model_, data, q_, v_, tau_, fext_);
+      state_.forces->computeForces(model_, data, work_.q, work_.v, work_.tau, work_.fext);
     }
-    locked_ = constraints_.lockedModel(step_control_, q_, v_);
-    computeAcceleration(locked_ != nullptr ? *locked_ : step_control_.dynamicsModel());
+    state_.locked = constraints_.lockedModel(step_control_, work_.q, work_.v);
+    computeAcceleration(state_.locked != nullptr ? *state_.locked : step_control_.dynamicsModel());
     // Both measures every step, from the body velocities the dynamics just computed. With stiff
     // modes scaled, the exact signal includes their added inertia: it is the energy the scaled
     // system exchanges with its potential.
@@ -451,30 +454,31 @@ namespace pinsettle
     const pinocchio::Convention convention = constraints_.dynamicsConvention();
     e.exact = computeBodyKineticEnergy(model_, data, convention);
     e.simplified = computeSimplifiedKineticEnergy(model_, data, convention);
-    e.added = step_control_.addedEnergy(v_);
-    e.signal = settings_->energy == EnergyMeasure::Exact ? e.exact + e.added : e.simplified;
+    e.added = step_control_.addedEnergy(work_.v);
+    e.signal = state_.settings->energy == EnergyMeasure::Exact ? e.exact + e.added : e.simplified;
     return e;
   }
 
   void Solver::computeAcceleration(const pinocchio::Model & model)
   {
-    constraints_.computeAcceleration(model, data, q_, v_, tau_, use_fext_ ? &fext_ : nullptr);
+    constraints_.computeAcceleration(
+      model, data, work_.q, work_.v, work_.tau, state_.use_fext ? &work_.fext : nullptr);
   }
 
   void Solver::correctAcceleration()
   {
-    if (locked_ != nullptr)
+    if (state_.locked != nullptr)
     {
       // Stiff modes scaled at this step's peak would need the free model's dynamics.
       if (step_control_.stiffModes() == 0)
       {
-        if (constraints_.acceptLocked(data, q_, v_))
+        if (constraints_.acceptLocked(data, work_.q, work_.v))
           return;
         // Joints pulled off their stops leave them: once more with those free.
-        if (const pinocchio::Model * unlocked = constraints_.unlockPulled(data, q_, v_))
+        if (const pinocchio::Model * unlocked = constraints_.unlockPulled(data, work_.q, work_.v))
         {
           computeAcceleration(*unlocked);
-          if (constraints_.acceptLocked(data, q_, v_))
+          if (constraints_.acceptLocked(data, work_.q, work_.v))
             return;
         }
       }
@@ -482,7 +486,7 @@ namespace pinsettle
     }
     // The scaled stiff modes' inertia enters the acceleration here, once the step is taken.
     step_control_.correctAcceleration(data);
-    constraints_.hold(data, q_, v_, step_control_.timeScale());
+    constraints_.hold(data, work_.q, work_.v, step_control_.timeScale());
   }
 
   void Solver::restartStretch()
@@ -490,38 +494,39 @@ namespace pinsettle
     peaks_.restart();
     window_.restart();
     guard_.restart();
-    stationary_ = false;
+    state_.stationary = false;
   }
 
   bool Solver::rollBack(Result & result)
   {
-    if (!guard_.rollBack(q_, v_, time_))
+    if (!guard_.rollBack(work_.q, work_.v, state_.time))
     {
       result.reason = "the integration kept blowing up (non-finite values or explosive energy "
                       "growth) after the step was halved "
                       + std::to_string(DivergenceGuard::kMaxReductions) + " times";
       return false;
     }
-    trace_.event(step_, time_, EventKind::Rollback);
-    step_control_.halve(data, q_, v_, step_); // what it takes is forgotten by the reset below
+    trace_.event(state_.step, state_.time, EventKind::Rollback);
+    step_control_.halve(
+      data, work_.q, work_.v, state_.step); // what it takes is forgotten by the reset below
     restartStretch();
-    runaway_.reset(step_, 0.);
+    runaway_.reset(state_.step, 0.);
     return true;
   }
 
   bool Solver::isRunaway(const StepEnergies & e, Result & result)
   {
-    if (!runaway_.isDue(step_) || !runaway_.sample(e.exact + e.added))
+    if (!runaway_.isDue(state_.step) || !runaway_.sample(e.exact + e.added))
       return false;
     // Partial damping can lose to a potential that falls by a fixed amount per turn although a
     // well exists (a pendulum under a constant torque just below what gravity holds): the first
     // verdict lowers kt to 0, which stops the mechanism at every peak, near the bottom of each
     // well it passes; only a second runaway is reported.
-    if (kt_ > 0.)
+    if (state_.kt > 0.)
     {
-      kt_ = 0.;
+      state_.kt = 0.;
       result.reason = "kt lowered to 0: with partial damping the released energy kept growing";
-      runaway_.reset(step_, e.exact);
+      runaway_.reset(state_.step, e.exact);
       return false;
     }
     std::ostringstream msg;
@@ -529,7 +534,7 @@ namespace pinsettle
     msg << "the potential energy falls without bound: " << runaway_.released() << " J released and "
         << runaway_.drift() << " (rad or m) travelled by "
         << describeCoordinate(model_, runaway_.furthestCoordinate()) << " in "
-        << runaway_.stepsSinceReset(step_)
+        << runaway_.stepsSinceReset(state_.step)
         << " steps with kt = 0, the energy released per doubling of the run and the distance both "
            "growing at least "
         << RunawayMonitor::kRunawayRatio << "x, " << RunawayMonitor::kRunawayDoublings
@@ -542,63 +547,63 @@ namespace pinsettle
   {
     window_.record(e.signal);
     const bool quiet = window_.isQuiet(e.signal);
-    const bool exact_rest = stationary_ || window_.isExactRest();
-    if (!rest_.isDue(quiet, peaks_.isNotRising(e.signal), exact_rest, step_))
+    const bool exact_rest = state_.stationary || window_.isExactRest();
+    if (!rest_.isDue(quiet, peaks_.isNotRising(e.signal), exact_rest, state_.step))
       return false;
     // Where the mechanism is drifting (its velocity, or from rest its acceleration): a push off
     // an unstable rest goes that way, as the mechanism would fall, not along whichever sign
     // the eigen-solver gave the softest direction.
-    drift_ = v_.isZero(0.) ? data.ddq : v_;
-    StabilityReport report = assess(q_, forces_);
+    work_.drift = work_.v.isZero(0.) ? data.ddq : work_.v;
+    StabilityReport report = assess(work_.q, state_.forces);
     // Unstable, or loops left open, is no rest.
     const double energy =
-      report.verdict == Stability::Unstable || !constraints_.isSatisfied(data, q_)
+      report.verdict == Stability::Unstable || !constraints_.isSatisfied(data, work_.q)
         ? std::numeric_limits<double>::infinity()
-        : computeRestEnergy(report, staticForce(q_, forces_));
-    rest_.record(std::move(report), q_, step_, energy);
+        : computeRestEnergy(report, staticForce(work_.q, state_.forces));
+    rest_.record(std::move(report), work_.q, state_.step, energy);
     return true;
   }
 
   void Solver::pushOff(Result & result)
   {
-    rest_.push(model_, data, q_, v_);
-    if (v_.dot(drift_) < 0.)
-      v_ = -v_;
-    ++result.pushes;
-    trace_.event(step_, time_, EventKind::Push);
-    guard_.keep(q_, v_, time_);
+    rest_.push(model_, data, work_.q, work_.v);
+    if (work_.v.dot(work_.drift) < 0.)
+      work_.v = -work_.v;
+    ++result.info.pushes;
+    trace_.event(state_.step, state_.time, EventKind::Push);
+    guard_.keep(work_.q, work_.v, state_.time);
     step_control_.restartGrowth();
     restartStretch();
-    runaway_.reset(step_, 0.);
+    runaway_.reset(state_.step, 0.);
   }
 
   void Solver::damp(const StepEnergies & e, Result & result)
   {
-    ++result.peaks;
-    trace_.event(step_, time_, EventKind::Damping);
+    ++result.info.peaks;
+    trace_.event(state_.step, state_.time, EventKind::Damping);
     double taken = e.exact + e.added;
     // Moved back to the peak, the mechanism gives up the potential it lost since too: at least
     // the kinetic energy of the peak sample is taken out (the runaway monitor counts it).
-    if (settings_->backtrack && backtrackToPeak(e.signal, e.exact + e.added))
-      taken = std::max(taken, exact_before_);
-    v_ *= kt_;
-    runaway_.addRemoved((1. - kt_ * kt_) * taken);
+    if (state_.settings->backtrack && backtrackToPeak(e.signal, e.exact + e.added))
+      taken = std::max(taken, state_.exact_before);
+    work_.v *= state_.kt;
+    runaway_.addRemoved((1. - state_.kt * state_.kt) * taken);
     // Impacts after a damping event start a new stretch: only steps in a row within one
     // stretch are chatter. Counted across events, a weld-hung arm whose fast mode peaks every
     // 4 steps, each stretch starting with its joints settling back onto their stops, had its
     // step halved 21 times and never got to a rest (gymnasium-robotics' Fetch).
-    impacts_ = 0;
+    state_.impacts = 0;
     peaks_.restart();
-    guard_.keepIfClean(q_, v_, time_);
+    guard_.keepIfClean(work_.q, work_.v, state_.time);
     step_control_.restartGrowth();
     reestimateStep();
   }
 
   void Solver::keepConfiguration(double exact)
   {
-    q_before2_.swap(q_before_);
-    q_before_ = q_;
-    exact_before_ = exact;
+    work_.q_before2.swap(work_.q_before);
+    work_.q_before = work_.q;
+    state_.exact_before = exact;
   }
 
   bool Solver::backtrackToPeak(double e, double exact)
@@ -607,14 +612,14 @@ namespace pinsettle
     // left out) may peak where the real motion still gains speed, and moving back there undoes
     // its progress at every such peak (with kt = 0 a 1e8 mass ratio then cycled for ever). At
     // a peak of the exact signal this always holds.
-    if (!(exact < exact_before_))
+    if (!(exact < state_.exact_before))
       return false;
-    // A sample pairs q_k with the velocity of the step into it, v_{k-1/2}: the energy's vertex,
-    // stepsPastPeak samples back, lies half a step earlier along the path, between the two
+    // A sample pairs q_k with the velocity of the step into it, work_.v{k-1/2}: the energy's
+    // vertex, stepsPastPeak samples back, lies half a step earlier along the path, between the two
     // configurations kept before this one (1 to 2 steps back).
     const double back = std::clamp(peaks_.stepsPastPeak(e) + 0.5, 1., 2.);
-    pinocchio::interpolate(model_, q_before_, q_before2_, back - 1., q_);
-    constraints_.projectState(data, q_, v_);
+    pinocchio::interpolate(model_, work_.q_before, work_.q_before2, back - 1., work_.q);
+    constraints_.projectState(data, work_.q, work_.v);
     // The clock is not moved back: it counts the time integrated, and the trace, the progress
     // reports and playback (keyframes in time order) need it to run forward.
     return true;
@@ -622,63 +627,65 @@ namespace pinsettle
 
   bool Solver::integrate()
   {
-    const bool from_rest = (v_.array() == 0.).all();
+    const bool from_rest = (work_.v.array() == 0.).all();
     correctAcceleration();
-    const double h = step_control_.nextStep(v_, data.ddq);
-    integrateSemiImplicitEuler(model_, q_, v_, data.ddq, h, dq_, q_next_);
-    if (!q_next_.allFinite() || !v_.allFinite())
+    const double h = step_control_.nextStep(work_.v, data.ddq);
+    integrateSemiImplicitEuler(model_, work_.q, work_.v, data.ddq, h, work_.dq, work_.q_next);
+    if (!work_.q_next.allFinite() || !work_.v.allFinite())
       return false;
-    q_.swap(q_next_);
+    work_.q.swap(work_.q_next);
     // A joint past a stop at every step is not motion but chatter (each step crosses the range,
     // and the impacts keep the energy at zero): roll back with the step halved, as for a
     // blow-up.
-    const bool hit = constraints_.enforceStops(q_, v_, trace_.isTracing());
-    impacts_ = hit ? impacts_ + 1 : 0;
+    const bool hit = constraints_.enforceStops(work_.q, work_.v, trace_.isTracing());
+    state_.impacts = hit ? state_.impacts + 1 : 0;
     for (const pinocchio::JointIndex joint : constraints_.hits())
-      trace_.event(step_, time_ + h, EventKind::Impact, joint);
-    if (impacts_ >= DivergenceGuard::kBlowUpSteps)
+      trace_.event(state_.step, state_.time + h, EventKind::Impact, joint);
+    if (state_.impacts >= DivergenceGuard::kBlowUpSteps)
     {
-      impacts_ = 0;
+      state_.impacts = 0;
       return false;
     }
-    constraints_.projectStep(data, q_, v_, hit); // back onto the loops, the stops kept
-    runaway_.addMotion(dq_);
-    time_ += h;
+    constraints_.projectStep(data, work_.q, work_.v, hit); // back onto the loops, the stops kept
+    runaway_.addMotion(work_.dq);
+    state_.time += h;
     // At rest before and after, and not moved to the bit: the next step starts from the same
     // state, so every later one would too (the loop is deterministic in q and v).
-    stationary_ = from_rest && (v_.array() == 0.).all() && q_ == q_next_;
+    state_.stationary = from_rest && (work_.v.array() == 0.).all() && work_.q == work_.q_next;
     return true;
   }
 
   void Solver::finish(Status status, Result & result)
   {
     result.status = status;
-    result.steps = step_;
-    result.sim_time = time_;
-    result.dt = step_control_.dt();
-    result.dt_estimates = step_control_.estimates();
-    result.dt_reductions = guard_.reductions();
-    result.scaled_modes = step_control_.scaledModes();
-    result.scaled_joints = step_control_.scaledJoints();
-    trace_.finish(result);
-    result.q = q_;
-    result.v = v_;
-    Eigen::VectorXd tau = staticForce(q_, forces_); // at result.q, polished or not
-    result.residual = residualOf(q_, tau);
-    if (!settled_by_newton_) // else it holds the residual where Newton took over
-      result.residual_before_polish = result.residual;
-    StabilityReport report = rest_.isAssessed(q_) ? rest_.takeReport() : assess(q_, forces_);
-    if (settings_->polish && status == Status::Converged && !settled_by_newton_)
-      polish(report, forces_, tau, result);
-    const std::pair<double, double> energies = computeKineticEnergies(model_, data, result.q, v_);
-    result.kinetic_energy = energies.first;
-    result.simplified_kinetic_energy = energies.second;
+    result.info.steps = state_.step;
+    result.info.sim_time = state_.time;
+    result.info.dt = step_control_.dt();
+    result.info.dt_estimates = step_control_.estimates();
+    result.info.dt_reductions = guard_.reductions();
+    result.info.scaled_modes = step_control_.scaledModes();
+    result.info.scaled_joints = step_control_.scaledJoints();
+    trace_.finish(result.trace);
+    result.q = work_.q;
+    result.v = work_.v;
+    Eigen::VectorXd tau = staticForce(work_.q, state_.forces); // at result.q, polished or not
+    result.residual = residualOf(work_.q, tau);
+    if (!state_.settled_by_newton) // else it holds the residual where Newton took over
+      result.info.residual_before_polish = result.residual;
+    StabilityReport report =
+      rest_.isAssessed(work_.q) ? rest_.takeReport() : assess(work_.q, state_.forces);
+    if (state_.settings->polish && status == Status::Converged && !state_.settled_by_newton)
+      polish(report, state_.forces, tau, result);
+    const std::pair<double, double> energies =
+      computeKineticEnergies(model_, data, result.q, work_.v);
+    result.info.kinetic_energy = energies.first;
+    result.info.simplified_kinetic_energy = energies.second;
     result.stability = report.verdict;
-    result.min_stiffness_eigenvalue = report.min_eigenvalue;
-    result.neutral_directions = report.neutral_directions;
+    result.info.min_stiffness_eigenvalue = report.min_eigenvalue;
+    result.info.neutral_directions = report.neutral_directions;
     constraints_.describeRest(data, result.q, tau, result);
-    settings_ = nullptr;
-    forces_ = nullptr;
+    state_.settings = nullptr;
+    state_.forces = nullptr;
   }
 
   double Solver::residualOf(const Eigen::VectorXd & q, const Eigen::VectorXd & tau)
@@ -798,7 +805,7 @@ namespace pinsettle
     if (reach < 0.)
       return;
     NewtonRun run = iterateNewton(result.q, tau_q, result.residual, report, forces);
-    result.polish_iterations = run.iterations;
+    result.info.polish_iterations = run.iterations;
     if (run.iterations == 0)
       return;
     const double moved = pinocchio::difference(model_, result.q, run.q).lpNorm<Eigen::Infinity>();
@@ -807,7 +814,7 @@ namespace pinsettle
       return;
     result.q = run.q;
     result.residual = run.residual;
-    result.polished = true;
+    result.info.polished = true;
     tau_q = run.tau;
     report = std::move(after);
   }
@@ -817,14 +824,16 @@ namespace pinsettle
     // A try costs O(nv^3), a step O(nv): the step estimates' spacing, without their ds floor.
     const std::int64_t spacing =
       std::max<std::int64_t>(1, static_cast<std::int64_t>(model_.nv) * model_.nv / 4);
-    if (!settings_->polish || !settings_->newton_takeover || step_ - newton_tried_at_ < spacing)
+    if (
+      !state_.settings->polish || !state_.settings->newton_takeover
+      || state_.step - state_.newton_tried_at < spacing)
       return false;
-    newton_tried_at_ = step_;
-    StabilityReport report = assess(q_, forces_);
+    state_.newton_tried_at = state_.step;
+    StabilityReport report = assess(work_.q, state_.forces);
     if (report.verdict == Stability::Unstable)
       return false;
-    const Eigen::VectorXd tau = staticForce(q_, forces_);
-    const double residual = residualOf(q_, tau);
+    const Eigen::VectorXd tau = staticForce(work_.q, state_.forces);
+    const double residual = residualOf(work_.q, tau);
     // Within the polish's reach and near where the mechanism stands: far from its rest the
     // reach (residual over the softest stiffness) is long, and Newton, clamped onto a stop,
     // found a 'rest' 2.8 rad away and 3.7 J above the start of a bistable pendulum's release.
@@ -837,25 +846,25 @@ namespace pinsettle
     // Only a Newton run that gets to round-off within the reach (iterateNewton gives up as soon
     // as it moves further) ends the run: anything less (a stall, a step beyond the reach,
     // another kind of rest) leaves the mechanism to the damping, where it was.
-    NewtonRun run = iterateNewton(q_, tau, residual, report, forces_, reach);
+    NewtonRun run = iterateNewton(work_.q, tau, residual, report, state_.forces, reach);
     if (!run.at_round_off)
       return false;
     // Not moved (held, or a zero residual): the rest is the one just assessed.
-    StabilityReport after = run.iterations == 0 ? report : assess(run.q, forces_);
+    StabilityReport after = run.iterations == 0 ? report : assess(run.q, state_.forces);
     if (after.verdict != report.verdict)
       return false;
     // Newton leaves neutral directions alone: a force still pulling along one (a slider on a
     // tilted arm, 3.6 N along it) is no rest, whatever the round-off of the rest.
     const double energy = computeRestEnergy(after, run.tau);
-    if (!(energy <= restEnergyLimit(model_, *settings_)))
+    if (!(energy <= restEnergyLimit(model_, *state_.settings)))
       return false;
-    result.residual_before_polish = residual;
-    result.polish_iterations = run.iterations;
-    result.polished = run.iterations > 0;
-    q_ = std::move(run.q);
-    v_.setZero();
-    rest_.record(std::move(after), q_, step_, energy);
-    settled_by_newton_ = true;
+    result.info.residual_before_polish = residual;
+    result.info.polish_iterations = run.iterations;
+    result.info.polished = run.iterations > 0;
+    work_.q = std::move(run.q);
+    work_.v.setZero();
+    rest_.record(std::move(after), work_.q, state_.step, energy);
+    state_.settled_by_newton = true;
     return true;
   }
 

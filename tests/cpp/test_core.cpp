@@ -250,7 +250,7 @@ BOOST_AUTO_TEST_CASE(pendulum_settles_hanging_down)
           BOOST_CHECK_LT(
             pinocchio::computeGeneralizedGravity(model, data, result.q).lpNorm<Eigen::Infinity>(),
             1e-8);
-          BOOST_CHECK_GT(result.peaks, 0);
+          BOOST_CHECK_GT(result.info.peaks, 0);
         }
       }
     }
@@ -373,7 +373,7 @@ BOOST_AUTO_TEST_CASE(step_loop_does_not_allocate)
     const pinsettle::Result result = solver.solve(q0, settings);
     allocations[k] = g_allocations.load() - before;
     frees[k] = g_frees.load() - freed;
-    BOOST_CHECK_EQUAL(result.steps, steps[k]);
+    BOOST_CHECK_EQUAL(result.info.steps, steps[k]);
   }
   BOOST_TEST_MESSAGE(
     "mallocs: " << allocations[0] << " for 100 steps, " << allocations[1] << " for 20000");
@@ -415,11 +415,11 @@ BOOST_AUTO_TEST_CASE(default_settings_allocate_at_events_not_in_the_steps_betwee
   };
   const pinsettle::Result result =
     solver.solve(pinocchio::neutral(model), settings, &springs, count);
-  const long events = result.peaks + result.dt_estimates + result.pushes;
+  const long events = result.info.peaks + result.info.dt_estimates + result.info.pushes;
   BOOST_TEST_MESSAGE(
     "default settings: " << allocating_steps << " of " << polls << " steps allocate; "
-                         << result.peaks << " damping events, " << result.dt_estimates
-                         << " estimates, " << result.pushes << " pushes");
+                         << result.info.peaks << " damping events, " << result.info.dt_estimates
+                         << " estimates, " << result.info.pushes << " pushes");
   BOOST_CHECK(result.status == pinsettle::Status::Converged);
   BOOST_CHECK_GT(polls, 100);
   BOOST_CHECK_LE(allocating_steps, events);
@@ -464,7 +464,7 @@ BOOST_AUTO_TEST_CASE(non_finite_values_stop_with_diverged)
   // Every evaluation after the 50th is NaN: each roll-back to the start with half the step meets
   // it again, and after 30 halvings the run is declared diverged with the last good state.
   BOOST_CHECK(result.status == pinsettle::Status::Diverged);
-  BOOST_CHECK_EQUAL(result.dt_reductions, 30);
+  BOOST_CHECK_EQUAL(result.info.dt_reductions, 30);
   BOOST_CHECK(!result.reason.empty());
   BOOST_CHECK(result.q.allFinite());
   BOOST_CHECK(result.v.allFinite());
@@ -486,7 +486,7 @@ BOOST_AUTO_TEST_CASE(abort_callback_and_limits)
       return seen.size() == 3;
     });
   BOOST_CHECK(aborted.status == pinsettle::Status::Aborted);
-  BOOST_CHECK_EQUAL(aborted.steps, 30);
+  BOOST_CHECK_EQUAL(aborted.info.steps, 30);
   BOOST_CHECK_GT(std::abs(aborted.q[0]), 0.5); // still swinging: the current state is kept
 
   // The callback saw the run where it stood: steps, time, the last step's energy and the
@@ -497,7 +497,7 @@ BOOST_AUTO_TEST_CASE(abort_callback_and_limits)
     BOOST_CHECK_EQUAL(seen[k].steps, 10 * std::int64_t(k + 1));
     BOOST_CHECK_CLOSE(seen[k].sim_time, 1e-3 * static_cast<double>(seen[k].steps), 1e-9);
     BOOST_CHECK_GT(seen[k].kinetic_energy, 0.);
-    BOOST_CHECK_LE(seen[k].wall_time, aborted.wall_time);
+    BOOST_CHECK_LE(seen[k].wall_time, aborted.info.wall_time);
   }
   BOOST_CHECK_LT(seen[0].kinetic_energy, seen[2].kinetic_energy); // falling from rest
   pinocchio::Data data(model);
@@ -723,21 +723,21 @@ BOOST_AUTO_TEST_CASE(automatic_step_settles_a_stiff_spring_next_to_a_heavy_body)
       const pinsettle::Result result = solver.solve(Eigen::Vector2d(0.8, 0.), settings, &springs);
       BOOST_CHECK(result.status == pinsettle::Status::Converged);
       BOOST_CHECK(result.stability == pinsettle::Stability::Stable);
-      BOOST_CHECK_EQUAL(result.dt_reductions, 0);
+      BOOST_CHECK_EQUAL(result.info.dt_reductions, 0);
       // Hanging down, the slider sags by m g / k along the pendulum.
       BOOST_CHECK_SMALL(result.q[0], 1e-8);
       BOOST_CHECK_CLOSE(result.q[1], -0.01 * 9.81 / 1e8, 1e-3);
       if (scale)
       {
-        BOOST_CHECK_EQUAL(result.scaled_modes, 1);
-        BOOST_CHECK_GT(result.dt, 1e-2); // the pendulum's pace: 0.2 * 2 / sqrt(g / l) ~ 0.13 s
+        BOOST_CHECK_EQUAL(result.info.scaled_modes, 1);
+        BOOST_CHECK_GT(result.info.dt, 1e-2); // the pendulum's pace: 0.2 * 2 / sqrt(g / l) ~ 0.13 s
       }
       else
       {
-        BOOST_CHECK_EQUAL(result.scaled_modes, 0);
-        BOOST_CHECK_LT(result.dt, 2e-5); // below 2 / omega_max of the stiff mode
+        BOOST_CHECK_EQUAL(result.info.scaled_modes, 0);
+        BOOST_CHECK_LT(result.info.dt, 2e-5); // below 2 / omega_max of the stiff mode
       }
-      steps[scale ? 1 : 0] = result.steps;
+      steps[scale ? 1 : 0] = result.info.steps;
     }
   }
   BOOST_CHECK_LT(10 * steps[1], steps[0]);
@@ -797,7 +797,7 @@ BOOST_AUTO_TEST_CASE(constant_torque_on_a_free_wheel_has_no_equilibrium)
     solver.solve(pinocchio::neutral(model), pinsettle::Settings(), &torque);
   BOOST_CHECK(result.status == pinsettle::Status::NoEquilibrium);
   BOOST_CHECK(result.reason.find("falls without bound") != std::string::npos);
-  BOOST_CHECK_LE(result.steps, 2 * 100 * 1024 + 1);
+  BOOST_CHECK_LE(result.info.steps, 2 * 100 * 1024 + 1);
 }
 
 BOOST_AUTO_TEST_CASE(newton_polish_stops_once_a_step_moves_q_by_its_round_off_only)
@@ -811,9 +811,9 @@ BOOST_AUTO_TEST_CASE(newton_polish_stops_once_a_step_moves_q_by_its_round_off_on
   pinsettle::Solver solver(model);
   const pinsettle::Result result = solver.solve(q0, pinsettle::Settings());
   BOOST_REQUIRE(result.status == pinsettle::Status::Converged);
-  BOOST_CHECK(result.polished);
-  BOOST_CHECK_GE(result.polish_iterations, 1);
-  BOOST_CHECK_LE(result.polish_iterations, 4);
+  BOOST_CHECK(result.info.polished);
+  BOOST_CHECK_GE(result.info.polish_iterations, 1);
+  BOOST_CHECK_LE(result.info.polish_iterations, 4);
   // The answer is at round-off: recomputed outside the solver, the residual is a tiny share of
   // the start's force, and a further Newton step would not move q by more than its round-off.
   pinocchio::Data data(model);
@@ -842,9 +842,9 @@ BOOST_AUTO_TEST_CASE(newton_polish_brings_the_residual_to_round_off_and_keeps_th
   settings.ds = 100; // near the rest: with the default window of 10 the run stops 0.04 rad off
   const pinsettle::Result result = solver.solve(pinocchio::neutral(model), settings);
   BOOST_CHECK(result.status == pinsettle::Status::Converged);
-  BOOST_CHECK(result.polished);
-  BOOST_CHECK_GE(result.polish_iterations, 1);
-  BOOST_CHECK_GT(result.residual_before_polish, 1e-9);
+  BOOST_CHECK(result.info.polished);
+  BOOST_CHECK_GE(result.info.polish_iterations, 1);
+  BOOST_CHECK_GT(result.info.residual_before_polish, 1e-9);
   BOOST_CHECK_LT(result.residual, 1e-12);
   BOOST_CHECK(result.stability != pinsettle::Stability::Unstable);
   // Recomputed outside the solver.
@@ -854,7 +854,7 @@ BOOST_AUTO_TEST_CASE(newton_polish_brings_the_residual_to_round_off_and_keeps_th
   // The same rest as without the polish, closer to exact.
   settings.polish = false;
   const pinsettle::Result plain = solver.solve(pinocchio::neutral(model), settings);
-  BOOST_CHECK_EQUAL(plain.residual, result.residual_before_polish);
+  BOOST_CHECK_EQUAL(plain.residual, result.info.residual_before_polish);
   BOOST_CHECK_LT(pinocchio::difference(model, plain.q, result.q).lpNorm<Eigen::Infinity>(), 1e-5);
 }
 
@@ -874,9 +874,9 @@ BOOST_AUTO_TEST_CASE(newton_takes_over_at_a_damping_event_at_the_same_strict_min
   const pinsettle::Result damped = solver.solve(q0, settings);
   BOOST_REQUIRE(taken.status == pinsettle::Status::Converged);
   BOOST_REQUIRE(damped.status == pinsettle::Status::Converged);
-  BOOST_CHECK_LT(taken.steps, damped.steps);
-  BOOST_CHECK(taken.polished);
-  BOOST_CHECK_GT(taken.residual_before_polish, taken.residual);
+  BOOST_CHECK_LT(taken.info.steps, damped.info.steps);
+  BOOST_CHECK(taken.info.polished);
+  BOOST_CHECK_GT(taken.info.residual_before_polish, taken.residual);
   BOOST_CHECK(taken.stability == pinsettle::Stability::Stable);
   pinocchio::Data data(model);
   const double weight = model.inertias[1].mass() * 9.81 * model.inertias[1].lever().norm();
@@ -1006,8 +1006,8 @@ BOOST_AUTO_TEST_CASE(joint_inertia_settles_a_chain_at_the_same_rest_in_fewer_ste
   const pinsettle::Result b = solver.solve(q0, scaled);
   BOOST_REQUIRE(a.status == pinsettle::Status::Converged);
   BOOST_REQUIRE(b.status == pinsettle::Status::Converged);
-  BOOST_CHECK_EQUAL(a.scaled_joints, 0);
-  BOOST_CHECK_GE(b.scaled_joints, model.nv / 2);
+  BOOST_CHECK_EQUAL(a.info.scaled_joints, 0);
+  BOOST_CHECK_GE(b.info.scaled_joints, model.nv / 2);
   BOOST_CHECK(model.armature == armature); // the user's model is left as it was
   pinocchio::Data data(model);
   const double start_force =
@@ -1017,10 +1017,11 @@ BOOST_AUTO_TEST_CASE(joint_inertia_settles_a_chain_at_the_same_rest_in_fewer_ste
   BOOST_CHECK(b.stability == pinsettle::Stability::Stable);
   for (Eigen::Index k = 0; k < model.nq; ++k)
     BOOST_CHECK_LT(std::abs(std::remainder(b.q[k], 2. * M_PI)), 1e-9);
-  BOOST_TEST_MESSAGE("steps: " << a.steps << " plain, " << b.steps << " with joint inertia");
-  BOOST_CHECK_LT(2 * b.steps, a.steps);
+  BOOST_TEST_MESSAGE(
+    "steps: " << a.info.steps << " plain, " << b.info.steps << " with joint inertia");
+  BOOST_CHECK_LT(2 * b.info.steps, a.info.steps);
   // The run's end energies are the bodies' (the fictitious inertia is not reported).
-  BOOST_CHECK_LE(b.kinetic_energy, 10. * scaled.max_e);
+  BOOST_CHECK_LE(b.info.kinetic_energy, 10. * scaled.max_e);
 
   // The same solver after the model changed (gravity tilted): the run of a fresh solver (the
   // added inertia rides on a copy of the model made each run). Without the polish, which would
@@ -1034,7 +1035,7 @@ BOOST_AUTO_TEST_CASE(joint_inertia_settles_a_chain_at_the_same_rest_in_fewer_ste
   const pinsettle::Result again = reused.solve(q0, unpolished);
   const pinsettle::Result fresh = pinsettle::Solver(tilted).solve(q0, unpolished);
   BOOST_REQUIRE(again.status == pinsettle::Status::Converged);
-  BOOST_CHECK_EQUAL(again.steps, fresh.steps);
+  BOOST_CHECK_EQUAL(again.info.steps, fresh.info.steps);
   BOOST_CHECK_LT((again.q - fresh.q).lpNorm<Eigen::Infinity>(), 1e-12);
   BOOST_CHECK_LT(
     pinocchio::computeGeneralizedGravity(tilted, data, again.q).lpNorm<Eigen::Infinity>(),
@@ -1043,9 +1044,9 @@ BOOST_AUTO_TEST_CASE(joint_inertia_settles_a_chain_at_the_same_rest_in_fewer_ste
 
   // Not with the simplified energy (it would not see the added inertia), nor a fixed step.
   scaled.energy = pinsettle::EnergyMeasure::Simplified;
-  BOOST_CHECK_EQUAL(solver.solve(q0, scaled).scaled_joints, 0);
+  BOOST_CHECK_EQUAL(solver.solve(q0, scaled).info.scaled_joints, 0);
   scaled.energy = pinsettle::EnergyMeasure::Exact;
   scaled.dt = 1e-3;
   scaled.max_steps = 50;
-  BOOST_CHECK_EQUAL(solver.solve(q0, scaled).scaled_joints, 0);
+  BOOST_CHECK_EQUAL(solver.solve(q0, scaled).info.scaled_joints, 0);
 }

@@ -192,7 +192,7 @@ BOOST_AUTO_TEST_CASE(empty_elements_step_exactly_like_the_bare_core)
   const Eigen::VectorXd q0 = pinocchio::neutral(model);
   const pinsettle::Result bare = a.solve(q0);
   const pinsettle::Result with = b.solve(q0, pinsettle::Settings(), &none);
-  BOOST_CHECK_EQUAL(bare.steps, with.steps);
+  BOOST_CHECK_EQUAL(bare.info.steps, with.info.steps);
   BOOST_CHECK(bare.q == with.q);
 }
 
@@ -540,7 +540,7 @@ BOOST_AUTO_TEST_CASE(released_on_a_saddle_the_ur5_is_pushed_to_a_stable_rest)
   pinsettle::Solver solver(model);
   const pinsettle::Result result = solver.solve(q0);
   BOOST_CHECK(result.status == pinsettle::Status::Converged);
-  BOOST_CHECK_GE(result.pushes, 1);
+  BOOST_CHECK_GE(result.info.pushes, 1);
   BOOST_CHECK(result.stability != pinsettle::Stability::Unstable);
   BOOST_CHECK(
     pinsettle::assessStability(model, data, result.q).verdict != pinsettle::Stability::Unstable);

@@ -172,8 +172,8 @@ BOOST_AUTO_TEST_CASE(redundant_point_loop_assembles_and_settles)
     settings.polish = true;
     const pinsettle::Result r = solver.solve(fourBarStart(), settings, &springs);
     BOOST_CHECK(r.status == pinsettle::Status::Converged);
-    BOOST_CHECK_EQUAL(r.mobility, 1);
-    BOOST_CHECK_CLOSE(r.assembly_distance, moved, 1e-6);
+    BOOST_CHECK_EQUAL(r.info.mobility, 1);
+    BOOST_CHECK_CLOSE(r.info.assembly_distance, moved, 1e-6);
     BOOST_CHECK_SMALL(r.constraint_error, 1e-10);
     BOOST_CHECK(r.stability == pinsettle::Stability::Stable);
     // The residual recomputed: the static force has no component along the allowed motion.
@@ -232,9 +232,9 @@ BOOST_AUTO_TEST_CASE(empty_loops_step_exactly_like_the_tree)
   q0 << 0.3, -0.2, 0.5;
   const pinsettle::Result a = plain.solve(q0);
   const pinsettle::Result b = with_none.solve(q0);
-  BOOST_CHECK_EQUAL(a.steps, b.steps);
+  BOOST_CHECK_EQUAL(a.info.steps, b.info.steps);
   BOOST_CHECK((a.q.array() == b.q.array()).all());
-  BOOST_CHECK_EQUAL(b.mobility, 3);
+  BOOST_CHECK_EQUAL(b.info.mobility, 3);
   BOOST_CHECK_EQUAL(b.constraint_error, 0.);
 }
 

@@ -149,9 +149,9 @@ BOOST_AUTO_TEST_CASE(solver_settles_the_coupled_arm_at_a_minimum_of_its_potentia
     Eigen::VectorXd q0(2);
     q0 << start, 0.; // off the coupling: assembled first
     const pinsettle::Result r = solver.solve(q0);
-    BOOST_TEST_MESSAGE("start " << start << ": q " << r.q.transpose() << ", " << r.steps);
+    BOOST_TEST_MESSAGE("start " << start << ": q " << r.q.transpose() << ", " << r.info.steps);
     BOOST_REQUIRE(r.status == pinsettle::Status::Converged);
-    BOOST_CHECK_EQUAL(r.mobility, 1);
+    BOOST_CHECK_EQUAL(r.info.mobility, 1);
     BOOST_CHECK_SMALL(r.q[1] - (kMultiplier * r.q[0] + kOffset), 1e-12);
     // Pinocchio's rnea on the mimic model vanishes at the rest.
     Eigen::VectorXd qm(1);
@@ -236,9 +236,9 @@ BOOST_AUTO_TEST_CASE(couplings_with_loops_settle_where_the_static_force_balances
   Eigen::VectorXd q0(4);
   q0 << -1.0, 0.8, -1.6, -0.2;
   const pinsettle::Result r = solver.solve(q0);
-  BOOST_TEST_MESSAGE("q " << r.q.transpose() << ", " << r.steps << " steps");
+  BOOST_TEST_MESSAGE("q " << r.q.transpose() << ", " << r.info.steps << " steps");
   BOOST_REQUIRE(r.status == pinsettle::Status::Converged);
-  BOOST_CHECK_EQUAL(r.mobility, 1);
+  BOOST_CHECK_EQUAL(r.info.mobility, 1);
   // Independently: the constraints hold, and gravity has no component along the motion they
   // allow (the null space of their Jacobian by central differences of closure()).
   BOOST_CHECK_SMALL(closure(model, r.q).lpNorm<Eigen::Infinity>(), 1e-10);

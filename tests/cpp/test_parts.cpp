@@ -15,6 +15,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <chrono>
+#include <optional>
 #include <cmath>
 #include <limits>
 #include <thread>
@@ -622,27 +623,27 @@ BOOST_AUTO_TEST_CASE(trace_recorder_keeps_the_whole_run_in_bounded_memory)
   for (std::int64_t step = 0; step < 13; ++step)
     trace.sample(step, 0.1 * static_cast<double>(step), 1., 2., q);
   trace.event(7, 0.7, pinsettle::EventKind::Push);
-  pinsettle::Result result;
-  trace.finish(result);
+  pinsettle::Trace kept;
+  trace.finish(kept);
   // Full at steps 0-3 (stride 1), then 0, 2 + 4, 6 (stride 2), then 0, 4 + 8, 12 (stride 4).
-  BOOST_REQUIRE_EQUAL(result.trace.size(), 4u);
-  BOOST_CHECK_EQUAL(result.trace_stride, 4);
+  BOOST_REQUIRE_EQUAL(kept.samples.size(), 4u);
+  BOOST_CHECK_EQUAL(kept.stride, 4);
   for (std::size_t k = 0; k < 4; ++k)
   {
-    BOOST_CHECK_EQUAL(result.trace[k].step, static_cast<std::int64_t>(4 * k));
-    BOOST_CHECK(result.trace[k].q == q);
+    BOOST_CHECK_EQUAL(kept.samples[k].step, static_cast<std::int64_t>(4 * k));
+    BOOST_CHECK(kept.samples[k].q == q);
   }
-  BOOST_REQUIRE_EQUAL(result.events.size(), 1u);
-  BOOST_CHECK(result.events[0].kind == pinsettle::EventKind::Push);
+  BOOST_REQUIRE_EQUAL(kept.events.size(), 1u);
+  BOOST_CHECK(kept.events[0].kind == pinsettle::EventKind::Push);
 
   // Without tracing nothing is kept.
   settings.trace_every = 0;
   trace.start(settings);
   trace.sample(0, 0., 1., 2., q);
   trace.event(0, 0., pinsettle::EventKind::Damping);
-  pinsettle::Result none;
+  pinsettle::Trace none;
   trace.finish(none);
-  BOOST_CHECK(none.trace.empty() && none.events.empty());
+  BOOST_CHECK(none.samples.empty() && none.events.empty());
 }
 
 BOOST_AUTO_TEST_CASE(run_clock_stops_on_the_budget_and_on_the_callback)
@@ -654,11 +655,10 @@ BOOST_AUTO_TEST_CASE(run_clock_stops_on_the_budget_and_on_the_callback)
   BOOST_CHECK(!clock.isDue(0));
   BOOST_CHECK(!clock.isDue(7));
   BOOST_CHECK(clock.isDue(16));
-  pinsettle::Status status = pinsettle::Status::MaxSteps;
   pinsettle::RunProgress progress;
   progress.steps = 16;
-  BOOST_CHECK(!clock.mustStop(progress, status)); // no budget, no callback
-  BOOST_CHECK_GE(progress.wall_time, 0.);         // the clock read for the callback
+  BOOST_CHECK(!clock.mustStop(progress)); // no budget, no callback
+  BOOST_CHECK_GE(progress.wall_time, 0.); // the clock read for the callback
 
   int calls = 0;
   std::int64_t steps_seen = 0;
@@ -667,17 +667,19 @@ BOOST_AUTO_TEST_CASE(run_clock_stops_on_the_budget_and_on_the_callback)
     return ++calls >= 2;
   };
   clock.configure(settings, abort);
-  BOOST_CHECK(!clock.mustStop(progress, status));
-  BOOST_CHECK(clock.mustStop(progress, status));
-  BOOST_CHECK(status == pinsettle::Status::Aborted);
+  BOOST_CHECK(!clock.mustStop(progress));
+  const std::optional<pinsettle::Status> aborted = clock.mustStop(progress);
+  BOOST_REQUIRE(aborted);
+  BOOST_CHECK(*aborted == pinsettle::Status::Aborted);
   BOOST_CHECK_EQUAL(steps_seen, 16);
 
   settings.max_time = 1e-3;
   pinsettle::RunClock timed;
   timed.configure(settings, pinsettle::AbortCallback());
   std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  BOOST_CHECK(timed.mustStop(progress, status));
-  BOOST_CHECK(status == pinsettle::Status::TimeLimit);
+  const std::optional<pinsettle::Status> late = timed.mustStop(progress);
+  BOOST_REQUIRE(late);
+  BOOST_CHECK(*late == pinsettle::Status::TimeLimit);
   BOOST_CHECK_GE(timed.elapsed(), 5e-3);
 }
 

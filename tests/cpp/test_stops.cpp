@@ -270,8 +270,8 @@ BOOST_AUTO_TEST_CASE(a_pendulum_comes_to_rest_on_its_stop)
   }
   // A start outside the range is moved onto the nearest stop and reported.
   const pinsettle::Result clamped = solver.solve(Eigen::VectorXd::Constant(1, 2.));
-  BOOST_REQUIRE_EQUAL(clamped.start_clamped.size(), 1u);
-  BOOST_CHECK_CLOSE(clamped.start_clamped[0].second, 0.5, 1e-12);
+  BOOST_REQUIRE_EQUAL(clamped.info.start_clamped.size(), 1u);
+  BOOST_CHECK_CLOSE(clamped.info.start_clamped[0].second, 0.5, 1e-12);
   BOOST_CHECK(clamped.status == pinsettle::Status::Converged);
 }
 
@@ -317,11 +317,11 @@ BOOST_AUTO_TEST_CASE(joint_inertia_keeps_the_rest_on_a_stop_run_after_run)
   const pinsettle::Result second = solver.solve(q0, settings);
   const pinsettle::Result fresh = pinsettle::Solver(model, nullptr, &stops).solve(q0, settings);
   BOOST_REQUIRE(first.status == pinsettle::Status::Converged);
-  BOOST_CHECK_GT(first.scaled_joints, 0);
+  BOOST_CHECK_GT(first.info.scaled_joints, 0);
   BOOST_CHECK_EQUAL(first.q[0], 0.6);
   BOOST_CHECK_LT(restViolation(model, stops, first.q), 1e-6);
   BOOST_CHECK(first.stability == pinsettle::Stability::Stable);
-  BOOST_CHECK_EQUAL(second.steps, fresh.steps);
+  BOOST_CHECK_EQUAL(second.info.steps, fresh.info.steps);
   BOOST_CHECK_LT((second.q - fresh.q).lpNorm<Eigen::Infinity>(), 1e-12);
   BOOST_CHECK_EQUAL((first.q - fresh.q).lpNorm<Eigen::Infinity>(), 0.);
 }
@@ -360,7 +360,7 @@ BOOST_AUTO_TEST_CASE(no_stop_no_change)
   q0 << 1., -0.5, 0.3;
   pinsettle::Solver with(model, nullptr, &far), without(model);
   const pinsettle::Result a = with.solve(q0), b = without.solve(q0);
-  BOOST_CHECK_EQUAL(a.steps, b.steps);
+  BOOST_CHECK_EQUAL(a.info.steps, b.info.steps);
   BOOST_CHECK(a.q == b.q);
   BOOST_CHECK(a.stop_contacts.empty());
   // Stops and loops together are accepted (tests/test_limits.py checks a four-bar on a stop

@@ -65,17 +65,17 @@ namespace pinsettle
     // --- The start of a run -------------------------------------------------------------------
 
     ///
-    /// \brief Move the start onto the constraints: the loops assembled (result.assembly_distance)
-    /// with a velocity they allow, q moved into the stops' ranges (result.start_clamped) and the
+    /// \brief Move the start onto the constraints: the loops assembled (Info::assembly_distance)
+    /// with a velocity they allow, q moved into the stops' ranges (Info::start_clamped) and the
     /// velocity into a stop removed, the loops closed again with the clamped joints held.
     ///
     /// \param[in,out] q The start configuration (dim model.nq).
     /// \param[in,out] v The start velocity (dim model.nv).
-    /// \param[out] result Its mobility, assembly_distance and start_clamped are set.
+    /// \param[out] info Its mobility, assembly_distance and start_clamped are set.
     /// \throws std::invalid_argument when the loops leave no degree of freedom or cannot be
     ///         closed with the clamped joints held.
     ///
-    void start(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Result & result);
+    void start(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Info & info);
 
     // --- A rest -------------------------------------------------------------------------------
 
@@ -203,9 +203,8 @@ namespace pinsettle
     void projectState(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v);
 
   private:
-    // Result::mobility, assembly_distance: the loops assembled, v onto their motions.
-    void assemble(
-      pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Result & result);
+    // Info::mobility, assembly_distance: the loops assembled, v onto their motions.
+    void assemble(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Info & info);
     // The loops closed with the joints moved onto their stops at the start held there.
     void closeLoopsOnStops(pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v);
 

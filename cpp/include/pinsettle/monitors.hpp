@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -69,10 +70,9 @@ namespace pinsettle
     /// \brief Poll the clock, then the callback.
     /// \param[in,out] progress The run's progress, given to the callback (its wall_time is
     ///                 set here).
-    /// \param[out] status Status::TimeLimit or Status::Aborted when the run must stop.
-    /// \return Whether the run must stop.
+    /// \return Status::TimeLimit or Status::Aborted when the run must stop, else nothing.
     ///
-    bool mustStop(RunProgress & progress, Status & status) const;
+    std::optional<Status> mustStop(RunProgress & progress) const;
 
     /// \brief Seconds since the clock started.
     double elapsed() const;
@@ -374,7 +374,7 @@ namespace pinsettle
     }
 
     /// \brief Hand the trace over to the result.
-    void finish(Result & result);
+    void finish(Trace & trace);
 
   private:
     bool tracing_ = false, configurations_ = false;

@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace pinsettle
@@ -82,15 +83,10 @@ namespace pinsettle
   const char * toString(EventKind kind);
 
   ///
-  /// \brief Outcome of a kinetic-damping solve.
+  /// \brief How a solve went: its statistics, its timings and the figures behind its verdict.
   ///
-  struct Result
+  struct Info
   {
-    /// Final configuration (dim model.nq).
-    Eigen::VectorXd q;
-    /// Final joint velocity (dim model.nv).
-    Eigen::VectorXd v;
-    Status status = Status::MaxSteps;
     /// Steps taken (ABA evaluations).
     std::int64_t steps = 0;
     /// Detected energy peaks, i.e. damping events.
@@ -115,22 +111,16 @@ namespace pinsettle
     /// How far the start configuration moved to assemble the loops (max |difference|, rad or
     /// m); 0 without loops.
     double assembly_distance = 0.;
-    /// Largest loop constraint error of the final configuration (m or rad); 0 without loops.
-    double constraint_error = 0.;
-    /// Joints resting on a stop at the end, with the stops' reactions; empty without stops.
-    std::vector<StopContact> stop_contacts;
     /// Joints whose start was outside their stops, and how far each was moved onto the nearest
     /// stop (rad or m).
     std::vector<std::pair<pinocchio::JointIndex, double>> start_clamped;
     /// Residual before the Newton polish (N m or N): where the run stopped, or where Newton
-    /// took over at a damping event (Settings::newton_takeover); equal to residual when not
-    /// polished.
+    /// took over at a damping event (Settings::newton_takeover); equal to Result::residual when
+    /// not polished.
     double residual_before_polish = 0.;
     /// Newton iterations of the polish (or of the takeover); whether its result was kept.
     int polish_iterations = 0;
     bool polished = false;
-    /// Why the run ended short of convergence (no_equilibrium, diverged), else empty.
-    std::string reason;
     /// Simulated time (s).
     double sim_time = 0.;
     /// Wall-clock time of the solve (s).
@@ -139,6 +129,38 @@ namespace pinsettle
     double kinetic_energy = 0.;
     /// Simplified energy sum |v|^2 + |w|^2 of the final state.
     double simplified_kinetic_energy = 0.;
+    /// Smallest eigenvalue of the symmetric part of the stiffness matrix (N m/rad or N/m).
+    double min_stiffness_eigenvalue = 0.;
+    /// Stiffness eigenvalues within the tolerance of zero (free directions).
+    int neutral_directions = 0;
+  };
+
+  ///
+  /// \brief The states a solve recorded (Settings::trace_every > 0), and its events.
+  ///
+  struct Trace
+  {
+    /// Samples in step order; empty when not tracing.
+    std::vector<TraceSample> samples;
+    /// Recording stride in force at the end (grows when the trace was decimated).
+    std::int64_t stride = 0;
+    /// Every damping event and push, in step order, when tracing (not decimated).
+    std::vector<TraceEvent> events;
+  };
+
+  ///
+  /// \brief Outcome of a kinetic-damping solve: the answer, with how the solve went (info) and
+  /// what it recorded (trace) apart.
+  ///
+  struct Result
+  {
+    /// Final configuration (dim model.nq).
+    Eigen::VectorXd q;
+    /// Final joint velocity (dim model.nv).
+    Eigen::VectorXd v;
+    Status status = Status::MaxSteps;
+    /// Why the run ended short of convergence (no_equilibrium, diverged), else empty.
+    std::string reason;
     /// max |rnea(q, 0, 0) - applied generalized forces| of the final configuration (N m or N);
     /// with loops, of its component along the motions they allow (computeStaticForce); with
     /// stops, the largest violation of the conditions of a rest against them
@@ -146,16 +168,12 @@ namespace pinsettle
     double residual = 0.;
     /// Stability of the final configuration (assessStability).
     Stability stability = Stability::Unknown;
-    /// Smallest eigenvalue of the symmetric part of the stiffness matrix (N m/rad or N/m).
-    double min_stiffness_eigenvalue = 0.;
-    /// Stiffness eigenvalues within the tolerance of zero (free directions).
-    int neutral_directions = 0;
-    /// Samples recorded when Settings::trace_every > 0, in step order.
-    std::vector<TraceSample> trace;
-    /// Recording stride in force at the end (grows when the trace was decimated).
-    std::int64_t trace_stride = 0;
-    /// Every damping event and push, in step order, when tracing (not decimated).
-    std::vector<TraceEvent> events;
+    /// Largest loop constraint error of the final configuration (m or rad); 0 without loops.
+    double constraint_error = 0.;
+    /// Joints resting on a stop at the end, with the stops' reactions; empty without stops.
+    std::vector<StopContact> stop_contacts;
+    Info info;
+    Trace trace;
   };
 
 } // namespace pinsettle

@@ -184,7 +184,12 @@ namespace pinsettle
       const Settings & settings,
       const ForceModel * forces,
       Result & result);
-    // One pass of the loop at step_: the dynamics evaluated and, as the parts decide, a roll
+    // Whether nothing holds the mechanism against its weight (explainFreeFall): the reason and
+    // the trace's one sample set in result.
+    bool isFallingFreely(Result & result);
+    // The step loop from the start to its end: the status it ends with (one exit).
+    Status runLoop(RunClock & clock, const AbortCallback & abort, Result & result);
+    // One pass of the loop at state_.step: the dynamics evaluated and, as the parts decide, a roll
     // back, a push off an unstable rest, a damping event or a step; the status when it ends the
     // run. energy: the exact kinetic energy of the pass (for the progress).
     std::optional<Status> takeStep(Result & result, double & energy);
@@ -268,32 +273,41 @@ namespace pinsettle
     Eigen::VectorXd staticForce(const Eigen::VectorXd & q, const ForceModel * forces);
     StabilityReport assess(const Eigen::VectorXd & q, const ForceModel * forces);
 
+    // The run in progress: its inputs and where it is. start() sets it whole, so that nothing
+    // of a previous run is read in the next (a solver is reused across solves).
+    struct RunState
+    {
+      const Settings * settings = nullptr;
+      const ForceModel * forces = nullptr;
+      bool use_fext = false;
+      double kt = 0.; // lowered to 0 when partial damping cannot hold a runaway
+      std::int64_t step = 0;
+      double time = 0.;
+      int impacts = 0; // steps in a row with a joint past a stop
+      // The last step started and ended at rest on the same q: an exact rest, no window needed.
+      bool stationary = false;
+      // Newton's takeover: the step of its last try, and whether it ended the run.
+      std::int64_t newton_tried_at = 0;
+      bool settled_by_newton = false;
+      const pinocchio::Model * locked = nullptr; // the model this step's dynamics ran on, if locked
+      double exact_before = 0.; // the exact energy (with added inertia) one sample back
+    };
+
+    // Memory sized once for the model: the state (q, v) and the loop's scratch.
+    struct Workspace
+    {
+      explicit Workspace(const pinocchio::Model & model);
+      Eigen::VectorXd q, v, dq, q_next, tau;
+      Eigen::VectorXd drift; // v, or from rest the acceleration, at the last rest assessment
+      Eigen::VectorXd q_before, q_before2; // q one and two samples back (backtracking)
+      ForceVector fext;
+    };
+
     const pinocchio::Model & model_;
-    ConstraintSet constraints_;                 // loops and stops: the loop never asks which
-    const pinocchio::Model * locked_ = nullptr; // the model this step's dynamics ran on, if locked
+    ConstraintSet constraints_;                      // loops and stops: the loop never asks which
     std::unique_ptr<pinocchio::Data> progress_data_; // made on the first progress report
-
-    // The run in progress: its inputs and where it is.
-    const Settings * settings_ = nullptr;
-    const ForceModel * forces_ = nullptr;
-    bool use_fext_ = false;
-    double kt_ = 0.; // lowered to 0 when partial damping cannot hold a runaway
-    std::int64_t step_ = 0;
-    double time_ = 0.;
-    int impacts_ = 0; // steps in a row with a joint past a stop
-    // The last step started and ended at rest on the same q: an exact rest, no window needed.
-    bool stationary_ = false;
-    // Newton's takeover: the step of its last try, and whether it ended the run.
-    std::int64_t newton_tried_at_ = 0;
-    bool settled_by_newton_ = false;
-
-    // Workspace, sized once for the model.
-    Eigen::VectorXd q_, v_, dq_, q_next_, tau_;
-    Eigen::VectorXd drift_; // v, or from rest the acceleration, at the last rest assessment
-    // q one and two samples back, and the exact energy (with added inertia) one back
-    Eigen::VectorXd q_before_, q_before2_;
-    double exact_before_ = 0.;
-    ForceVector fext_;
+    RunState state_;
+    Workspace work_;
 
     // The parts of the loop, each with its own state.
     PeakDetector peaks_;

@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pinocchio
 import pinsettle
 from pinsettle.__main__ import main
 
@@ -26,6 +27,19 @@ def expect(error: type[Exception], call, *args, **kwargs) -> None:
     except error:
         return
     raise AssertionError(f"{call.__name__}{args} did not raise {error.__name__}")
+
+
+def chain(links: int):
+    """A chain of hinges (the model only: its Data is what is checked)."""
+    model = pinocchio.Model()
+    parent = 0
+    for k in range(links):
+        placement = pinocchio.SE3(np.eye(3), np.array([0.0, 0.0, -0.1 if k else 0.0]))
+        parent = model.addJoint(parent, pinocchio.JointModelRY(), placement, f"joint{k + 1}")
+        model.appendBodyToJoint(
+            parent, pinocchio.Inertia.FromSphere(0.1, 0.01), pinocchio.SE3.Identity()
+        )
+    return model
 
 
 def exercise(ur5, scenes) -> None:
@@ -55,6 +69,9 @@ def exercise(ur5, scenes) -> None:
         expect(ValueError, pinsettle.solve, ur5, **bad)
     expect(ValueError, pinsettle.solve, ur5, np.full(ur5.nq, math.nan))
     expect(ValueError, pinsettle.solve, ur5, np.zeros(3))
+    # The memory a model's Data takes, and a model whose Data (32 GB) does not fit.
+    assert pinsettle.solver_memory(ur5) > 0
+    expect(MemoryError, pinsettle.solve, chain(1000))
     # The command line, in process.
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         assert main(["solve", str(ROBOTS / "fourbar.toml")]) == 0

@@ -761,7 +761,7 @@ class Progress:
 FULL = Config(SCENE_NAMES, CHAIN_LENGTHS, repeats=5, sweep_repeats=3)
 QUICK = Config(
     ("pendulum", "fourbar"),
-    (5, 10, 1000),  # 1,000 links: refused by pinsettle (or stopped by max_time)
+    (5, 10, 1000),  # 1,000 links: refused where its 32 GB Data does not fit (or max_time)
     repeats=1,
     sweep_repeats=1,
     kts=(0.0, 0.5),
@@ -1063,7 +1063,7 @@ def scale_chain(config: Config, results: Results, programs: Path, work: Path, n:
     bench = chain_scene(n)
     try:
         statics, q_star, residual, verdict = chain_statics(n, bench)
-    except ValueError as e:  # a model pinsettle refuses (too many degrees of freedom)
+    except (ValueError, MemoryError) as e:  # refused: its Data would not fit in memory
         results.scaling.append({"n": n, "refused": str(e)})
         return
     long_chain = n > config.deep_chain_max

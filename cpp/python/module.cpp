@@ -62,7 +62,9 @@ namespace
     return x;
   }
 
-  const pinocchio::Model & modelFrom(const py::handle & obj, const char * name = "model")
+  // The pinocchio::Model a Python object holds, refused with a message (ValueError) where the
+  // algorithms do not support it, so that it is never run.
+  const pinocchio::Model & supportedModel(const py::handle & obj, const char * name = "model")
   {
     bp::extract<pinocchio::Model &> model(obj.ptr());
     if (!model.check())
@@ -72,10 +74,18 @@ namespace
           << py::str(py::type::handle_of(obj).attr("__qualname__")).cast<std::string>();
       throw py::type_error(msg.str());
     }
-    // Every entry point reads its model here: one the algorithms do not support is refused
-    // with a message (ValueError), never run.
     checkSupportedModel(model());
     return model();
+  }
+
+  // Every entry point reads its model here: supportedModel, and one whose pinocchio::Data
+  // would not fit in the memory available is refused (MemoryError) before any Data of it is
+  // made, by pinsettle or by the Python code around it.
+  const pinocchio::Model & modelFrom(const py::handle & obj, const char * name = "model")
+  {
+    const pinocchio::Model & model = supportedModel(obj, name);
+    checkDataMemory(model, 1, "pinsettle");
+    return model;
   }
 
   // The force elements of a scene, already resolved to joint and frame indices by the Python
@@ -196,7 +206,7 @@ namespace
     const pinocchio::Model & model = modelFrom(model_obj);
     checkConfiguration(model, q, "q");
     return Evaluation{
-      model, elementsFrom(model, spec), loopsFrom(model, loops), pinocchio::Data(model),
+      model, elementsFrom(model, spec), loopsFrom(model, loops), makeData(model, "the evaluation"),
       stopsFrom(model, stops)};
   }
 
@@ -658,6 +668,25 @@ namespace
       "of several configuration entries whose model limits no stop applies.");
   }
 
+  // What a model's pinocchio::Data takes, checked before one is made (model-checks.hpp).
+  void bindMemoryTools(py::module_ & m)
+  {
+    m.def(
+      "data_memory",
+      [](const py::object & model_obj) { return computeDataMemory(supportedModel(model_obj)); },
+      py::arg("model"),
+      "Bytes one pinocchio.Data of the model takes (computeDataMemory): a Solver holds one.");
+
+    m.def(
+      "check_data_memory",
+      [](const py::object & model_obj, int count, const std::string & what) {
+        checkDataMemory(supportedModel(model_obj), count, what.c_str());
+      },
+      py::arg("model"), py::arg("count"), py::arg("what"),
+      "Raise MemoryLimitError (a MemoryError) where count pinocchio.Data of the model would not "
+      "fit in the memory available (checkDataMemory).");
+  }
+
   // Helpers on a model: its kinetic energies, its mimic joints released.
   void bindModelTools(py::module_ & m)
   {
@@ -686,7 +715,7 @@ namespace
         const pinocchio::Model & model = modelFrom(model_obj);
         checkConfiguration(model, q, "q");
         checkVelocity(model, v, "v");
-        pinocchio::Data data(model);
+        pinocchio::Data data = makeData(model, "kinetic_energies");
         return computeKineticEnergies(model, data, q, v);
       },
       py::arg("model"), py::arg("q"), py::arg("v"));
@@ -823,9 +852,12 @@ PYBIND11_MODULE(_core, m)
   // pybind11 finds numpy's C API (and parses numpy's version) on the first array it makes:
   // 1 ms, done here at import rather than in a user's first solve.
   (void)py::array_t<double>(0);
+  // A model too large for the machine's memory: a MemoryError that says how much it needs.
+  py::register_exception<pinsettle::MemoryLimitError>(m, "MemoryLimitError", PyExc_MemoryError);
   bindSettings(m);
   bindSolve(m);
   bindModelTools(m);
+  bindMemoryTools(m);
   bindEvaluations(m);
   bindLoopTools(m);
 }

@@ -6,8 +6,11 @@
 
 #include <pinocchio/multibody.hpp>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -290,31 +293,6 @@ namespace pinsettle
       }
     }
 
-    // Pinocchio 4.1's Data constructor allocates and zeroes four nv x nv x nv tensors (the
-    // second-order derivatives of rnea), 32 nv^3 bytes, whichever algorithm is run: 32 GB for
-    // nv = 1000, where the allocation fails (std::bad_alloc) or, with memory overcommitted, the
-    // zeroing wakes the kernel's OOM killer. Such a model is refused before any Data is made.
-    constexpr double kMaxDataTensorBytes = 1024. * 1024. * 1024.; // 1 GiB: nv up to 322
-
-    void checkDataSize(const pinocchio::Model & model)
-    {
-      const double nv = static_cast<double>(model.nv);
-      const double bytes = 4. * nv * nv * nv * static_cast<double>(sizeof(double));
-      if (bytes <= kMaxDataTensorBytes)
-        return;
-      int largest = static_cast<int>(std::cbrt(kMaxDataTensorBytes / (4. * sizeof(double))));
-      while (4. * std::pow(largest + 1., 3) * sizeof(double) <= kMaxDataTensorBytes)
-        ++largest;
-      std::ostringstream msg;
-      msg.precision(3);
-      msg << "model: nv = " << model.nv
-          << " degrees of freedom is more than pinsettle supports (nv up to " << largest
-          << "): every pinocchio::Data for it, which each Pinocchio algorithm works in, holds "
-             "four nv x nv x nv tensors (second-order derivatives of rnea), "
-          << bytes / 1e9 << " GB, allocated and zeroed whenever one is made";
-      throw std::invalid_argument(msg.str());
-    }
-
     // The per-joint limits and properties a released model keeps, by configuration entry and
     // by velocity entry.
     using ModelVector = pinocchio::Model::VectorXs pinocchio::Model::*;
@@ -416,7 +394,68 @@ namespace pinsettle
       checkJoint(model, j, model.joints[j]);
     checkTables(model);
     checkDepthFirstOrder(model);
-    checkDataSize(model);
+  }
+
+  std::size_t computeDataMemory(const pinocchio::Model & model)
+  {
+    const double nv = static_cast<double>(model.nv);
+    const double joints = static_cast<double>(model.njoints);
+    // The tensors; about 30 nv x nv matrices (M, Minv, C, the first-order derivatives, the
+    // kinematic Hessians' 6 nv^2, ...); per joint its spatial blocks. Measured by the resident
+    // memory a Solver adds (tests/test_resources.py): 262 MB at nv = 200 against 267 counted.
+    const double bytes = 8. * (4. * nv * nv * nv + 30. * nv * nv) + 8192. * joints;
+    return static_cast<std::size_t>(bytes);
+  }
+
+  std::size_t availableMemory()
+  {
+    std::ifstream meminfo("/proc/meminfo");
+    std::string key;
+    std::size_t kb = 0;
+    std::string unit;
+    while (meminfo >> key >> kb >> unit)
+      if (key == "MemAvailable:")
+        return kb * 1024;
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    return pages > 0 && page > 0 ? static_cast<std::size_t>(pages) * static_cast<std::size_t>(page)
+                                 : 0;
+  }
+
+  void checkDataMemory(const pinocchio::Model & model, int count, const char * what)
+  {
+    // Pinocchio 4.1's Data constructor allocates and zeroes its four nv^3 tensors whichever
+    // algorithm runs: 32 GB for nv = 1000, where the allocation fails (std::bad_alloc) or, with
+    // memory overcommitted, the zeroing wakes the kernel's OOM killer. Below kSmallData no
+    // machine lacks the memory, and /proc is not read (a solve of a small model takes less
+    // time than reading it).
+    constexpr double kSmallData = 256. * 1024. * 1024.;
+    const double need = static_cast<double>(count) * static_cast<double>(computeDataMemory(model));
+    if (need <= kSmallData)
+      return;
+    const double have = static_cast<double>(availableMemory());
+    if (have == 0. || need <= have)
+      return;
+    std::ostringstream msg;
+    msg.precision(3);
+    msg << "the model is too large for this machine's memory: " << what << " needs ";
+    if (count == 1)
+      msg << "a pinocchio.Data of " << need / 1e9 << " GB";
+    else
+      msg << count << " pinocchio.Data objects of " << need / count / 1e9 << " GB each, "
+          << need / 1e9 << " GB in all";
+    msg << " (model.nv = " << model.nv
+        << "; Pinocchio 4.1 keeps four nv x nv x nv tensors of second-order derivatives in every "
+           "Data), and "
+        << have / 1e9
+        << " GB are available; a mechanism of this size needs a machine with more memory, or "
+           "fewer degrees of freedom (lock joints that do not move)";
+    throw MemoryLimitError(msg.str());
+  }
+
+  pinocchio::Data makeData(const pinocchio::Model & model, const char * what)
+  {
+    checkDataMemory(model, 1, what);
+    return pinocchio::Data(model);
   }
 
 } // namespace pinsettle

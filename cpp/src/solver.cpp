@@ -232,7 +232,7 @@ namespace pinsettle
 
   Solver::Solver(
     const pinocchio::Model & model, const LoopConstraints * loops, const JointStops * stops)
-  : data(model)
+  : data(makeData(model, "the solver"))
   , model_(model)
   , constraints_(model, loops, stops)
   , work_(model)
@@ -372,9 +372,20 @@ namespace pinsettle
 
   double Solver::progressResidual()
   {
-    // In a Data of its own: the run's scratch carries state between steps.
+    // In a Data of its own, made when first asked for: the run's scratch carries state between
+    // steps. Where a second Data would not fit in memory, the progress goes without a residual.
     if (!progress_data_)
+    {
+      try
+      {
+        checkDataMemory(model_, 1, "the progress report's residual");
+      }
+      catch (const MemoryLimitError &)
+      {
+        return std::numeric_limits<double>::quiet_NaN();
+      }
       progress_data_ = std::make_unique<pinocchio::Data>(model_);
+    }
     return residualOf(
       work_.q, constraints_.computeStaticForce(*progress_data_, work_.q, state_.forces));
   }

@@ -20,6 +20,7 @@ from ._solve import (
     Trace,
     assess_stability,
     kinetic_energies,
+    solver_memory,
     static_force,
     static_residual,
 )
@@ -53,6 +54,7 @@ __all__ = [
     "scenes_dir",
     "Solver",
     "solve",
+    "solver_memory",
     "static_force",
     "static_residual",
     "sweep",

@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio
 
 import pinsettle
+from pinsettle._checks import new_data
 from pinsettle._cli_flags import Flag, add_flags, flag, setting_flags
 from pinsettle._progress import StatusLine, status_line
 from pinsettle._settings import SETTING_FIELDS, SETTING_TYPES
@@ -112,7 +113,7 @@ def _rest_check(model: pinocchio.Model, q: np.ndarray, limits: bool) -> float:
     """The residual of a rest recomputed with pinocchio alone: |g(q)| on the joints off their
     stops, and on a joint at a stop of the model's position limits the pull asked of the stop
     (max(0, -g) at the lower, max(0, g) at the upper)."""
-    g = pinocchio.computeGeneralizedGravity(model, model.createData(), q)
+    g = pinocchio.computeGeneralizedGravity(model, new_data(model, "the residual check"), q)
     violation = np.abs(g)
     if limits:
         for j in range(1, model.njoints):
@@ -449,7 +450,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         status: int = args.func(args)
         return status
-    except (ValueError, TypeError, FileNotFoundError, IsADirectoryError) as error:
+    except (ValueError, TypeError, FileNotFoundError, IsADirectoryError, MemoryError) as error:
         print(f"pinsettle: error: {_for_the_command_line(str(error))}", file=sys.stderr)
         return 2
     except ImportError as error:  # pinsettle play without its optional extra

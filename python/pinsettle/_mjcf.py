@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
+from ._checks import new_data
 from ._mjcf_actuators import _actuators, _ActuatorSprings
 from ._mjcf_mass import _EPS, _GeomMass, _mesh_mass, _MeshMass, _shape_mass
 from ._mjcf_parse import (
@@ -640,7 +641,7 @@ class _Ends:
     def __init__(self, reader: _Reader, model: pinocchio.Model, q0: np.ndarray) -> None:
         self.reader = reader
         self.model = model
-        self.data = model.createData()
+        self.data = new_data(model, "reading the MJCF file")
         pinocchio.framesForwardKinematics(model, self.data, q0)
 
     def body(self, name: str, where: str) -> str:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
+from ._checks import new_data
 from ._play_meshes import _frame_id
 from ._play_timeline import FPS, Timeline
 from ._scene import Scene
@@ -78,7 +79,7 @@ def _frame_points(
     model: pinocchio.Model, qs: np.ndarray, ends: list[tuple[str, tuple[float, float, float]]]
 ) -> np.ndarray:
     """World positions (keys, ends, 3) of the points ``(frame, point)`` at each configuration."""
-    data = model.createData()
+    data = new_data(model, "playback")
     frames = [_frame_id(model, frame) for frame, _ in ends]
     out = np.zeros((len(qs), len(ends), 3))
     for k, q in enumerate(qs):
@@ -102,7 +103,7 @@ class _Mark:
 def _joint_axes(model: pinocchio.Model, qs: np.ndarray, joint: int) -> tuple[np.ndarray, bool]:
     """The world direction of a 1-DoF joint's motion at each configuration, and whether it
     turns (a revolute joint: its axis) or slides (a prismatic one: its direction)."""
-    data = model.createData()
+    data = new_data(model, "playback")
     columns = np.zeros((len(qs), 6))
     for k, q in enumerate(qs):
         pinocchio.computeJointJacobians(model, data, q)
@@ -115,7 +116,7 @@ def _joint_axes(model: pinocchio.Model, qs: np.ndarray, joint: int) -> tuple[np.
 
 
 def _joint_origins(model: pinocchio.Model, qs: np.ndarray, joint: int) -> np.ndarray:
-    data = model.createData()
+    data = new_data(model, "playback")
     out = np.zeros((len(qs), 3))
     for k, q in enumerate(qs):
         pinocchio.forwardKinematics(model, data, q)
@@ -244,7 +245,7 @@ def stop_reactions(scene: Scene, result: Result) -> list[tuple[str, np.ndarray, 
     """Each stop a joint rests on at the end: the joint, where it is (world), the reaction as
     a vector along its axis (a torque about it by the right-hand rule, or a force), the unit."""
     model = scene.model
-    data = model.createData()
+    data = new_data(model, "playback")
     pinocchio.forwardKinematics(model, data, result.q)
     out = []
     for name, side in result.at_limit.items():

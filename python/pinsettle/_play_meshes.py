@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
+from ._checks import new_data
 from ._scene import Scene
 from .robots import robots_dir
 
@@ -331,7 +332,7 @@ def _stick_figure(model: pinocchio.Model) -> pinocchio.GeometryModel:
     each joint and at each body's centre of mass."""
     import coal
 
-    data = model.createData()
+    data = new_data(model, "playback")
     pinocchio.forwardKinematics(model, data, pinocchio.neutral(model))
     points = [data.oMi[j].translation for j in range(model.njoints)]
     points += [data.oMi[j].act(model.inertias[j].lever) for j in range(model.njoints)]

@@ -333,6 +333,15 @@ def _check_model(model: Any) -> None:
         raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
 
 
+def solver_memory(model: pinocchio.Model) -> int:
+    """Bytes a Solver of the model needs, before one is built: one ``pinocchio.Data``, of which
+    Pinocchio 4.1 keeps four nv x nv x nv tensors of second-order derivatives (32 nv^3 bytes,
+    2 GB at nv = 400). A solver, a solve or an evaluation that would not fit in the memory the
+    machine has available raises MemoryError saying so, before it allocates."""
+    _check_model(model)
+    return int(_core.data_memory(model))
+
+
 def kinetic_energies(model: pinocchio.Model, q: Any, v: Any) -> tuple[float, float]:
     """Both energy measures at the state (q, v): the exact sum 1/2 m|v|^2 + 1/2 w^T I w (J,
     equal to 1/2 v^T M(q) v) and the simplified sum |v|^2 + |w|^2 over the bodies."""

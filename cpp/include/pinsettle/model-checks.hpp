@@ -7,6 +7,9 @@
 
 #include <pinocchio/multibody/fwd.hpp>
 
+#include <cstddef>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace pinsettle
@@ -59,6 +62,42 @@ namespace pinsettle
   ///
   pinocchio::Model releaseMimicJoints(
     const pinocchio::Model & model, std::vector<MimicJoint> & mimics);
+
+  ///
+  /// \brief Memory (bytes) one pinocchio::Data of the model takes. Pinocchio 4.1 keeps four
+  /// nv x nv x nv tensors of the RNEA's second-order derivatives in every Data and zeroes them
+  /// when it builds one: 32 nv^3 bytes, 2 GB at nv = 400; the rest (its nv x nv matrices and
+  /// per-joint blocks) is counted from above. A Solver holds one Data (two with a progress
+  /// callback).
+  ///
+  std::size_t computeDataMemory(const pinocchio::Model & model);
+
+  ///
+  /// \brief Memory this machine has available for a new allocation (bytes): MemAvailable of
+  /// /proc/meminfo where it can be read, else the physical memory; 0 when neither is known.
+  ///
+  std::size_t availableMemory();
+
+  /// \brief A model too large for the memory of the machine (the Python module raises it as
+  /// MemoryError).
+  class MemoryLimitError : public std::runtime_error
+  {
+  public:
+    using std::runtime_error::runtime_error;
+  };
+
+  ///
+  /// \brief Check that `count` pinocchio::Data of the model fit in the memory available, before
+  /// one is built (building one that does not fit ends the process: the kernel's out-of-memory
+  /// killer, not an exception).
+  ///
+  /// \param[in] what What the Data is for, named in the message ("the solver").
+  /// \throws MemoryLimitError saying how much the model needs (nv, GB) and how much is available.
+  ///
+  void checkDataMemory(const pinocchio::Model & model, int count, const char * what);
+
+  /// \brief A pinocchio::Data of the model, checked first (checkDataMemory).
+  pinocchio::Data makeData(const pinocchio::Model & model, const char * what);
 
 } // namespace pinsettle
 

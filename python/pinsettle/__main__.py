@@ -19,8 +19,8 @@ import numpy as np
 import pinocchio
 
 import pinsettle
-from pinsettle._checks import new_data
 from pinsettle._cli_flags import Flag, add_flags, flag, setting_flags
+from pinsettle._memory import new_data
 from pinsettle._progress import StatusLine, status_line
 from pinsettle._settings import SETTING_FIELDS, SETTING_TYPES
 

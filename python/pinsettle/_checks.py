@@ -43,14 +43,3 @@ def as_flag(value: Any, name: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be True or False, got {type(value).__name__} {value!r}")
     return bool(value)
-
-
-def new_data(model: Any, what: str) -> Any:
-    """``model.createData()``, checked first against the memory the machine has available: a
-    MemoryError that says how much, instead of the kernel's OOM killer (Pinocchio 4.1 zeroes
-    four nv^3 tensors in every Data; its Python binding copies the Data it returns, so the peak
-    is two)."""
-    from . import _core  # the compiled module; this file imports nothing of the package at import
-
-    _core.check_data_memory(model, 2, what)
-    return model.createData()

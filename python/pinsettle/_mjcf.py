@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
-from ._checks import new_data
+from ._memory import new_data
 from ._mjcf_actuators import _actuators, _ActuatorSprings
 from ._mjcf_mass import _EPS, _GeomMass, _mesh_mass, _MeshMass, _shape_mass
 from ._mjcf_parse import (

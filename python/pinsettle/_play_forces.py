@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
-from ._checks import new_data
+from ._memory import new_data
 from ._play_meshes import _frame_id
 from ._play_timeline import FPS, Timeline
 from ._scene import Scene

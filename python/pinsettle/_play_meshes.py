@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
-from ._checks import new_data
+from ._memory import new_data
 from ._scene import Scene
 from .robots import robots_dir
 

@@ -421,7 +421,7 @@ namespace pinsettle
                                  : 0;
   }
 
-  void checkDataMemory(const pinocchio::Model & model, int count, const char * what)
+  bool fitsInMemory(const pinocchio::Model & model, int count)
   {
     // Pinocchio 4.1's Data constructor allocates and zeroes its four nv^3 tensors whichever
     // algorithm runs: 32 GB for nv = 1000, where the allocation fails (std::bad_alloc) or, with
@@ -431,10 +431,17 @@ namespace pinsettle
     constexpr double kSmallData = 256. * 1024. * 1024.;
     const double need = static_cast<double>(count) * static_cast<double>(computeDataMemory(model));
     if (need <= kSmallData)
-      return;
+      return true;
     const double have = static_cast<double>(availableMemory());
-    if (have == 0. || need <= have)
+    return have == 0. || need <= have;
+  }
+
+  void checkDataMemory(const pinocchio::Model & model, int count, const char * what)
+  {
+    if (fitsInMemory(model, count))
       return;
+    const double need = static_cast<double>(count) * static_cast<double>(computeDataMemory(model));
+    const double have = static_cast<double>(availableMemory()); // read again for the message
     std::ostringstream msg;
     msg.precision(3);
     msg << "the model is too large for this machine's memory: " << what << " needs ";

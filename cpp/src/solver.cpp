@@ -376,14 +376,8 @@ namespace pinsettle
     // steps. Where a second Data would not fit in memory, the progress goes without a residual.
     if (!progress_data_)
     {
-      try
-      {
-        checkDataMemory(model_, 1, "the progress report's residual");
-      }
-      catch (const MemoryLimitError &)
-      {
+      if (!fitsInMemory(model_, 1))
         return std::numeric_limits<double>::quiet_NaN();
-      }
       progress_data_ = std::make_unique<pinocchio::Data>(model_);
     }
     return residualOf(

@@ -256,6 +256,8 @@ BOOST_AUTO_TEST_CASE(a_data_that_would_not_fit_in_memory_is_refused_before_it_is
   const std::size_t available = pinsettle::availableMemory();
   BOOST_REQUIRE_GT(available, 0u);
   const int count = static_cast<int>(static_cast<double>(available) / bytes) + 1;
+  BOOST_CHECK(!pinsettle::fitsInMemory(large, count));
+  BOOST_CHECK(pinsettle::fitsInMemory(chain(322), 1));
   std::string message;
   try
   {

@@ -78,6 +78,12 @@ namespace pinsettle
   ///
   std::size_t availableMemory();
 
+  ///
+  /// \brief Whether `count` pinocchio::Data of the model fit in the memory available
+  /// (availableMemory; always where they take at most 256 MB, without reading it).
+  ///
+  bool fitsInMemory(const pinocchio::Model & model, int count);
+
   /// \brief A model too large for the memory of the machine (the Python module raises it as
   /// MemoryError).
   class MemoryLimitError : public std::runtime_error

@@ -3,6 +3,7 @@
 //
 
 #include "pinsettle/constraint-set.hpp"
+#include "pinsettle/solver.hpp"
 #include "pinsettle/statics.hpp"
 #include "pinsettle/step-control.hpp"
 #include "joint-kinds.hpp"
@@ -17,11 +18,25 @@ namespace pinsettle
 {
 
   ConstraintSet::ConstraintSet(
-    const pinocchio::Model & model, const LoopConstraints * loops, const JointStops * stops)
+    const pinocchio::Model & model,
+    const LoopConstraints * loops,
+    const JointStops * stops,
+    const GroundContacts * contacts)
   : model_(model)
   , loops_(loops != nullptr && !loops->empty() ? loops : nullptr)
   , stops_(stops != nullptr && !stops->empty() ? stops : nullptr)
+  , contacts_(contacts != nullptr && !contacts->empty() ? contacts : nullptr)
   {
+    if (contacts_ != nullptr)
+    {
+      if (&contacts_->model() != &model)
+        throw std::invalid_argument("contacts: they were made for another model than the solver's");
+      if (loops_ != nullptr)
+        throw std::invalid_argument(
+          "contacts: ground contacts together with loops or joint couplings are not supported "
+          "yet; remove the loops or the contacts");
+      contact_stepper_.reset(new ContactStepper(*contacts_));
+    }
     if (loops_ != nullptr)
     {
       if (&loops_->model() != &model)
@@ -46,6 +61,8 @@ namespace pinsettle
     pinocchio::Data & data, Eigen::VectorXd & q, Eigen::VectorXd & v, Info & info)
   {
     info.mobility = model_.nv;
+    if (contact_stepper_)
+      contact_stepper_->start();
     if (loops_ != nullptr)
       assemble(data, q, v, info);
     if (stops_ == nullptr)
@@ -103,9 +120,23 @@ namespace pinsettle
     return pinsettle::computeStaticForce(model_, data, q, forces);
   }
 
+  std::string ConstraintSet::explainFreeFall(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const
+  {
+    if (contacts_ != nullptr)
+      return std::string();
+    return pinsettle::explainFreeFall(model_, data, q, forces, loops_, stops_);
+  }
+
   double ConstraintSet::computeResidual(
     pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & tau) const
   {
+    if (contacts_ != nullptr)
+    {
+      // The stops take what the contacts leave (a joint on its stop may press into it).
+      const ContactBalance balance = balanceContacts(model_, data, *contacts_, q, tau);
+      return stops_ != nullptr ? computeStopResidual(*stops_, q, balance.left) : balance.residual;
+    }
     if (stops_ != nullptr && loops_ != nullptr)
       return balanceStops(model_, data, *loops_, *stops_, q, tau).residual;
     if (stops_ != nullptr)
@@ -116,6 +147,8 @@ namespace pinsettle
   StabilityReport ConstraintSet::assessStability(
     pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const
   {
+    if (contacts_ != nullptr)
+      return pinsettle::assessStability(model_, data, *contacts_, q, forces);
     if (loops_ != nullptr && stops_ != nullptr)
       return pinsettle::assessStability(model_, data, *loops_, *stops_, q, forces);
     if (loops_ != nullptr)
@@ -141,7 +174,14 @@ namespace pinsettle
     if (loops_ != nullptr)
       result.constraint_error =
         computeLoopError(model_, data, *loops_, q).lpNorm<Eigen::Infinity>();
-    if (stops_ != nullptr && loops_ != nullptr)
+    if (contacts_ != nullptr)
+    {
+      result.ground_contacts = describeContacts(model_, data, *contacts_, q, tau);
+      if (stops_ != nullptr)
+        result.stop_contacts =
+          computeStopContacts(*stops_, q, balanceContacts(model_, data, *contacts_, q, tau).left);
+    }
+    else if (stops_ != nullptr && loops_ != nullptr)
       result.stop_contacts = balanceStops(model_, data, *loops_, *stops_, q, tau).contacts;
     else if (stops_ != nullptr)
       result.stop_contacts = computeStopContacts(*stops_, q, tau);
@@ -180,6 +220,7 @@ namespace pinsettle
     const Eigen::VectorXd & tau,
     const ForceVector * fext)
   {
+    dynamics_model_ = &model;
     if (loops_ != nullptr)
       stepper_->dynamics(data, q, v, tau, fext);
     else if (fext != nullptr)
@@ -208,6 +249,14 @@ namespace pinsettle
   {
     if (hold_ != nullptr)
       hold_->hold(data, q, v, &added);
+  }
+
+  void ConstraintSet::resolveContacts(
+    pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v, double h)
+  {
+    if (contact_stepper_ != nullptr)
+      contact_stepper_->apply(
+        dynamics_model_ != nullptr ? *dynamics_model_ : model_, data, q, v, data.ddq, h);
   }
 
   bool ConstraintSet::enforceStops(Eigen::VectorXd & q, Eigen::VectorXd & v, bool record)

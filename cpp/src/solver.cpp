@@ -231,10 +231,13 @@ namespace pinsettle
   }
 
   Solver::Solver(
-    const pinocchio::Model & model, const LoopConstraints * loops, const JointStops * stops)
+    const pinocchio::Model & model,
+    const LoopConstraints * loops,
+    const JointStops * stops,
+    const GroundContacts * contacts)
   : data(makeData(model, "the solver"))
   , model_(model)
-  , constraints_(model, loops, stops)
+  , constraints_(model, loops, stops, contacts)
   , work_(model)
   , window_(1, 0.)
   , step_control_(model, constraints_.loops())
@@ -293,8 +296,7 @@ namespace pinsettle
 
   bool Solver::isFallingFreely(Result & result)
   {
-    result.reason = explainFreeFall(
-      model_, data, work_.q, state_.forces, constraints_.loops(), constraints_.stops());
+    result.reason = constraints_.explainFreeFall(data, work_.q, state_.forces);
     if (result.reason.empty())
       return false;
     // The trace holds the one state of the run, so that playback shows where it would fall.
@@ -635,6 +637,7 @@ namespace pinsettle
     const bool from_rest = (work_.v.array() == 0.).all();
     correctAcceleration();
     const double h = step_control_.nextStep(work_.v, data.ddq);
+    constraints_.resolveContacts(data, work_.q, work_.v, h);
     integrateSemiImplicitEuler(model_, work_.q, work_.v, data.ddq, h, work_.dq, work_.q_next);
     if (!work_.q_next.allFinite() || !work_.v.allFinite())
       return false;

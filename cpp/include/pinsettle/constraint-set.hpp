@@ -5,6 +5,7 @@
 #ifndef __pinsettle_constraint_set_hpp__
 #define __pinsettle_constraint_set_hpp__
 
+#include "pinsettle/contacts.hpp"
 #include "pinsettle/forces.hpp"
 #include "pinsettle/loops.hpp"
 #include "pinsettle/result.hpp"
@@ -22,7 +23,8 @@ namespace pinsettle
 
   ///
   /// \brief Everything that restricts the mechanism's motion, as one object: the loop closures
-  /// (LoopConstraints) and the joint stops (JointStops) of a scene, either or both or none.
+  /// (LoopConstraints), the joint stops (JointStops) and the ground contacts (GroundContacts)
+  /// of a scene, any of them or none.
   ///
   /// The solver's step loop and its Newton iterations ask this set for what a rest and a step
   /// need (the static force and residual of a rest, its stability report, the dynamics of a
@@ -40,16 +42,21 @@ namespace pinsettle
     ///
     /// \param[in] loops Loop closures (empty or nullptr: none).
     /// \param[in] stops Joint stops (empty or nullptr: none).
-    /// \throws std::invalid_argument when loops or stops were made for another model.
+    /// \param[in] contacts Ground contacts (empty or nullptr: none).
+    /// \throws std::invalid_argument when loops, stops or contacts were made for another model,
+    ///         or for contacts with loops (not supported yet).
     ///
     ConstraintSet(
-      const pinocchio::Model & model, const LoopConstraints * loops, const JointStops * stops);
+      const pinocchio::Model & model,
+      const LoopConstraints * loops,
+      const JointStops * stops,
+      const GroundContacts * contacts = nullptr);
     ~ConstraintSet();
 
     /// Whether nothing restricts the motion (every joint velocity free).
     bool empty() const
     {
-      return loops_ == nullptr && stops_ == nullptr;
+      return loops_ == nullptr && stops_ == nullptr && contacts_ == nullptr;
     }
     /// The loop closures, or nullptr.
     const LoopConstraints * loops() const
@@ -61,6 +68,18 @@ namespace pinsettle
     {
       return stops_;
     }
+    /// The ground contacts, or nullptr.
+    const GroundContacts * contacts() const
+    {
+      return contacts_;
+    }
+
+    ///
+    /// \brief Why the mechanism at q falls for ever with nothing to stop it (explainFreeFall),
+    /// or empty. A mechanism with ground contacts may fall onto the ground: never said.
+    ///
+    std::string explainFreeFall(
+      pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const;
 
     // --- The start of a run -------------------------------------------------------------------
 
@@ -109,7 +128,8 @@ namespace pinsettle
 
     ///
     /// \brief The constraints' part of the answer at q with static force tau: the loops' error
-    /// (result.constraint_error) and the stops' contacts and reactions (result.stop_contacts).
+    /// (result.constraint_error), the stops' contacts and reactions (result.stop_contacts) and
+    /// the ground contacts with their forces (result.ground_contacts).
     ///
     void describeRest(
       pinocchio::Data & data,
@@ -176,6 +196,14 @@ namespace pinsettle
       const TimeScale & added);
 
     ///
+    /// \brief Before the step of length h is integrated: the ground contacts' impulses folded
+    /// into the acceleration data.ddq (ContactStepper), on the model the dynamics ran on.
+    /// Nothing without contacts.
+    ///
+    void resolveContacts(
+      pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & v, double h);
+
+    ///
     /// \brief After a step: a joint past a stop put on it with its velocity into the stop
     /// removed (an inelastic impact; enforceStops).
     ///
@@ -211,7 +239,10 @@ namespace pinsettle
     const pinocchio::Model & model_;
     const LoopConstraints * loops_;
     const JointStops * stops_;
+    const GroundContacts * contacts_;
+    const pinocchio::Model * dynamics_model_ = nullptr; // of the last computeAcceleration
     std::unique_ptr<LoopStepper> stepper_;
+    std::unique_ptr<ContactStepper> contact_stepper_;
     std::unique_ptr<StopHold> hold_;
     std::vector<pinocchio::JointIndex> hits_; // joints that hit a stop in a step
     std::vector<Eigen::Index> on_stops_;      // indices in v of joints on a stop

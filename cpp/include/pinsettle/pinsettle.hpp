@@ -6,6 +6,7 @@
 #define __pinsettle_pinsettle_hpp__
 
 #include "pinsettle/constraint-set.hpp"
+#include "pinsettle/contacts.hpp"
 #include "pinsettle/damping.hpp"
 #include "pinsettle/elements.hpp"
 #include "pinsettle/energy.hpp"

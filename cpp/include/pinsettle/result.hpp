@@ -5,6 +5,7 @@
 #ifndef __pinsettle_result_hpp__
 #define __pinsettle_result_hpp__
 
+#include "pinsettle/contacts.hpp"
 #include "pinsettle/stops.hpp"
 
 #include <Eigen/Core>
@@ -172,6 +173,9 @@ namespace pinsettle
     double constraint_error = 0.;
     /// Joints resting on a stop at the end, with the stops' reactions; empty without stops.
     std::vector<StopContact> stop_contacts;
+    /// The ground contacts closed at the end (gap within kContactGapTolerance), with the forces
+    /// that balance the rest; empty without contacts.
+    std::vector<GroundContact> ground_contacts;
     Info info;
     Trace trace;
   };

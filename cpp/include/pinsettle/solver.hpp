@@ -122,13 +122,15 @@ namespace pinsettle
     /// \param[in] model The mechanism's tree.
     /// \param[in] loops Loop closures of the tree (they must outlive the solver), or nullptr.
     /// \param[in] stops Joint stops (they must outlive the solver), or nullptr.
+    /// \param[in] contacts Ground contacts (they must outlive the solver), or nullptr.
     /// \throws std::invalid_argument when loops or stops were made for another model, or when
     ///         both are given (not supported yet).
     ///
     explicit Solver(
       const pinocchio::Model & model,
       const LoopConstraints * loops = nullptr,
-      const JointStops * stops = nullptr);
+      const JointStops * stops = nullptr,
+      const GroundContacts * contacts = nullptr);
     ~Solver();
 
     ///

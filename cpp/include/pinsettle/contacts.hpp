@@ -1,0 +1,266 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#ifndef __pinsettle_contacts_hpp__
+#define __pinsettle_contacts_hpp__
+
+#include "pinsettle/stability.hpp"
+
+#include <Eigen/Cholesky>
+
+#include <string>
+#include <vector>
+
+namespace pinsettle
+{
+
+  ///
+  /// \brief A contact at a rest: one point of a body against one ground plane, the force the
+  /// ground exerts on the body there.
+  ///
+  struct GroundContact
+  {
+    /// The contact point's name (the scene's [[contact]] name, or its frame).
+    std::string name;
+    /// The ground's name.
+    std::string ground;
+    /// The contact point on the ground (world, m): the sphere's lowest point.
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();
+    /// The ground's unit normal (world), pointing out of the ground.
+    Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+    /// The force's component along the normal (N), >= 0.
+    double normal_force = 0.;
+    /// The force's component in the ground's plane (world, N).
+    Eigen::Vector3d tangential_force = Eigen::Vector3d::Zero();
+    /// Distance from the sphere to the plane (m): negative when it sinks in.
+    double gap = 0.;
+    /// Whether the tangential force is strictly inside the friction cone (|f_t| < mu f_n); a
+    /// contact at the cone's edge would slide.
+    bool sticking = true;
+  };
+
+  ///
+  /// \brief Ground planes and the points (spheres of a radius, 0 for a point) of bodies that can
+  /// touch them: hard unilateral contacts with Coulomb friction, inelastic.
+  ///
+  /// Every point is a candidate against every plane (a fixed set, sized once: the step loop
+  /// allocates nothing). The gap of a sphere of centre c and radius r on a plane through o with
+  /// unit normal n is n.(c - o) - r; the contact point is c - r n.
+  ///
+  class GroundContacts
+  {
+  public:
+    /// \brief A ground plane: a point on it and its normal (world), its friction coefficient.
+    struct Plane
+    {
+      std::string name;
+      Eigen::Vector3d point;
+      Eigen::Vector3d normal; ///< unit, out of the ground
+      Eigen::Vector3d t1, t2; ///< unit tangents, (t1, t2, normal) right-handed
+      double friction;        ///< Coulomb coefficient mu >= 0
+    };
+    /// \brief A contact point: the centre of a sphere fixed to a body.
+    struct Point
+    {
+      std::string name;
+      pinocchio::JointIndex joint;
+      Eigen::Vector3d position; ///< in the joint's frame (m)
+      double radius;            ///< >= 0 (m)
+    };
+
+    /// \param[in] model The mechanism (it must outlive the contacts).
+    explicit GroundContacts(const pinocchio::Model & model);
+
+    ///
+    /// \brief Add a ground plane.
+    /// \throws std::invalid_argument naming the ground for a normal of zero length, a
+    ///         friction coefficient that is negative or not finite, or a non-finite point.
+    ///
+    void addPlane(
+      const std::string & name,
+      const Eigen::Vector3d & point,
+      const Eigen::Vector3d & normal,
+      double friction);
+
+    ///
+    /// \brief Add a contact point (a sphere of radius radius centred at position in the frame of
+    /// joint).
+    /// \throws std::invalid_argument naming the point for a joint out of range, a negative or
+    ///         non-finite radius, or a non-finite position.
+    ///
+    void addPoint(
+      const std::string & name,
+      pinocchio::JointIndex joint,
+      const Eigen::Vector3d & position,
+      double radius);
+
+    /// Whether there is nothing to touch (no plane or no point): the solver runs none of this.
+    bool empty() const
+    {
+      return planes_.empty() || points_.empty();
+    }
+    /// Number of candidate pairs (points x planes), each of three constraint rows.
+    int pairs() const
+    {
+      return static_cast<int>(planes_.size() * points_.size());
+    }
+    const std::vector<Plane> & planes() const
+    {
+      return planes_;
+    }
+    const std::vector<Point> & points() const
+    {
+      return points_;
+    }
+    const pinocchio::Model & model() const
+    {
+      return model_;
+    }
+
+  private:
+    const pinocchio::Model & model_;
+    std::vector<Plane> planes_;
+    std::vector<Point> points_;
+  };
+
+  ///
+  /// \brief The candidate pairs at a configuration: gaps, contact points and the Jacobian of
+  /// each pair's three rows (t1, t2, n) of the body's velocity at its contact point.
+  ///
+  struct ContactGeometry
+  {
+    /// Gap of each pair (m), dim pairs().
+    Eigen::VectorXd gap;
+    /// Contact point of each pair (world, m), 3 x pairs().
+    Eigen::Matrix3Xd point;
+    /// Rows (t1, t2, n) of each pair, 3 pairs() x model.nv: J v is the contact point's velocity
+    /// in the ground's axes (m/s).
+    Eigen::MatrixXd jacobian;
+  };
+
+  ///
+  /// \brief Gaps, contact points and Jacobians of every pair at q (runs
+  /// pinocchio::computeJointJacobians on data).
+  ///
+  void computeContactGeometry(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    ContactGeometry & geometry);
+
+  ///
+  /// \brief Solve the contact impulses of a step: lambda in the friction cones (three per
+  /// active pair, ordered t1, t2, n) with the contact velocities u = G lambda + b
+  /// complementary to them (projected Gauss-Seidel, started from lambda).
+  ///
+  /// \param[in] G Delassus matrix J M^-1 J^T of the active rows (dim 3a x 3a).
+  /// \param[in] b Contact velocities without impulses, the gap terms included (dim 3a).
+  /// \param[in] friction Coefficient of each active pair (dim a).
+  /// \param[in,out] lambda Impulses (dim 3a, N s): the start in, the answer out.
+  /// \return The number of sweeps.
+  ///
+  int solveContactImpulses(
+    const Eigen::Ref<const Eigen::MatrixXd> & G,
+    const Eigen::Ref<const Eigen::VectorXd> & b,
+    const Eigen::Ref<const Eigen::VectorXd> & friction,
+    Eigen::Ref<Eigen::VectorXd> lambda);
+
+  ///
+  /// \brief The contacts' part of a step: the impulses of a step of length h from the free
+  /// acceleration, folded into that acceleration so that the semi-implicit Euler step lands on
+  /// a velocity the contacts allow (inelastic, sticking or sliding by Coulomb's law).
+  ///
+  /// Pairs that cannot close within the step (gap + h min(0, u_n) > 0) are left out; without
+  /// any, the step costs one computeJointJacobians. The impulses start from the last step's.
+  ///
+  class ContactStepper
+  {
+  public:
+    explicit ContactStepper(const GroundContacts & contacts);
+
+    /// Forget the last step's impulses (the start of a run).
+    void start();
+
+    ///
+    /// \param[in] model The model the acceleration was computed on (its mass matrix is used).
+    /// \param[in] q, v The state at the step's start.
+    /// \param[in,out] ddq The free acceleration in, the one with the contacts' impulses out.
+    /// \param[in] h The step (s).
+    ///
+    void apply(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q,
+      const Eigen::VectorXd & v,
+      Eigen::VectorXd & ddq,
+      double h);
+
+  private:
+    const GroundContacts & contacts_;
+    ContactGeometry geometry_;
+    std::vector<int> active_;
+    Eigen::VectorXd force_; // of each pair at the last step (N), 3 pairs()
+    Eigen::MatrixXd Ja_, Y_, G_;
+    Eigen::VectorXd b_, lambda_, mu_, vfree_, dv_;
+    Eigen::LLT<Eigen::MatrixXd> llt_;
+  };
+
+  /// \brief The contact forces that balance a static force at a rest, and what is left.
+  struct ContactBalance
+  {
+    /// One per pair (pairs()), 3 rows (t1, t2, n) each (N): J^T f balances tau (the static
+    /// force, gravity minus the applied efforts).
+    Eigen::VectorXd force;
+    /// Pairs taken as closed (gap within the tolerance).
+    std::vector<int> closed;
+    /// What the forces leave unbalanced, tau - J^T f (dim model.nv, N m or N).
+    Eigen::VectorXd left;
+    /// |left|_inf (N m or N).
+    double residual = 0.;
+  };
+
+  /// Gaps at most this (m) count as closed at a rest.
+  constexpr double kContactGapTolerance = 1e-6;
+
+  ///
+  /// \brief The contact forces at a rest at q with static force tau (the generalized force of
+  /// gravity and the applied efforts, dim model.nv): among the forces of the closed pairs that
+  /// balance tau, in their friction cones and pressing, the one of least norm (for a support of
+  /// more points than a rigid body needs, the rigid model leaves the share open: least norm
+  /// shares it evenly where symmetry does).
+  ///
+  ContactBalance balanceContacts(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau);
+
+  ///
+  /// \brief Stability of a rest on the ground: the sticking contacts that carry a force held as
+  /// bilateral, the stiffness (with the contact forces' own, from the gap function, so that a
+  /// ball on a floor is neutral) restricted to the motions they leave free. With every motion
+  /// held, stable.
+  ///
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces);
+
+  ///
+  /// \brief The contacts at a rest, for the result: each closed pair with its forces and gap.
+  ///
+  std::vector<GroundContact> describeContacts(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau);
+
+} // namespace pinsettle
+
+#endif // ifndef __pinsettle_contacts_hpp__

@@ -1,0 +1,537 @@
+//
+// Copyright (c) 2026 pinsettle contributors
+//
+
+#include "pinsettle/contacts.hpp"
+#include "pinsettle/prebuilt.hpp"
+#include "pinsettle/statics.hpp"
+
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/joint-configuration.hpp>
+
+#include <Eigen/QR>
+#include <Eigen/SVD>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+namespace pinsettle
+{
+
+  namespace
+  {
+    bool isFinite(const Eigen::Vector3d & x)
+    {
+      return x.allFinite();
+    }
+
+    void throwContactError(
+      const std::string & what, const std::string & name, const std::string & msg)
+    {
+      throw std::invalid_argument(what + " '" + name + "': " + msg);
+    }
+
+    // Two unit tangents completing the normal n to a right-handed frame (t1, t2, n).
+    void completeFrame(const Eigen::Vector3d & n, Eigen::Vector3d & t1, Eigen::Vector3d & t2)
+    {
+      const Eigen::Vector3d seed =
+        std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+      t1 = (seed - seed.dot(n) * n).normalized();
+      t2 = n.cross(t1);
+    }
+
+    // The world point Jacobian row e^T (J_lin + J_ang x p) of body `joint` at the world point
+    // p, written into row (data.J: the world Jacobian of computeJointJacobians).
+    template<typename Row>
+    void writePointRow(
+      const pinocchio::Model & model,
+      const pinocchio::Data & data,
+      pinocchio::JointIndex joint,
+      const Eigen::Vector3d & p,
+      const Eigen::Vector3d & e,
+      Row && row)
+    {
+      row.setZero();
+      // e.(v + w x p) = e.v + w.(p x e)
+      const Eigen::Vector3d pe = p.cross(e);
+      for (pinocchio::JointIndex j = joint; j > 0; j = model.parents[j])
+        for (int m = model.idx_vs[j]; m < model.idx_vs[j] + model.nvs[j]; ++m)
+          row[m] = e.dot(data.J.col(m).head<3>()) + pe.dot(data.J.col(m).tail<3>());
+    }
+
+    constexpr int kMaxSweeps = 2000;
+
+    // One contact's projected Gauss-Seidel update: the normal impulse, then the tangential one
+    // projected onto the disc mu lambda_n. Returns the largest change.
+    double updateContact(
+      const Eigen::Ref<const Eigen::MatrixXd> & G,
+      const Eigen::Ref<const Eigen::VectorXd> & b,
+      double mu,
+      Eigen::Index r,
+      Eigen::Ref<Eigen::VectorXd> lambda)
+    {
+      const double old_n = lambda[r + 2];
+      const double gnn = G(r + 2, r + 2);
+      const double un = G.row(r + 2).dot(lambda) + b[r + 2];
+      const double ln = gnn > 0. ? std::max(0., old_n - un / gnn) : 0.;
+      lambda[r + 2] = ln;
+      const Eigen::Vector2d old_t = lambda.segment<2>(r);
+      const Eigen::Vector2d ut(G.row(r).dot(lambda) + b[r], G.row(r + 1).dot(lambda) + b[r + 1]);
+      // A projected gradient step of length 1 / (largest eigenvalue of the 2 x 2 block): its
+      // fixed point is Coulomb's law. A Newton step on the block (G_tt^-1) projected onto the
+      // disc is not: on a box held by four corners it stopped at forces that let it creep.
+      const double a = G(r, r), c = G(r + 1, r + 1), off = G(r, r + 1);
+      const double largest = 0.5 * (a + c) + std::sqrt(0.25 * (a - c) * (a - c) + off * off);
+      Eigen::Vector2d lt = old_t;
+      if (largest > 0.)
+        lt -= ut / largest;
+      const double radius = mu * ln;
+      const double norm = lt.norm();
+      if (norm > radius)
+        lt *= norm > 0. ? radius / norm : 0.;
+      lambda.segment<2>(r) = lt;
+      return std::max(std::abs(ln - old_n), (lt - old_t).lpNorm<Eigen::Infinity>());
+    }
+  } // namespace
+
+  // --- GroundContacts ---------------------------------------------------------------------------
+
+  GroundContacts::GroundContacts(const pinocchio::Model & model)
+  : model_(model)
+  {
+  }
+
+  void GroundContacts::addPlane(
+    const std::string & name,
+    const Eigen::Vector3d & point,
+    const Eigen::Vector3d & normal,
+    double friction)
+  {
+    if (!isFinite(point))
+      throwContactError("ground", name, "its point must be finite (m)");
+    const double length = normal.norm();
+    if (!(length > 1e-12) || !std::isfinite(length))
+    {
+      std::ostringstream msg;
+      msg << "its normal must have a non-zero finite length, got (" << normal.transpose() << ")";
+      throwContactError("ground", name, msg.str());
+    }
+    if (!(friction >= 0.) || !std::isfinite(friction))
+      throwContactError(
+        "ground", name,
+        "friction must be a finite coefficient >= 0, got " + std::to_string(friction));
+    Plane plane{name, point, normal / length, {}, {}, friction};
+    completeFrame(plane.normal, plane.t1, plane.t2);
+    planes_.push_back(plane);
+  }
+
+  void GroundContacts::addPoint(
+    const std::string & name,
+    pinocchio::JointIndex joint,
+    const Eigen::Vector3d & position,
+    double radius)
+  {
+    if (joint == 0 || joint >= static_cast<pinocchio::JointIndex>(model_.njoints))
+      throwContactError(
+        "contact", name,
+        "its body must be moved by a joint (1 to " + std::to_string(model_.njoints - 1) + "), got "
+          + std::to_string(joint));
+    if (!isFinite(position))
+      throwContactError("contact", name, "its point must be finite (m)");
+    if (!(radius >= 0.) || !std::isfinite(radius))
+      throwContactError(
+        "contact", name, "radius must be finite and >= 0 (m), got " + std::to_string(radius));
+    points_.push_back(Point{name, joint, position, radius});
+  }
+
+  // --- Geometry and impulses --------------------------------------------------------------------
+
+  void computeContactGeometry(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    ContactGeometry & geometry)
+  {
+    const int pairs = contacts.pairs();
+    geometry.gap.resize(pairs);
+    geometry.point.resize(3, pairs);
+    geometry.jacobian.resize(3 * pairs, model.nv);
+    pinocchio::computeJointJacobians(model, data, q);
+    int k = 0;
+    for (const GroundContacts::Point & s : contacts.points())
+    {
+      const Eigen::Vector3d centre = data.oMi[s.joint].act(s.position);
+      for (const GroundContacts::Plane & plane : contacts.planes())
+      {
+        geometry.gap[k] = plane.normal.dot(centre - plane.point) - s.radius;
+        const Eigen::Vector3d x = centre - s.radius * plane.normal;
+        geometry.point.col(k) = x;
+        writePointRow(model, data, s.joint, x, plane.t1, geometry.jacobian.row(3 * k));
+        writePointRow(model, data, s.joint, x, plane.t2, geometry.jacobian.row(3 * k + 1));
+        writePointRow(model, data, s.joint, x, plane.normal, geometry.jacobian.row(3 * k + 2));
+        ++k;
+      }
+    }
+  }
+
+  int solveContactImpulses(
+    const Eigen::Ref<const Eigen::MatrixXd> & G,
+    const Eigen::Ref<const Eigen::VectorXd> & b,
+    const Eigen::Ref<const Eigen::VectorXd> & friction,
+    Eigen::Ref<Eigen::VectorXd> lambda)
+  {
+    for (int sweep = 1; sweep <= kMaxSweeps; ++sweep)
+    {
+      double change = 0.;
+      for (Eigen::Index k = 0; k < friction.size(); ++k)
+        change = std::max(change, updateContact(G, b, friction[k], 3 * k, lambda));
+      if (change <= 1e-11 * lambda.lpNorm<Eigen::Infinity>() || change == 0.)
+        return sweep;
+    }
+    return kMaxSweeps;
+  }
+
+  // --- The step ---------------------------------------------------------------------------------
+
+  ContactStepper::ContactStepper(const GroundContacts & contacts)
+  : contacts_(contacts)
+  {
+    const int rows = 3 * contacts.pairs();
+    const int nv = contacts.model().nv;
+    geometry_.gap.resize(contacts.pairs());
+    geometry_.point.resize(3, contacts.pairs());
+    geometry_.jacobian.resize(rows, nv);
+    active_.reserve(contacts.pairs());
+    force_ = Eigen::VectorXd::Zero(rows);
+    Ja_.resize(rows, nv);
+    Y_.resize(nv, rows);
+    G_.resize(rows, rows);
+    b_.resize(rows);
+    lambda_.resize(rows);
+    mu_.resize(contacts.pairs());
+    vfree_.resize(nv);
+    dv_.resize(nv);
+    llt_ = Eigen::LLT<Eigen::MatrixXd>(nv);
+  }
+
+  void ContactStepper::start()
+  {
+    force_.setZero();
+  }
+
+  void ContactStepper::apply(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & v,
+    Eigen::VectorXd & ddq,
+    double h)
+  {
+    computeContactGeometry(model, data, contacts_, q, geometry_);
+    vfree_ = v + h * ddq;
+    active_.clear();
+    const int planes = static_cast<int>(contacts_.planes().size());
+    for (int p = 0; p < contacts_.pairs(); ++p)
+    {
+      const double un = geometry_.jacobian.row(3 * p + 2).dot(vfree_);
+      if (geometry_.gap[p] + h * std::min(0., un) <= 0.)
+        active_.push_back(p);
+      else
+        force_.segment<3>(3 * p).setZero();
+    }
+    if (active_.empty())
+      return;
+    const Eigen::Index a = static_cast<Eigen::Index>(active_.size());
+    for (Eigen::Index k = 0; k < a; ++k)
+    {
+      const int p = active_[static_cast<std::size_t>(k)];
+      Ja_.middleRows<3>(3 * k) = geometry_.jacobian.middleRows<3>(3 * p);
+      mu_[k] = contacts_.planes()[static_cast<std::size_t>(p % planes)].friction;
+      lambda_.segment<3>(3 * k) = h * force_.segment<3>(3 * p);
+    }
+    const auto J = Ja_.topRows(3 * a);
+    const auto Y = Y_.leftCols(3 * a);
+    const auto G = G_.topLeftCorner(3 * a, 3 * a);
+    auto b = b_.head(3 * a);
+    auto lambda = lambda_.head(3 * a);
+    prebuilt::crba(model, data, q);
+    data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose();
+    llt_.compute(data.M);
+    Y_.leftCols(3 * a) = J.transpose();
+    llt_.matrixL().solveInPlace(Y_.leftCols(3 * a));
+    G_.topLeftCorner(3 * a, 3 * a).noalias() = Y.transpose() * Y;
+    b.noalias() = J * vfree_;
+    for (Eigen::Index k = 0; k < a; ++k)
+    {
+      // Open: close the gap in this step and no more; sunk in: come out by a fifth per step.
+      const double gap = geometry_.gap[active_[static_cast<std::size_t>(k)]];
+      b[3 * k + 2] += gap > 0. ? gap / h : 0.2 * gap / h;
+    }
+    solveContactImpulses(G, b, mu_.head(a), lambda);
+    dv_.noalias() = Y * lambda;
+    llt_.matrixU().solveInPlace(dv_);
+    ddq += dv_ / h;
+    for (Eigen::Index k = 0; k < a; ++k)
+      force_.segment<3>(3 * active_[static_cast<std::size_t>(k)]) = lambda.segment<3>(3 * k) / h;
+  }
+
+  // --- A rest -----------------------------------------------------------------------------------
+
+  namespace
+  {
+    // Least-norm forces of the pairs in `pairs` with J^T f = tau, by least squares.
+    Eigen::VectorXd leastNormForces(
+      const ContactGeometry & geometry, const std::vector<int> & pairs, const Eigen::VectorXd & tau)
+    {
+      Eigen::MatrixXd A(tau.size(), 3 * static_cast<Eigen::Index>(pairs.size()));
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+        A.middleCols<3>(3 * static_cast<Eigen::Index>(k)) =
+          geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose();
+      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A);
+      cod.setThreshold(1e-10);
+      return cod.solve(tau);
+    }
+
+    bool insideCones(
+      const GroundContacts & contacts, const std::vector<int> & pairs, const Eigen::VectorXd & f)
+    {
+      const std::size_t planes = contacts.planes().size();
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+      {
+        const Eigen::Index r = 3 * static_cast<Eigen::Index>(k);
+        const double mu = contacts.planes()[static_cast<std::size_t>(pairs[k]) % planes].friction;
+        if (f.segment<2>(r).norm() > mu * f[r + 2] * (1. + 1e-9) + 1e-12 * f.norm())
+          return false;
+      }
+      return true;
+    }
+
+    // Forces in the cones closest to balancing tau in the mass metric (the step's problem at
+    // zero velocity), when least norm leaves a cone.
+    Eigen::VectorXd conicForces(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const GroundContacts & contacts,
+      const Eigen::VectorXd & q,
+      const ContactGeometry & geometry,
+      const std::vector<int> & pairs,
+      const Eigen::VectorXd & tau,
+      double shrink,
+      Eigen::VectorXd f)
+    {
+      const Eigen::Index rows = 3 * static_cast<Eigen::Index>(pairs.size());
+      Eigen::MatrixXd J(rows, model.nv);
+      Eigen::VectorXd mu(pairs.size());
+      const std::size_t planes = contacts.planes().size();
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+      {
+        J.middleRows<3>(3 * static_cast<Eigen::Index>(k)) =
+          geometry.jacobian.middleRows<3>(3 * pairs[k]);
+        mu[static_cast<Eigen::Index>(k)] =
+          shrink * contacts.planes()[static_cast<std::size_t>(pairs[k]) % planes].friction;
+      }
+      prebuilt::crba(model, data, q);
+      data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose();
+      const Eigen::LLT<Eigen::MatrixXd> llt(data.M);
+      const Eigen::MatrixXd Y = llt.matrixL().solve(J.transpose());
+      const Eigen::MatrixXd G = Y.transpose() * Y;
+      // Velocity after a unit time from rest: M^-1 (J^T f - tau); u = G f - J M^-1 tau.
+      const Eigen::VectorXd b = -(Y.transpose() * llt.matrixL().solve(tau));
+      for (Eigen::Index k = 0; k < mu.size(); ++k)
+        f[3 * k + 2] = std::max(f[3 * k + 2], 0.);
+      solveContactImpulses(G, b, mu, f);
+      return f;
+    }
+  } // namespace
+
+  ContactBalance balanceContacts(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau)
+  {
+    ContactBalance balance;
+    balance.force = Eigen::VectorXd::Zero(3 * contacts.pairs());
+    ContactGeometry geometry;
+    computeContactGeometry(model, data, contacts, q, geometry);
+    for (int p = 0; p < contacts.pairs(); ++p)
+      if (geometry.gap[p] <= kContactGapTolerance)
+        balance.closed.push_back(p);
+    // Active set: a pair the least-norm balance would pull on opens, one at a time.
+    std::vector<int> pairs = balance.closed;
+    Eigen::VectorXd f;
+    const double tiny = 1e-12 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
+    while (!pairs.empty())
+    {
+      f = leastNormForces(geometry, pairs, tau);
+      Eigen::Index worst = -1;
+      for (Eigen::Index k = 0; k < static_cast<Eigen::Index>(pairs.size()); ++k)
+        if (f[3 * k + 2] < -tiny && (worst < 0 || f[3 * k + 2] < f[3 * worst + 2]))
+          worst = k;
+      if (worst < 0)
+        break;
+      pairs.erase(pairs.begin() + worst);
+    }
+    const auto unbalanced = [&](const Eigen::VectorXd & forces) {
+      Eigen::VectorXd left = tau;
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+        left.noalias() -= geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose()
+                          * forces.segment<3>(3 * static_cast<Eigen::Index>(k));
+      return left;
+    };
+    if (!pairs.empty() && !insideCones(contacts, pairs, f))
+    {
+      // Least norm shares the tangential force evenly and may leave a lightly loaded point's
+      // cone where other shares stay inside every cone (a box on a slope, its upper corners):
+      // first cones shrunk by 1 %, whose answer sticks, else the cones themselves.
+      const Eigen::VectorXd start = f;
+      f = conicForces(model, data, contacts, q, geometry, pairs, tau, 0.99, start);
+      if (!(unbalanced(f).lpNorm<Eigen::Infinity>() <= 1e-10 * tau.lpNorm<Eigen::Infinity>()))
+        f = conicForces(model, data, contacts, q, geometry, pairs, tau, 1., start);
+    }
+    for (std::size_t k = 0; k < pairs.size(); ++k)
+      balance.force.segment<3>(3 * pairs[k]) = f.segment<3>(3 * static_cast<Eigen::Index>(k));
+    balance.left = unbalanced(f);
+    balance.residual = balance.left.lpNorm<Eigen::Infinity>();
+    return balance;
+  }
+
+  namespace
+  {
+    // The rows held at a rest: all three of a sticking pair that carries a force, the normal
+    // alone of one at the cone's edge (it may slide); none of a pair that carries nothing.
+    std::vector<Eigen::Index> heldRows(
+      const GroundContacts & contacts, const ContactBalance & balance, double tiny)
+    {
+      std::vector<Eigen::Index> rows;
+      const std::size_t planes = contacts.planes().size();
+      for (const int p : balance.closed)
+      {
+        const Eigen::Vector3d f = balance.force.segment<3>(3 * p);
+        if (!(f[2] > tiny))
+          continue;
+        const double mu = contacts.planes()[static_cast<std::size_t>(p) % planes].friction;
+        if (f.head<2>().norm() < mu * f[2] * (1. - 1e-9))
+        {
+          rows.push_back(3 * p);
+          rows.push_back(3 * p + 1);
+        }
+        rows.push_back(3 * p + 2);
+      }
+      return rows;
+    }
+
+    Eigen::MatrixXd selectRows(const Eigen::MatrixXd & J, const std::vector<Eigen::Index> & rows)
+    {
+      Eigen::MatrixXd out(static_cast<Eigen::Index>(rows.size()), J.cols());
+      for (std::size_t k = 0; k < rows.size(); ++k)
+        out.row(static_cast<Eigen::Index>(k)) = J.row(rows[k]);
+      return out;
+    }
+
+    // An orthonormal basis of the motions the rows of Jh leave free (dim nv x free).
+    Eigen::MatrixXd nullSpace(const Eigen::MatrixXd & Jh, Eigen::Index nv)
+    {
+      if (Jh.rows() == 0)
+        return Eigen::MatrixXd::Identity(nv, nv);
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(Jh, Eigen::ComputeFullV);
+      const Eigen::VectorXd & s = svd.singularValues();
+      const double cut = 1e-10 * std::max(s[0], 1e-300);
+      Eigen::Index rank = 0;
+      while (rank < s.size() && s[rank] > cut)
+        ++rank;
+      return svd.matrixV().rightCols(nv - rank);
+    }
+  } // namespace
+
+  StabilityReport assessStability(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    const ForceModel * forces)
+  {
+    const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
+    const ContactBalance balance = balanceContacts(model, data, contacts, q, tau);
+    const double tiny = 1e-9 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
+    const std::vector<Eigen::Index> rows = heldRows(contacts, balance, tiny);
+    ContactGeometry geometry;
+    computeContactGeometry(model, data, contacts, q, geometry);
+    const Eigen::MatrixXd N = nullSpace(selectRows(geometry.jacobian, rows), model.nv);
+    if (N.cols() == 0)
+    {
+      // Held in every motion by contacts that press: a push lifts the body off them.
+      StabilityReport report = assessStiffness(Eigen::MatrixXd(0, 0), 1e-7);
+      report.verdict = Stability::Stable;
+      report.basis = N;
+      return report;
+    }
+    Eigen::VectorXd f(static_cast<Eigen::Index>(rows.size()));
+    for (std::size_t k = 0; k < rows.size(); ++k)
+      f[static_cast<Eigen::Index>(k)] = balance.force[rows[k]];
+    // The contact forces' stiffness d(J^T f)/dq along the free motions, f held; the rows follow
+    // the gap function (the contact point moves over a sphere as it turns).
+    const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
+    const double h = 1e-6;
+    Eigen::MatrixXd C(model.nv, N.cols());
+    Eigen::VectorXd q_plus(model.nq), q_minus(model.nq);
+    ContactGeometry plus, minus;
+    for (Eigen::Index k = 0; k < N.cols(); ++k)
+    {
+      pinocchio::integrate(model, q, (h * N.col(k)).eval(), q_plus);
+      pinocchio::integrate(model, q, (-h * N.col(k)).eval(), q_minus);
+      computeContactGeometry(model, data, contacts, q_plus, plus);
+      computeContactGeometry(model, data, contacts, q_minus, minus);
+      C.col(k) = (selectRows(plus.jacobian, rows).transpose() * f
+                  - selectRows(minus.jacobian, rows).transpose() * f)
+                 / (2. * h);
+    }
+    const Eigen::MatrixXd KN = K * N;
+    const Eigen::MatrixXd reduced = N.transpose() * (KN - C);
+    // Where gravity's stiffness and the contacts' cancel (a ball on a floor), what is left is
+    // the round-off of the differences: eigenvalues within 1e-7 of the terms count as zero.
+    const double terms = std::max(KN.lpNorm<Eigen::Infinity>(), C.lpNorm<Eigen::Infinity>());
+    StabilityReport report =
+      assessStiffness(reduced, 1e-7, std::max(computeStiffnessFloor(model, true), 1e-7 * terms));
+    report.softest_direction = N * report.softest_direction;
+    report.basis = N;
+    return report;
+  }
+
+  std::vector<GroundContact> describeContacts(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q,
+    const Eigen::VectorXd & tau)
+  {
+    const ContactBalance balance = balanceContacts(model, data, contacts, q, tau);
+    ContactGeometry geometry;
+    computeContactGeometry(model, data, contacts, q, geometry);
+    std::vector<GroundContact> out;
+    const std::size_t planes = contacts.planes().size();
+    for (const int p : balance.closed)
+    {
+      const GroundContacts::Plane & plane = contacts.planes()[static_cast<std::size_t>(p) % planes];
+      const Eigen::Vector3d f = balance.force.segment<3>(3 * p);
+      GroundContact c;
+      c.name = contacts.points()[static_cast<std::size_t>(p) / planes].name;
+      c.ground = plane.name;
+      c.point = geometry.point.col(p);
+      c.normal = plane.normal;
+      c.normal_force = f[2];
+      c.tangential_force = f[0] * plane.t1 + f[1] * plane.t2;
+      c.gap = geometry.gap[p];
+      c.sticking =
+        f.head<2>().norm() < plane.friction * f[2] * (1. - 1e-9) || f.head<2>().isZero(0.);
+      out.push_back(c);
+    }
+    return out;
+  }
+
+} // namespace pinsettle

@@ -176,6 +176,41 @@ namespace
     return stops;
   }
 
+  // Ground contacts: None for none, else ([(name, point, normal, friction)], [(name, joint
+  // index, position in the joint's frame, radius)]).
+  std::unique_ptr<GroundContacts> contactsFrom(
+    const pinocchio::Model & model, const py::object & spec)
+  {
+    if (spec.is_none())
+      return nullptr;
+    const auto t = spec.cast<std::tuple<py::list, py::list>>();
+    auto contacts = std::make_unique<GroundContacts>(model);
+    for (const py::handle & e : std::get<0>(t))
+    {
+      const auto g = e.cast<std::tuple<std::string, Eigen::Vector3d, Eigen::Vector3d, double>>();
+      contacts->addPlane(std::get<0>(g), std::get<1>(g), std::get<2>(g), std::get<3>(g));
+    }
+    for (const py::handle & e : std::get<1>(t))
+    {
+      const auto c = e.cast<std::tuple<std::string, std::size_t, Eigen::Vector3d, double>>();
+      contacts->addPoint(std::get<0>(c), std::get<1>(c), std::get<2>(c), std::get<3>(c));
+    }
+    return contacts;
+  }
+
+  // The ground contacts of a rest: (name, ground, point, normal, normal force, tangential
+  // force, gap, sticking) each.
+  py::list groundContactsToList(const std::vector<GroundContact> & contacts)
+  {
+    py::list out;
+    for (const GroundContact & c : contacts)
+      out.append(
+        py::make_tuple(
+          c.name, c.ground, c.point, c.normal, c.normal_force, c.tangential_force, c.gap,
+          c.sticking));
+    return out;
+  }
+
   py::list stopContactsToList(const pinocchio::Model & model, const std::vector<StopContact> & c)
   {
     py::list out;
@@ -327,6 +362,7 @@ namespace
     field("kinetic_energy") = r.info.kinetic_energy;
     field("simplified_kinetic_energy") = r.info.simplified_kinetic_energy;
     field("residual") = r.residual;
+    field("contacts") = groundContactsToList(r.ground_contacts);
     field("residual_before_polish") = r.info.residual_before_polish;
     field("polish_iterations") = r.info.polish_iterations;
     field("polished") = r.info.polished;
@@ -406,13 +442,15 @@ namespace
       const py::object & elements,
       const py::object & loops,
       const py::object & stops,
-      const py::object & joints)
+      const py::object & joints,
+      const py::object & contacts)
     : model_obj_(model_obj)
     , model_(modelFrom(model_obj))
     , elements_(elementsFrom(model_, elements))
     , loops_(loopsFrom(model_, loops))
     , stops_(stopsFrom(model_, stops))
-    , solver_(model_, loops_.get(), stops_.get())
+    , contacts_(contactsFrom(model_, contacts))
+    , solver_(model_, loops_.get(), stops_.get(), contacts_.get())
     , equal_limits_(
         py::tuple(
           jointNames(stops_ ? stops_->equalLimitJoints() : std::vector<pinocchio::JointIndex>())))
@@ -511,6 +549,7 @@ namespace
     std::unique_ptr<ForceElements> elements_;
     std::unique_ptr<LoopConstraints> loops_;
     std::unique_ptr<JointStops> stops_;
+    std::unique_ptr<GroundContacts> contacts_;
     Solver solver_;
     py::tuple equal_limits_, unapplied_limits_;
     std::vector<JointField> joints_;
@@ -625,12 +664,15 @@ namespace
       .def(
         py::init<
           const py::object &, const py::object &, const py::object &, const py::object &,
-          const py::object &>(),
+          const py::object &, const py::object &>(),
         py::arg("model"), py::arg("elements") = py::none(), py::arg("loops") = py::none(),
         py::arg("stops") = py::none(), py::arg("joints") = py::none(),
+        py::arg("contacts") = py::none(),
         "joints: how each joint's value is read from q, [(name, index in q, kind, offsets)] "
         "(kind 0 q[i], 1 atan2(q[i + 1], q[i]), 2 [q[i + k] for k in offsets]), or None for "
-        "a result without the joints' values.")
+        "a result without the joints' values. contacts: ground planes and contact points, "
+        "([(name, point, normal, friction)], [(name, joint index, position in the joint's "
+        "frame, radius)]), or None.")
       .def(
         "solve", &BoundSolver::solve, py::arg("q0"), py::arg("v0"), py::arg("settings"),
         py::arg("callback") = py::none(), py::arg("progress") = py::none(),

@@ -14,6 +14,7 @@ import pinocchio  # noqa: F401  (registers the converters that pinsettle._core r
 from ._scene import Scene, SceneError, load_scene
 from ._settings import Settings
 from ._solve import (
+    Contact,
     Progress,
     Result,
     StabilityReport,
@@ -32,6 +33,7 @@ from .scenes import scene_names, scene_path, scenes_dir
 __version__ = _metadata.version("pinsettle")
 
 __all__ = [
+    "Contact",
     "Progress",
     "Result",
     "Scene",

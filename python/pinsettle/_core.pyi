@@ -14,6 +14,10 @@ _Elements = dict[str, list[tuple[Any, ...]]]
 _Loops = list[tuple[Any, ...]]
 # Joint stops: (take the model's position limits, [(joint index, lower, upper), ...]).
 _Stops = tuple[bool, list[tuple[int, float, float]]]
+_Contacts = tuple[
+    list[tuple[str, npt.ArrayLike, npt.ArrayLike, float]],
+    list[tuple[str, int, npt.ArrayLike, float]],
+]
 
 class Settings:
     dt: float | str
@@ -103,6 +107,7 @@ class Solver:
         loops: _Loops | None = ...,
         stops: _Stops | None = ...,
         joints: list[tuple[str, int, int, list[int]]] | None = ...,
+        contacts: _Contacts | None = ...,
     ) -> None: ...
     def solve(
         self,

@@ -32,7 +32,9 @@ from ._scene_values import (
     _LAYOUTS,
     LOOP_KINDS,
     UNIT_NORM_SLACK,
+    ContactPoint,
     Coupling,
+    Ground,
     JointLimit,
     JointLoad,
     JointSpring,
@@ -87,6 +89,19 @@ else:  # pragma: no cover
 # --- the scene --------------------------------------------------------------------------------
 
 
+def _take_mimic(
+    model: pinocchio.Model,
+) -> tuple[pinocchio.Model, list[Coupling], pinocchio.Model | None, list[str]]:
+    """The model a scene solves, its couplings, the model given when it had mimic joints (else
+    None) and the scene's note on them."""
+    if not has_mimic_joints(model):
+        return model, [], None, []
+    given = pinocchio.Model(model)
+    model, couplings = _release_mimic(model)
+    notes = ["mimic joints honoured as couplings: " + "; ".join(c.text() for c in couplings)]
+    return model, couplings, given, notes
+
+
 def _release_mimic(model: pinocchio.Model) -> tuple[pinocchio.Model, list[Coupling]]:
     """A model with mimic joints as one without (each follower an ordinary joint of its own
     type and axis, without position limits) and the couplings that hold the followers."""
@@ -123,20 +138,13 @@ class Scene:
             raise TypeError(f"model must be a pinocchio.Model, got {type(model).__name__}")
         self._limits = True
         #: Joint couplings (``add_coupling``, a URDF's ``<mimic>`` tags, mimic joints).
-        self.couplings: list[Coupling] = []
+        self.couplings: list[Coupling]
         #: The model given, when it has mimic joints (``pinocchio.buildModelFromUrdf(path,
         #: mimic=True)``); ``model`` is then that model with each follower made an ordinary
         #: joint (of its own type and axis, without position limits) and coupled back in
         #: ``couplings``. None otherwise.
-        self.mimic_model: pinocchio.Model | None = None
-        if has_mimic_joints(model):
-            self.mimic_model = pinocchio.Model(model)
-            model, self.couplings = _release_mimic(model)
-        notes = (
-            ["mimic joints honoured as couplings: " + "; ".join(c.text() for c in self.couplings)]
-            if self.couplings
-            else []
-        )
+        self.mimic_model: pinocchio.Model | None
+        model, self.couplings, self.mimic_model, notes = _take_mimic(model)
         self.model = pinocchio.Model(model)
         self.name = name
         self.description = description
@@ -163,6 +171,10 @@ class Scene:
         self.locked: list[str] = []
         #: Stops added or overridden by ``set_limit`` (``[[limit]]``), one per joint.
         self.joint_limits: list[JointLimit] = []
+        #: Ground planes (``add_ground``, ``[[ground]]``) and the points of bodies that touch
+        #: them (``add_contact``, ``[[contact]]``).
+        self.grounds: list[Ground] = []
+        self.contacts: list[ContactPoint] = []
         self._start: dict[str, Any] = {}
         if gravity is not None:
             self.gravity = gravity
@@ -707,6 +719,70 @@ class Scene:
         self._changed()
         return self
 
+    def add_ground(
+        self,
+        point: Any = (0.0, 0.0, 0.0),
+        normal: Any = (0.0, 0.0, 1.0),
+        friction: Any = 0.5,
+        name: str | None = None,
+    ) -> Scene:
+        """A ground plane through ``point`` with ``normal`` pointing out of it (world, m; the
+        normal need not be of unit length), and its Coulomb friction coefficient (>= 0). The
+        contact points (``add_contact``) rest on it: unilateral, inelastic, a contact sticks
+        while its tangential force stays within ``friction`` times its normal force.
+
+        Raises:
+            SceneError: a point or normal that is not 3 finite numbers, a normal of zero length,
+                a negative friction, a name given twice.
+        """
+        name = f"ground{len(self.grounds) + 1}" if name is None else name
+        if not isinstance(name, str) or any(g.name == name for g in self.grounds):
+            raise SceneError(f"name must be a new ground's name (str), got {name!r}")
+        normal_v = _vector(normal, "normal", 3)
+        length = math.sqrt(sum(x * x for x in normal_v))
+        if not length > 1e-12:
+            raise SceneError(f"normal must have a non-zero length, got {list(normal_v)}")
+        ground = Ground(
+            name,
+            _vector(point, "point", 3),  # type: ignore[arg-type]
+            tuple(x / length for x in normal_v),  # type: ignore[arg-type]
+            _number(friction, "friction", nonnegative=True),
+        )
+        self.grounds.append(ground)
+        self._changed()
+        return self
+
+    def add_contact(
+        self, frame: str, point: Any = (0.0, 0.0, 0.0), radius: Any = 0.0, name: str | None = None
+    ) -> Scene:
+        """A point of a body that can touch the ground (``add_ground``): the centre ``point``
+        (in ``frame``, m) of a sphere of ``radius`` (m; 0, the default, for a point). Named
+        ``name``, else after the frame (with a number when the frame has several).
+
+        Raises:
+            SceneError: an unknown frame, a frame on the world, a point that is not 3 finite
+                numbers, a negative radius, a name given twice.
+        """
+        frame = self._frame_name(frame, "frame")
+        j = self.model.frames[self.model.getFrameId(frame)].parentJoint
+        if j == 0:
+            raise SceneError(f"frame: '{frame}' is fixed to the world; a contact needs a body")
+        if name is None:
+            same = sum(1 for c in self.contacts if c.frame == frame)
+            name = frame if same == 0 else f"{frame}#{same + 1}"
+        if not isinstance(name, str) or any(c.name == name for c in self.contacts):
+            raise SceneError(f"name must be a new contact's name (str), got {name!r}")
+        self.contacts.append(
+            ContactPoint(
+                name,
+                frame,
+                _vector(point, "point", 3),  # type: ignore[arg-type]
+                _number(radius, "radius", nonnegative=True),
+            )
+        )
+        self._changed()
+        return self
+
     def assemble(self, q: Any = None) -> tuple[np.ndarray, float]:
         """The configuration q (the start by default, full model) moved onto the loops, and how
         far it moved (max |difference|, rad or m), as the solver does before it starts.
@@ -887,6 +963,8 @@ class Scene:
             ("loops", self.loops),
             ("couplings", self.couplings),
             ("stops set", self.joint_limits),
+            ("grounds", self.grounds),
+            ("contacts", self.contacts),
         ):
             if items:
                 parts.append(f"{len(items)} {label}")
@@ -1152,3 +1230,7 @@ def _add_elements(scene: Scene, file: SceneFile) -> None:
         _at(f"[[loop]] #{k}", scene.add_loop, loop.a, loop.b, loop.kind)
     for k, limit in enumerate(file.limits, start=1):
         _at(f"[[limit]] #{k}", scene.set_limit, limit.joint, limit.lower, limit.upper)
+    for k, g in enumerate(file.grounds, start=1):
+        _at(f"[[ground]] #{k}", scene.add_ground, g.point, g.normal, g.friction, g.name)
+    for k, c in enumerate(file.contacts, start=1):
+        _at(f"[[contact]] #{k}", scene.add_contact, c.frame, c.point, c.radius, c.name)

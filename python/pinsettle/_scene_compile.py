@@ -14,7 +14,9 @@ import pinocchio
 
 from . import _core
 from ._scene_values import (
+    ContactPoint,
     Coupling,
+    Ground,
     JointLimit,
     JointLoad,
     JointSpring,
@@ -38,6 +40,8 @@ class SceneParts(Protocol):
     loops: list[Loop]
     couplings: list[Coupling]
     joint_limits: list[JointLimit]
+    grounds: list[Ground]
+    contacts: list[ContactPoint]
 
     @property
     def limits(self) -> bool: ...
@@ -115,6 +119,8 @@ class _Compiled:
         self._set_stops = [(int(model.getJointId(lim.joint)), lim) for lim in scene.joint_limits]
         #: The stops as the C++ core takes them with the scene's own setting (None: no stop).
         self.stops = self.stops_for(scene.limits)
+        #: Ground planes and contact points as the C++ core takes them (None: none).
+        self.contacts = self._contacts(scene)
         try:
             _core.static_force(model, pinocchio.neutral(model), self.elements)
         except ValueError as error:  # anything the C++ checks catch that the above did not
@@ -167,6 +173,30 @@ class _Compiled:
             ],
         }
         return spec if any(spec.values()) else None
+
+    def _contacts(self, scene: SceneParts) -> tuple[list[Any], list[Any]] | None:
+        """Ground planes and contact points for ``_core``: each point in its joint's frame."""
+        if not scene.grounds and not scene.contacts:
+            return None
+        if not scene.grounds or not scene.contacts:
+            missing = "[[ground]]" if not scene.grounds else "[[contact]]"
+            raise SceneError(
+                f"contacts need both a ground and points that touch it; no {missing} given"
+            )
+        planes = [
+            (g.name, np.array(g.point), np.array(g.normal), g.friction) for g in scene.grounds
+        ]
+        points = []
+        for c in scene.contacts:
+            frame = self.model.frames[self._frame(c.frame)]
+            if frame.parentJoint == 0:
+                raise SceneError(
+                    f"contact '{c.name}': frame '{c.frame}' is on the world once the locked "
+                    "joints are removed; a contact needs a body that moves"
+                )
+            position = frame.placement.act(np.array(c.point, dtype=float))
+            points.append((c.name, int(frame.parentJoint), position, c.radius))
+        return planes, points
 
     def _loops(self, scene: SceneParts) -> list[tuple[Any, ...]]:
         frame = self._frame

@@ -245,6 +245,26 @@ class LimitEntry:
 
 
 @dataclass(frozen=True)
+class GroundEntry:
+    """``[[ground]]``: ``Scene.add_ground``."""
+
+    point: Any = key((0.0, 0.0, 0.0))
+    normal: Any = key((0.0, 0.0, 1.0))
+    friction: Any = key(0.5)
+    name: Any = key(None)
+
+
+@dataclass(frozen=True)
+class ContactEntry:
+    """``[[contact]]``: ``Scene.add_contact``."""
+
+    frame: Any = key()
+    point: Any = key((0.0, 0.0, 0.0))
+    radius: Any = key(0.0)
+    name: Any = key(None)
+
+
+@dataclass(frozen=True)
 class SceneFile:
     """A scene file, read: each table as declared above (``start``: joint values by name, and
     ``pose``), the solver settings checked."""
@@ -256,6 +276,8 @@ class SceneFile:
     loads: list[LoadEntry]
     loops: list[LoopEntry]
     limits: list[LimitEntry]
+    grounds: list[GroundEntry]
+    contacts: list[ContactEntry]
     settings: Settings
 
 
@@ -266,6 +288,8 @@ _ARRAYS: tuple[tuple[str, type[Any], str], ...] = (
     ("load", LoadEntry, "loads"),
     ("loop", LoopEntry, "loops"),
     ("limit", LimitEntry, "limits"),
+    ("ground", GroundEntry, "grounds"),
+    ("contact", ContactEntry, "contacts"),
 )
 _TOP_KEYS = ["model", "start", *[name for name, _, _ in _ARRAYS], "solver"]
 

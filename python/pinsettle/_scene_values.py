@@ -84,6 +84,28 @@ LOOP_KINDS = ("point", "frame")
 
 
 @dataclass(frozen=True)
+class Ground:
+    """A ground plane through ``point`` with unit ``normal`` (out of the ground, world, m), and
+    its Coulomb friction coefficient."""
+
+    name: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    friction: float
+
+
+@dataclass(frozen=True)
+class ContactPoint:
+    """A point of a body that can touch the ground: the centre ``point`` (in ``frame``, m) of a
+    sphere of ``radius`` (m; 0 for a point)."""
+
+    name: str
+    frame: str
+    point: tuple[float, float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
 class Coupling:
     """A joint coupling (a URDF ``<mimic>`` tag, a mimic joint): q[follower] = multiplier *
     q[leader] + offset, two 1-DoF joints (rad or m)."""

@@ -85,6 +85,25 @@ def _progress_reporter(
 
 
 @dataclass(frozen=True)
+class Contact:
+    """A ground contact at a rest: the point ``name`` (a ``[[contact]]``) on the ground
+    ``ground``, where it touches (``point``, world, m: a sphere's lowest point), the ground's
+    unit ``normal``, the force the ground exerts on the body there (``normal_force`` >= 0, N;
+    ``tangential_force``, world, N, in the ground's plane), the ``gap`` (m, negative when sunk
+    in) and whether it ``sticking`` (the tangential force strictly inside the friction cone;
+    at its edge the contact would slide)."""
+
+    name: str
+    ground: str
+    point: np.ndarray
+    normal: np.ndarray
+    normal_force: float
+    tangential_force: np.ndarray
+    gap: float
+    sticking: bool
+
+
+@dataclass(frozen=True)
 class Result:
     """Outcome of a solve.
 
@@ -125,6 +144,14 @@ class Result:
     is the largest violation of the conditions of a rest against them (|force| off the stops, a
     stop that would have to pull) and the stability verdict is that of K restricted to the
     joints not pressed on a stop.
+
+    Ground contacts (a scene with ``[[ground]]`` and ``[[contact]]``): ``contacts`` lists each
+    contact point closed at the end (gap within 1e-6 m) as a ``Contact``, with the forces that
+    balance the rest: of all the forces in the friction cones that do, the least in norm (a body
+    on more points than it needs, a box on four corners, leaves the share open to a rigid
+    model). ``residual`` is what those forces leave unbalanced, and the verdict is that of K
+    restricted to the motions the sticking contacts leave free (stable when they hold every
+    motion).
     """
 
     q: np.ndarray
@@ -165,6 +192,7 @@ class Result:
     unapplied_limits: tuple[str, ...] = ()
     #: 'rad' or 'm' for each joint named in at_limit or start_clamped (for the summary).
     units: dict[str, str] = field(default_factory=dict, repr=False)
+    contacts: tuple[Contact, ...] = ()
 
     @property
     def converged(self) -> bool:
@@ -190,6 +218,7 @@ class Result:
             self._time_step_line(),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
             *self._loops_lines(),
+            *self._contacts_lines(),
             f"stability        {self.stability} (smallest stiffness eigenvalue "
             f"{self.min_stiffness_eigenvalue:.4g}{neutral}"
             + (", on the joints off their stops)" if self.at_limit else ")"),
@@ -241,6 +270,21 @@ class Result:
             plural = "s" if self.scaled_joints > 1 else ""
             parts.append(f", {self.scaled_joints} joint{plural} given a fictitious inertia")
         return "".join(parts)
+
+    def _contacts_lines(self) -> list[str]:
+        if not self.contacts:
+            return []
+        total = sum(c.normal_force for c in self.contacts)
+        lines = [
+            f"contacts         {len(self.contacts)} closed, normal forces summing to {total:.6g} N"
+        ]
+        for c in self.contacts:
+            state = "sticking" if c.sticking else "at the cone's edge"
+            lines.append(
+                f"  {c.name:<14} on {c.ground}: normal {c.normal_force:.6g} N, tangential "
+                f"{float(np.linalg.norm(c.tangential_force)):.4g} N, gap {c.gap:.2e} m, {state}"
+            )
+        return lines
 
     def _loops_lines(self) -> list[str]:
         if not self.loops:

@@ -17,7 +17,7 @@ from ._checks import as_vector
 from ._scene import Scene, has_mimic_joints
 from ._scene_values import JointReader
 from ._settings import Settings, make_settings
-from ._solve import Progress, Result, Trace, _limits_flag, _progress_reporter
+from ._solve import Contact, Progress, Result, Trace, _limits_flag, _progress_reporter
 
 
 @dataclass
@@ -219,6 +219,10 @@ class Solver:
         if trace is not None:
             trace["event_kind"] = tuple(trace["event_kind"])
             raw["trace"] = Trace(**trace)
+        if raw["contacts"]:
+            raw["contacts"] = tuple(Contact(*c) for c in raw["contacts"])
+        else:
+            raw["contacts"] = ()
         return Result._of_fields(raw)
 
 
@@ -285,7 +289,9 @@ def _scene_mechanism(scene: Scene, compiled: Any, limits: bool) -> _Mechanism:
     """A scene's compiled model with its elements, loops and stops (the limit notes as the
     core found them, less the joints the scene sets stops on)."""
     stops = compiled.stops_for(limits)
-    core = _core.Solver(compiled.model, compiled.elements, compiled.loops, stops)
+    core = _core.Solver(
+        compiled.model, compiled.elements, compiled.loops, stops, contacts=compiled.contacts
+    )
     equal = tuple(compiled.unset_equal_limits(core.equal_limits))
     unapplied = tuple(str(name) for name in core.unapplied_limits)
     return _Mechanism(core, compiled, equal, unapplied)

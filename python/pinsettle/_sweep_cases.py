@@ -268,6 +268,8 @@ def scene_data(scene: Scene) -> dict[str, Any]:
         "couplings": list(scene.couplings),
         "locked": list(scene.locked),
         "joint_limits": list(scene.joint_limits),
+        "grounds": list(scene.grounds),
+        "contacts": list(scene.contacts),
         "q0": scene.q0(),
     }
 
@@ -388,7 +390,8 @@ def _add_force_elements(scene: Scene, data: Mapping[str, Any], changed: _Sorted)
 
 
 def _add_constraints(scene: Scene, data: Mapping[str, Any]) -> None:
-    """The loops, couplings, locked joints and stops of ``data`` (a sweep changes none)."""
+    """The loops, couplings, locked joints, stops and contacts of ``data`` (a sweep changes
+    none)."""
     for loop in data["loops"]:
         scene.add_loop((loop.a_frame, loop.a_point), (loop.b_frame, loop.b_point), loop.kind)
     for c in data["couplings"]:
@@ -397,6 +400,10 @@ def _add_constraints(scene: Scene, data: Mapping[str, Any]) -> None:
         scene.lock(*data["locked"])
     for limit in data["joint_limits"]:
         scene.set_limit(limit.joint, limit.lower, limit.upper)
+    for g in data["grounds"]:
+        scene.add_ground(g.point, g.normal, g.friction, g.name)
+    for c in data["contacts"]:
+        scene.add_contact(c.frame, c.point, c.radius, c.name)
 
 
 def build_scene(data: Mapping[str, Any], keys: Sequence[Key], changes: Changes) -> Scene:

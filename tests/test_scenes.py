@@ -217,6 +217,8 @@ UNSTABLE_START_SCENES = ["pendulum_upright", "ur5_saddle"]
 # Closed-loop scenes: tests/test_loops.py checks them (closed form, SLSQP, header numbers).
 # Loop scenes, checked in tests/test_loops.py (and, with a stop, tests/test_limits.py).
 LOOP_SCENES = sorted([*loop_reference.MECHANISMS, "fourbar_stop"])
+# Checked by tests/test_contacts.py against tests/contact_reference.py.
+CONTACT_SCENES = ["box_on_floor", "box_on_incline"]
 
 # Points named in the comments: (scene, frame, point in the frame, world position as written).
 POSITIONS = [
@@ -313,7 +315,7 @@ def independent_root(ref: Reference, q_full: np.ndarray, neutral=()) -> np.ndarr
 
 def test_the_library_is_covered():
     # Every scene file has a header with its expectation, and this module checks all of them.
-    assert SCENES == sorted([*EXPECTED, *NO_EQUILIBRIUM_SCENES, *LOOP_SCENES])
+    assert SCENES == sorted([*EXPECTED, *NO_EQUILIBRIUM_SCENES, *LOOP_SCENES, *CONTACT_SCENES])
     for name in SCENES:
         assert "Expected:" in header(name), name
     assert pinsettle.scene_names() == SCENES  # the installed library is this folder
@@ -327,7 +329,9 @@ def test_expected_numbers_are_those_of_the_header(name):
         assert value.lstrip("-") in text, (name, value)
 
 
-@pytest.mark.parametrize("name", [n for n in SCENES if n not in LOOP_SCENES])  # loops: test_loops
+@pytest.mark.parametrize(  # loops: test_loops; contacts: test_contacts
+    "name", [n for n in SCENES if n not in LOOP_SCENES and n not in CONTACT_SCENES]
+)
 def test_reference_agrees_with_scene_static_force(name, solved):
     scene, result, ref = solved(name)
     assert np.array_equal(ref.q_start(), scene.q0())

@@ -517,6 +517,7 @@ def test_scenes_travel_as_data(name):
     mine, theirs = rebuilt.compile(), scene.compile()
     assert repr(mine.elements) == repr(theirs.elements)
     assert repr(mine.loops) == repr(theirs.loops) and mine.stops == theirs.stops
+    assert repr(mine.contacts) == repr(theirs.contacts)
 
 
 # --- a real Dask cluster on this machine ----------------------------------------------------------

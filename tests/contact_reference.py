@@ -1,0 +1,129 @@
+"""The conditions of a rest on the ground, recomputed without pinsettle's code.
+
+A rest with ground contacts is right when the reported contact forces balance gravity and the
+applied efforts (``rnea(q, 0, 0) = sum J_c^T f_c``, each ``J_c`` the world Jacobian of the
+body's point at the contact, from Pinocchio's frame Jacobian), each force lies in its friction
+cone and presses (``f_n >= 0``, ``|f_t| <= mu f_n``, ``f_t`` in the ground's plane), no contact
+point sinks into a ground, and the points that carry a force touch it (force times gap zero).
+The scene's grounds and contact points are read again from its TOML file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio
+import tomllib
+
+
+@dataclass
+class Plane:
+    name: str
+    point: np.ndarray
+    normal: np.ndarray  # unit
+    friction: float
+
+
+@dataclass
+class Sphere:
+    name: str
+    frame: str
+    point: np.ndarray
+    radius: float
+
+
+def read_contacts(path: Path) -> tuple[list[Plane], list[Sphere]]:
+    """The grounds and contact points of a scene file, named as pinsettle names them."""
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    planes = []
+    for k, g in enumerate(data.get("ground", []), start=1):
+        n = np.array(g.get("normal", (0.0, 0.0, 1.0)), float)
+        planes.append(
+            Plane(
+                g.get("name", f"ground{k}"),
+                np.array(g.get("point", (0.0, 0.0, 0.0)), float),
+                n / np.linalg.norm(n),
+                float(g.get("friction", 0.5)),
+            )
+        )
+    spheres: list[Sphere] = []
+    for c in data.get("contact", []):
+        same = sum(1 for s in spheres if s.frame == c["frame"])
+        default = c["frame"] if same == 0 else f"{c['frame']}#{same + 1}"
+        spheres.append(
+            Sphere(
+                c.get("name", default),
+                c["frame"],
+                np.array(c.get("point", (0.0, 0.0, 0.0)), float),
+                float(c.get("radius", 0.0)),
+            )
+        )
+    return planes, spheres
+
+
+def point_jacobian(model, data, frame: str, x: np.ndarray) -> np.ndarray:
+    """3 x nv: the world velocity of the point of frame's body at the world point x."""
+    fid = model.getFrameId(frame)
+    J = pinocchio.getFrameJacobian(model, data, fid, pinocchio.LOCAL_WORLD_ALIGNED)
+    r = x - data.oMf[fid].translation
+    skew = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+    return J[:3] - skew @ J[3:]
+
+
+@dataclass
+class RestCheck:
+    balance: float  # |rnea(q, 0, 0) - sum J^T f|_inf (N m or N)
+    scale: float  # |rnea(q, 0, 0)|_inf
+    worst_cone: float  # max(|f_t| - mu f_n, -f_n, |f_t . n|) over the contacts (N)
+    min_gap: float  # over every point and ground (m)
+    worst_touch: float  # max |gap| of the contacts that carry a force (m)
+    total_normal: np.ndarray  # sum of f_n n (world, N)
+    total_tangential: np.ndarray  # sum of f_t (world, N)
+
+
+def check_rest(model, q, planes, spheres, contacts) -> RestCheck:
+    """The rest conditions at q with the reported contacts (pinsettle.Contact)."""
+    data = model.createData()
+    pinocchio.computeJointJacobians(model, data, q)
+    pinocchio.updateFramePlacements(model, data)
+    by_plane = {p.name: p for p in planes}
+    by_point = {s.name: s for s in spheres}
+    tau = pinocchio.rnea(model, data, q, np.zeros(model.nv), np.zeros(model.nv))
+    left = tau.copy()
+    worst_cone, worst_touch = -np.inf, 0.0
+    total_n, total_t = np.zeros(3), np.zeros(3)
+    for c in contacts:
+        plane, sphere = by_plane[c.ground], by_point[c.name]
+        centre = data.oMf[model.getFrameId(sphere.frame)].act(sphere.point)
+        x = centre - sphere.radius * plane.normal
+        gap = plane.normal @ (centre - plane.point) - sphere.radius
+        assert np.allclose(x, c.point, atol=1e-12) and abs(gap - c.gap) < 1e-12
+        f = c.normal_force * plane.normal + c.tangential_force
+        left -= point_jacobian(model, data, sphere.frame, x).T @ f
+        ft = np.linalg.norm(c.tangential_force)
+        worst_cone = max(
+            worst_cone,
+            ft - plane.friction * c.normal_force,
+            -c.normal_force,
+            abs(c.tangential_force @ plane.normal),
+        )
+        if c.normal_force > 0:
+            worst_touch = max(worst_touch, abs(gap))
+        total_n += c.normal_force * plane.normal
+        total_t += c.tangential_force
+    gaps = [
+        plane.normal @ (data.oMf[model.getFrameId(s.frame)].act(s.point) - plane.point) - s.radius
+        for s in spheres
+        for plane in planes
+    ]
+    return RestCheck(
+        float(np.max(np.abs(left))),
+        float(np.max(np.abs(tau))),
+        float(worst_cone),
+        float(min(gaps)),
+        float(worst_touch),
+        total_n,
+        total_t,
+    )

@@ -1,0 +1,199 @@
+"""Ground contacts: bodies coming to rest on planes with Coulomb friction.
+
+Every answer is checked with tests/contact_reference.py (the balance recomputed with
+Pinocchio's own Jacobians, the cones, the gaps) and against closed forms: a box on a floor
+carries m g / 4 at each corner; on a slope it sticks exactly when tan(theta) <= mu, with
+tangential force m g sin(theta); a sphere rolls down any slope and rests neutrally on a floor.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pinsettle
+import pytest
+from contact_reference import Plane, Sphere, check_rest, read_contacts
+
+ROBOTS = Path(__file__).parents[1] / "robots"
+CONTACT_SCENES = ["box_on_floor", "box_on_incline"]
+G = 9.81
+MASS = 1.0  # free_body.urdf
+CORNERS = [(x, y, -0.05) for x in (-0.1, 0.1) for y in (-0.05, 0.05)]
+
+
+def body_scene(
+    theta: float = 0.0, mu: float = 0.5, radius: float | None = None, lift: float = 0.02
+) -> pinsettle.Scene:
+    """free_body.urdf on a slope of theta (rad) about y: on its four bottom corners, or on a
+    sphere of `radius` at its centre. It starts level with the slope, `lift` (m) above it."""
+    scene = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    normal = (-math.sin(theta), 0.0, math.cos(theta))
+    scene.add_ground(normal=normal, friction=mu, name="slope")
+    if radius is None:
+        for corner in CORNERS:
+            scene.add_contact("body", corner)
+        height = 0.05 + lift
+    else:
+        scene.add_contact("body", radius=radius)
+        height = radius + lift
+    w, y = math.cos(-theta / 2), math.sin(-theta / 2)
+    scene.set_start(root_joint=[*(height * np.array(normal)), w, 0.0, y, 0.0])
+    return scene
+
+
+def parts(scene: pinsettle.Scene) -> tuple[list[Plane], list[Sphere]]:
+    planes = [
+        Plane(g.name, np.array(g.point), np.array(g.normal), g.friction) for g in scene.grounds
+    ]
+    spheres = [Sphere(c.name, c.frame, np.array(c.point), c.radius) for c in scene.contacts]
+    return planes, spheres
+
+
+def assert_rest(scene: pinsettle.Scene, result: pinsettle.Result, planes=None, spheres=None):
+    """The rest conditions, independently: balance to round-off, forces in their cones,
+    nothing sunk in, the loaded points touching."""
+    if planes is None:
+        planes, spheres = parts(scene)
+    assert result.status == "converged", result.reason
+    check = check_rest(scene.model, result.q, planes, spheres, result.contacts)
+    assert check.balance <= 1e-9 * check.scale
+    assert check.worst_cone <= 1e-9 * check.scale
+    assert check.min_gap >= -1e-6
+    assert check.worst_touch <= 1e-6
+    assert result.kinetic_energy <= result.settings.max_e
+    return check
+
+
+@pytest.mark.parametrize("name", CONTACT_SCENES)
+def test_library_scene_rests_with_its_forces_balanced(name):
+    path = ROBOTS / f"{name}.toml"
+    scene = pinsettle.load_scene(path)
+    result = pinsettle.solve(scene)
+    planes, spheres = read_contacts(path)
+    check = assert_rest(scene, result, planes, spheres)
+    assert result.stability == "stable"
+    # The ground carries the weight.
+    weight = MASS * G * np.array([0.0, 0.0, 1.0])
+    assert np.allclose(check.total_normal + check.total_tangential, weight, rtol=1e-9, atol=1e-12)
+    assert result.residual <= 1e-9 * check.scale
+
+
+def test_box_on_a_floor_carries_a_quarter_of_its_weight_at_each_corner():
+    result = pinsettle.solve(pinsettle.load_scene(ROBOTS / "box_on_floor.toml"))
+    assert len(result.contacts) == 4
+    for c in result.contacts:
+        assert c.normal_force == pytest.approx(MASS * G / 4, rel=1e-9)
+        assert np.linalg.norm(c.tangential_force) <= 1e-9
+        assert c.sticking
+    # Its centre 0.05 m above the floor, level.
+    assert result.q[2] == pytest.approx(0.05, abs=1e-6)
+    assert abs(result.q[6]) == pytest.approx(1.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("tan_theta", [0.0, 0.2, 0.45, 0.49])
+def test_box_sticks_on_a_slope_no_steeper_than_the_friction_allows(tan_theta):
+    theta = math.atan(tan_theta)
+    scene = body_scene(theta, mu=0.5)
+    result = pinsettle.solve(scene)
+    check = assert_rest(scene, result)
+    n = np.array([-math.sin(theta), 0.0, math.cos(theta)])
+    assert check.total_normal == pytest.approx(MASS * G * math.cos(theta) * n, abs=1e-9)
+    # Up the slope, m g sin(theta).
+    up = np.array([math.cos(theta), 0.0, math.sin(theta)])
+    assert check.total_tangential == pytest.approx(MASS * G * math.sin(theta) * up, abs=1e-9)
+    assert all(c.sticking for c in result.contacts) or tan_theta == 0.0
+    assert result.stability == "stable"
+
+
+@pytest.mark.parametrize("tan_theta", [0.55, 1.0])
+def test_box_slides_down_a_slope_steeper_than_the_friction_allows(tan_theta):
+    result = pinsettle.solve(body_scene(math.atan(tan_theta), mu=0.5))
+    assert result.status == "no_equilibrium"
+    assert "root_joint" in result.reason
+    # It went down the slope (-x).
+    assert result.q[0] < -1.0
+
+
+def test_sphere_on_a_floor_is_neutral():
+    scene = body_scene(0.0, radius=0.05)
+    result = pinsettle.solve(scene)
+    check = assert_rest(scene, result)
+    assert result.stability == "neutral"
+    # Rolling about its contact point in two directions, turning about the normal.
+    assert result.neutral_directions == 3
+    assert check.total_normal == pytest.approx([0.0, 0.0, MASS * G], abs=1e-9)
+
+
+@pytest.mark.parametrize("mu", [0.2, 1.0])
+def test_sphere_rolls_down_any_slope(mu):
+    result = pinsettle.solve(body_scene(0.2, mu=mu, radius=0.05))
+    assert result.status == "no_equilibrium"
+    assert result.q[0] < -1.0
+
+
+def test_the_rest_on_a_slope_does_not_depend_on_the_drop_height_when_it_sticks_at_once():
+    # Level with the slope, all four corners land together and stick at the impact (the
+    # impulse's tangential share is within the cone when tan(theta) <= mu): the box rests
+    # where it lands, straight below its start along the slope's normal.
+    theta = math.atan(0.3)
+    for lift in (0.0, 0.02):
+        result = pinsettle.solve(body_scene(theta, lift=lift))
+        n = np.array([-math.sin(theta), 0.0, math.cos(theta)])
+        assert result.status == "converged"
+        assert result.q[:3] @ n == pytest.approx(0.05, abs=1e-6)
+
+
+# --- bad input -----------------------------------------------------------------------------
+
+
+def test_ground_errors_name_the_parameter():
+    scene = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    with pytest.raises(pinsettle.SceneError, match="normal must have a non-zero length"):
+        scene.add_ground(normal=(0.0, 0.0, 0.0))
+    with pytest.raises(pinsettle.SceneError, match="friction"):
+        scene.add_ground(friction=-0.1)
+    with pytest.raises(pinsettle.SceneError, match="point"):
+        scene.add_ground(point=(0.0, float("nan"), 0.0))
+    scene.add_ground(name="floor")
+    with pytest.raises(pinsettle.SceneError, match="new ground's name"):
+        scene.add_ground(name="floor")
+
+
+def test_contact_errors_name_the_parameter():
+    scene = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    with pytest.raises(pinsettle.SceneError, match="frame.*'bdy'"):
+        scene.add_contact("bdy")
+    with pytest.raises(pinsettle.SceneError, match="radius"):
+        scene.add_contact("body", radius=-0.01)
+    with pytest.raises(pinsettle.SceneError, match="fixed to the world"):
+        scene.add_contact("universe")
+
+
+def test_contacts_without_a_ground_are_an_error():
+    scene = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    scene.add_contact("body")
+    with pytest.raises(pinsettle.SceneError, match=r"no \[\[ground\]\]"):
+        pinsettle.solve(scene)
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ("[[ground]]\nnormal = [0, 0, 0]", r"\[\[ground\]\] #1.*normal"),
+        ("[[ground]]\nfriction = -1", r"\[\[ground\]\] #1.*friction"),
+        ("[[ground]]\nmu = 0.5", r"\[\[ground\]\] #1.*mu"),
+        ('[[ground]]\n[[contact]]\nframe = "nope"', r"\[\[contact\]\] #1.*nope"),
+        ("[[ground]]\n[[contact]]\npoint = [0, 0, 0]", r"\[\[contact\]\] #1.*frame"),
+    ],
+)
+def test_scene_file_errors_name_the_table_and_key(tmp_path, table, message):
+    text = (ROBOTS / "free_fall.toml").read_text(encoding="utf-8")
+    path = tmp_path / "scene.toml"
+    (tmp_path / "free_body.urdf").write_text(
+        (ROBOTS / "free_body.urdf").read_text(encoding="utf-8"), encoding="utf-8"
+    )
+    path.write_text(text + "\n" + table + "\n", encoding="utf-8")
+    with pytest.raises(pinsettle.SceneError, match=message):
+        pinsettle.load_scene(path)

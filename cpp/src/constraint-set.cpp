@@ -13,6 +13,7 @@
 
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace pinsettle
 {
@@ -35,7 +36,7 @@ namespace pinsettle
         throw std::invalid_argument(
           "contacts: ground contacts together with loops or joint couplings are not supported "
           "yet; remove the loops or the contacts");
-      contact_stepper_.reset(new ContactStepper(*contacts_));
+      contact_stepper_.reset(new ContactStepper(*contacts_, stops_));
     }
     if (loops_ != nullptr)
     {
@@ -47,7 +48,9 @@ namespace pinsettle
     {
       if (&stops_->model() != &model)
         throw std::invalid_argument("stops: they were made for another model than the solver's");
-      hold_.reset(new StopHold(*stops_, loops_));
+      // With contacts the stops are rows of the contacts' impulse solve, not held apart.
+      if (contacts_ == nullptr)
+        hold_.reset(new StopHold(*stops_, loops_));
       if (stepper_)
         stepper_->useStops(stops_);
       hits_.reserve(stops_->stops().size());
@@ -132,11 +135,7 @@ namespace pinsettle
     pinocchio::Data & data, const Eigen::VectorXd & q, const Eigen::VectorXd & tau) const
   {
     if (contacts_ != nullptr)
-    {
-      // The stops take what the contacts leave (a joint on its stop may press into it).
-      const ContactBalance balance = balanceContacts(model_, data, *contacts_, q, tau);
-      return stops_ != nullptr ? computeStopResidual(*stops_, q, balance.left) : balance.residual;
-    }
+      return balanceContacts(model_, data, *contacts_, q, tau, stops_).residual;
     if (stops_ != nullptr && loops_ != nullptr)
       return balanceStops(model_, data, *loops_, *stops_, q, tau).residual;
     if (stops_ != nullptr)
@@ -148,7 +147,7 @@ namespace pinsettle
     pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const
   {
     if (contacts_ != nullptr)
-      return pinsettle::assessStability(model_, data, *contacts_, q, forces);
+      return pinsettle::assessStability(model_, data, *contacts_, q, forces, stops_);
     if (loops_ != nullptr && stops_ != nullptr)
       return pinsettle::assessStability(model_, data, *loops_, *stops_, q, forces);
     if (loops_ != nullptr)
@@ -176,10 +175,9 @@ namespace pinsettle
         computeLoopError(model_, data, *loops_, q).lpNorm<Eigen::Infinity>();
     if (contacts_ != nullptr)
     {
-      result.ground_contacts = describeContacts(model_, data, *contacts_, q, tau);
-      if (stops_ != nullptr)
-        result.stop_contacts =
-          computeStopContacts(*stops_, q, balanceContacts(model_, data, *contacts_, q, tau).left);
+      ContactBalance balance = balanceContacts(model_, data, *contacts_, q, tau, stops_);
+      result.ground_contacts = describeContacts(model_, data, *contacts_, q, balance);
+      result.stop_contacts = std::move(balance.stops);
     }
     else if (stops_ != nullptr && loops_ != nullptr)
       result.stop_contacts = balanceStops(model_, data, *loops_, *stops_, q, tau).contacts;

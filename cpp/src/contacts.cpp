@@ -189,6 +189,12 @@ namespace pinsettle
       double change = 0.;
       for (Eigen::Index k = 0; k < friction.size(); ++k)
         change = std::max(change, updateContact(G, b, friction[k], 3 * k, lambda));
+      for (Eigen::Index r = 3 * friction.size(); r < lambda.size(); ++r)
+      {
+        const double old = lambda[r];
+        lambda[r] = G(r, r) > 0. ? std::max(0., old - (G.row(r).dot(lambda) + b[r]) / G(r, r)) : 0.;
+        change = std::max(change, std::abs(lambda[r] - old));
+      }
       if (change <= 1e-11 * lambda.lpNorm<Eigen::Infinity>() || change == 0.)
         return sweep;
     }
@@ -197,16 +203,19 @@ namespace pinsettle
 
   // --- The step ---------------------------------------------------------------------------------
 
-  ContactStepper::ContactStepper(const GroundContacts & contacts)
+  ContactStepper::ContactStepper(const GroundContacts & contacts, const JointStops * stops)
   : contacts_(contacts)
+  , stops_(stops)
   {
-    const int rows = 3 * contacts.pairs();
+    const int stop_rows = stops != nullptr ? static_cast<int>(stops->stops().size()) : 0;
+    stop_gap_.resize(stop_rows);
+    const int rows = 3 * contacts.pairs() + stop_rows;
     const int nv = contacts.model().nv;
     geometry_.gap.resize(contacts.pairs());
     geometry_.point.resize(3, contacts.pairs());
-    geometry_.jacobian.resize(rows, nv);
+    geometry_.jacobian.resize(3 * contacts.pairs(), nv);
     active_.reserve(contacts.pairs());
-    force_ = Eigen::VectorXd::Zero(rows);
+    force_ = Eigen::VectorXd::Zero(3 * contacts.pairs());
     Ja_.resize(rows, nv);
     Y_.resize(nv, rows);
     G_.resize(rows, rows);
@@ -243,9 +252,10 @@ namespace pinsettle
       else
         force_.segment<3>(3 * p).setZero();
     }
-    if (active_.empty())
-      return;
     const Eigen::Index a = static_cast<Eigen::Index>(active_.size());
+    const Eigen::Index rows = addStopRows(q, h, 3 * a);
+    if (rows == 0)
+      return;
     for (Eigen::Index k = 0; k < a; ++k)
     {
       const int p = active_[static_cast<std::size_t>(k)];
@@ -253,24 +263,27 @@ namespace pinsettle
       mu_[k] = contacts_.planes()[static_cast<std::size_t>(p % planes)].friction;
       lambda_.segment<3>(3 * k) = h * force_.segment<3>(3 * p);
     }
-    const auto J = Ja_.topRows(3 * a);
-    const auto Y = Y_.leftCols(3 * a);
-    const auto G = G_.topLeftCorner(3 * a, 3 * a);
-    auto b = b_.head(3 * a);
-    auto lambda = lambda_.head(3 * a);
+    lambda_.segment(3 * a, rows - 3 * a).setZero();
+    const auto J = Ja_.topRows(rows);
+    const auto Y = Y_.leftCols(rows);
+    const auto G = G_.topLeftCorner(rows, rows);
+    auto b = b_.head(rows);
+    auto lambda = lambda_.head(rows);
     prebuilt::crba(model, data, q);
     data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose();
     llt_.compute(data.M);
-    Y_.leftCols(3 * a) = J.transpose();
-    llt_.matrixL().solveInPlace(Y_.leftCols(3 * a));
-    G_.topLeftCorner(3 * a, 3 * a).noalias() = Y.transpose() * Y;
+    Y_.leftCols(rows) = J.transpose();
+    llt_.matrixL().solveInPlace(Y_.leftCols(rows));
+    G_.topLeftCorner(rows, rows).noalias() = Y.transpose() * Y;
     b.noalias() = J * vfree_;
+    // Open: close the gap in this step and no more; sunk in (round-off, a stop's clamp): come
+    // out within the step. Coming out by a fifth per step left go1's feet 1e-5 m deep when
+    // the damping had taken the energy below its limit.
+    const auto closing = [h](double gap) { return gap / h; };
     for (Eigen::Index k = 0; k < a; ++k)
-    {
-      // Open: close the gap in this step and no more; sunk in: come out by a fifth per step.
-      const double gap = geometry_.gap[active_[static_cast<std::size_t>(k)]];
-      b[3 * k + 2] += gap > 0. ? gap / h : 0.2 * gap / h;
-    }
+      b[3 * k + 2] += closing(geometry_.gap[active_[static_cast<std::size_t>(k)]]);
+    for (Eigen::Index r = 3 * a; r < rows; ++r)
+      b[r] += closing(stop_gap_[r - 3 * a]);
     solveContactImpulses(G, b, mu_.head(a), lambda);
     dv_.noalias() = Y * lambda;
     llt_.matrixU().solveInPlace(dv_);
@@ -279,23 +292,33 @@ namespace pinsettle
       force_.segment<3>(3 * active_[static_cast<std::size_t>(k)]) = lambda.segment<3>(3 * k) / h;
   }
 
+  Eigen::Index ContactStepper::addStopRows(const Eigen::VectorXd & q, double h, Eigen::Index row)
+  {
+    if (stops_ == nullptr)
+      return row;
+    const Eigen::Index first = row;
+    for (const JointStops::Stop & s : stops_->stops())
+    {
+      const double to_lower = q[s.iq] - s.lower, to_upper = s.upper - q[s.iq];
+      double sign = 0., gap = 0.;
+      if (to_lower + h * std::min(0., vfree_[s.iv]) <= 0.)
+        sign = 1., gap = to_lower;
+      else if (to_upper + h * std::min(0., -vfree_[s.iv]) <= 0.)
+        sign = -1., gap = to_upper;
+      else
+        continue;
+      Ja_.row(row).setZero();
+      Ja_(row, s.iv) = sign;
+      stop_gap_[row - first] = gap;
+      ++row;
+    }
+    return row;
+  }
+
   // --- A rest -----------------------------------------------------------------------------------
 
   namespace
   {
-    // Least-norm forces of the pairs in `pairs` with J^T f = tau, by least squares.
-    Eigen::VectorXd leastNormForces(
-      const ContactGeometry & geometry, const std::vector<int> & pairs, const Eigen::VectorXd & tau)
-    {
-      Eigen::MatrixXd A(tau.size(), 3 * static_cast<Eigen::Index>(pairs.size()));
-      for (std::size_t k = 0; k < pairs.size(); ++k)
-        A.middleCols<3>(3 * static_cast<Eigen::Index>(k)) =
-          geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose();
-      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A);
-      cod.setThreshold(1e-10);
-      return cod.solve(tau);
-    }
-
     bool insideCones(
       const GroundContacts & contacts, const std::vector<int> & pairs, const Eigen::VectorXd & f)
     {
@@ -348,12 +371,90 @@ namespace pinsettle
     }
   } // namespace
 
+  namespace
+  {
+    // A joint on its stop at a rest: its reaction is one more unknown, sign e_iv its column.
+    struct StopSupport
+    {
+      const JointStops::Stop * stop;
+      StopSide side;
+      double sign() const
+      {
+        return side == StopSide::Lower ? 1. : -1.;
+      }
+    };
+
+    std::vector<StopSupport> stopsReached(const JointStops * stops, const Eigen::VectorXd & q)
+    {
+      std::vector<StopSupport> on;
+      if (stops != nullptr)
+        for (const JointStops::Stop & s : stops->stops())
+        {
+          if (q[s.iq] <= s.lower)
+            on.push_back(StopSupport{&s, StopSide::Lower});
+          else if (q[s.iq] >= s.upper)
+            on.push_back(StopSupport{&s, StopSide::Upper});
+        }
+      return on;
+    }
+
+    // Least-norm forces of the pairs and reactions of the stops with J^T f + E r = tau, by
+    // least squares: 3 per pair, then 1 per stop.
+    Eigen::VectorXd leastNormSupport(
+      const ContactGeometry & geometry,
+      const std::vector<int> & pairs,
+      const std::vector<StopSupport> & on,
+      const Eigen::VectorXd & tau)
+    {
+      const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
+      if (p == 0 && on.empty())
+        return Eigen::VectorXd(0); // nothing supports: Eigen's decomposition of no column fails
+      Eigen::MatrixXd A =
+        Eigen::MatrixXd::Zero(tau.size(), p + static_cast<Eigen::Index>(on.size()));
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+        A.middleCols<3>(3 * static_cast<Eigen::Index>(k)) =
+          geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose();
+      for (std::size_t k = 0; k < on.size(); ++k)
+        A(on[k].stop->iv, p + static_cast<Eigen::Index>(k)) = on[k].sign();
+      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A);
+      cod.setThreshold(1e-10);
+      return cod.solve(tau);
+    }
+
+    // The support that pulls hardest (a normal force or a stop's reaction below -tiny), let go
+    // of: whether there was one.
+    bool releasePulling(
+      const Eigen::VectorXd & x,
+      std::vector<int> & pairs,
+      std::vector<StopSupport> & on,
+      double tiny)
+    {
+      const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
+      Eigen::Index worst = -1;
+      double least = -tiny;
+      for (Eigen::Index k = 0; k < static_cast<Eigen::Index>(pairs.size()); ++k)
+        if (x[3 * k + 2] < least)
+          least = x[3 * k + 2], worst = k;
+      for (Eigen::Index k = 0; k < static_cast<Eigen::Index>(on.size()); ++k)
+        if (x[p + k] < least)
+          least = x[p + k], worst = static_cast<Eigen::Index>(pairs.size()) + k;
+      if (worst < 0)
+        return false;
+      if (worst < static_cast<Eigen::Index>(pairs.size()))
+        pairs.erase(pairs.begin() + worst);
+      else
+        on.erase(on.begin() + (worst - static_cast<Eigen::Index>(pairs.size())));
+      return true;
+    }
+  } // namespace
+
   ContactBalance balanceContacts(
     const pinocchio::Model & model,
     pinocchio::Data & data,
     const GroundContacts & contacts,
     const Eigen::VectorXd & q,
-    const Eigen::VectorXd & tau)
+    const Eigen::VectorXd & tau,
+    const JointStops * stops)
   {
     ContactBalance balance;
     balance.force = Eigen::VectorXd::Zero(3 * contacts.pairs());
@@ -362,23 +463,25 @@ namespace pinsettle
     for (int p = 0; p < contacts.pairs(); ++p)
       if (geometry.gap[p] <= kContactGapTolerance)
         balance.closed.push_back(p);
-    // Active set: a pair the least-norm balance would pull on opens, one at a time.
+    // Active set: a support the least-norm balance would pull on lets go, one at a time.
     std::vector<int> pairs = balance.closed;
-    Eigen::VectorXd f;
+    std::vector<StopSupport> on = stopsReached(stops, q);
+    Eigen::VectorXd x;
     const double tiny = 1e-12 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
-    while (!pairs.empty())
+    do
+      x = leastNormSupport(geometry, pairs, on, tau);
+    while (releasePulling(x, pairs, on, tiny));
+    const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
+    Eigen::VectorXd f = x.head(p);
+    Eigen::VectorXd on_contacts = tau; // what the stops leave to the contacts
+    for (std::size_t k = 0; k < on.size(); ++k)
     {
-      f = leastNormForces(geometry, pairs, tau);
-      Eigen::Index worst = -1;
-      for (Eigen::Index k = 0; k < static_cast<Eigen::Index>(pairs.size()); ++k)
-        if (f[3 * k + 2] < -tiny && (worst < 0 || f[3 * k + 2] < f[3 * worst + 2]))
-          worst = k;
-      if (worst < 0)
-        break;
-      pairs.erase(pairs.begin() + worst);
+      const double r = x[p + static_cast<Eigen::Index>(k)];
+      on_contacts[on[k].stop->iv] -= on[k].sign() * r;
+      balance.stops.push_back(StopContact{on[k].stop->joint, on[k].side, r});
     }
     const auto unbalanced = [&](const Eigen::VectorXd & forces) {
-      Eigen::VectorXd left = tau;
+      Eigen::VectorXd left = on_contacts;
       for (std::size_t k = 0; k < pairs.size(); ++k)
         left.noalias() -= geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose()
                           * forces.segment<3>(3 * static_cast<Eigen::Index>(k));
@@ -390,9 +493,9 @@ namespace pinsettle
       // cone where other shares stay inside every cone (a box on a slope, its upper corners):
       // first cones shrunk by 1 %, whose answer sticks, else the cones themselves.
       const Eigen::VectorXd start = f;
-      f = conicForces(model, data, contacts, q, geometry, pairs, tau, 0.99, start);
+      f = conicForces(model, data, contacts, q, geometry, pairs, on_contacts, 0.99, start);
       if (!(unbalanced(f).lpNorm<Eigen::Infinity>() <= 1e-10 * tau.lpNorm<Eigen::Infinity>()))
-        f = conicForces(model, data, contacts, q, geometry, pairs, tau, 1., start);
+        f = conicForces(model, data, contacts, q, geometry, pairs, on_contacts, 1., start);
     }
     for (std::size_t k = 0; k < pairs.size(); ++k)
       balance.force.segment<3>(3 * pairs[k]) = f.segment<3>(3 * static_cast<Eigen::Index>(k));
@@ -447,6 +550,34 @@ namespace pinsettle
         ++rank;
       return svd.matrixV().rightCols(nv - rank);
     }
+    // The contact forces' stiffness d(J^T f)/dq along the motions N (dim nv x N.cols()), f held
+    // on the rows; the rows follow the gap function (the contact point moves over a sphere as
+    // it turns), by central differences.
+    Eigen::MatrixXd contactForceStiffness(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const GroundContacts & contacts,
+      const Eigen::VectorXd & q,
+      const std::vector<Eigen::Index> & rows,
+      const Eigen::VectorXd & f,
+      const Eigen::MatrixXd & N)
+    {
+      const double h = 1e-6;
+      Eigen::MatrixXd C(model.nv, N.cols());
+      Eigen::VectorXd q_plus(model.nq), q_minus(model.nq);
+      ContactGeometry plus, minus;
+      for (Eigen::Index k = 0; k < N.cols(); ++k)
+      {
+        pinocchio::integrate(model, q, (h * N.col(k)).eval(), q_plus);
+        pinocchio::integrate(model, q, (-h * N.col(k)).eval(), q_minus);
+        computeContactGeometry(model, data, contacts, q_plus, plus);
+        computeContactGeometry(model, data, contacts, q_minus, minus);
+        C.col(k) = (selectRows(plus.jacobian, rows).transpose() * f
+                    - selectRows(minus.jacobian, rows).transpose() * f)
+                   / (2. * h);
+      }
+      return C;
+    }
   } // namespace
 
   StabilityReport assessStability(
@@ -454,15 +585,25 @@ namespace pinsettle
     pinocchio::Data & data,
     const GroundContacts & contacts,
     const Eigen::VectorXd & q,
-    const ForceModel * forces)
+    const ForceModel * forces,
+    const JointStops * stops)
   {
     const Eigen::VectorXd tau = computeStaticForce(model, data, q, forces);
-    const ContactBalance balance = balanceContacts(model, data, contacts, q, tau);
+    const ContactBalance balance = balanceContacts(model, data, contacts, q, tau, stops);
     const double tiny = 1e-9 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
     const std::vector<Eigen::Index> rows = heldRows(contacts, balance, tiny);
     ContactGeometry geometry;
     computeContactGeometry(model, data, contacts, q, geometry);
-    const Eigen::MatrixXd N = nullSpace(selectRows(geometry.jacobian, rows), model.nv);
+    // The joints pressed on a stop are held too (their rows have no curvature).
+    Eigen::MatrixXd Jh = selectRows(geometry.jacobian, rows);
+    for (const StopContact & c : balance.stops)
+      if (c.reaction > tiny)
+      {
+        Jh.conservativeResize(Jh.rows() + 1, Eigen::NoChange);
+        Jh.row(Jh.rows() - 1).setZero();
+        Jh(Jh.rows() - 1, model.idx_vs[c.joint]) = 1.;
+      }
+    const Eigen::MatrixXd N = nullSpace(Jh, model.nv);
     if (N.cols() == 0)
     {
       // Held in every motion by contacts that press: a push lifts the body off them.
@@ -474,23 +615,8 @@ namespace pinsettle
     Eigen::VectorXd f(static_cast<Eigen::Index>(rows.size()));
     for (std::size_t k = 0; k < rows.size(); ++k)
       f[static_cast<Eigen::Index>(k)] = balance.force[rows[k]];
-    // The contact forces' stiffness d(J^T f)/dq along the free motions, f held; the rows follow
-    // the gap function (the contact point moves over a sphere as it turns).
     const Eigen::MatrixXd K = computeStiffnessMatrix(model, data, q, forces);
-    const double h = 1e-6;
-    Eigen::MatrixXd C(model.nv, N.cols());
-    Eigen::VectorXd q_plus(model.nq), q_minus(model.nq);
-    ContactGeometry plus, minus;
-    for (Eigen::Index k = 0; k < N.cols(); ++k)
-    {
-      pinocchio::integrate(model, q, (h * N.col(k)).eval(), q_plus);
-      pinocchio::integrate(model, q, (-h * N.col(k)).eval(), q_minus);
-      computeContactGeometry(model, data, contacts, q_plus, plus);
-      computeContactGeometry(model, data, contacts, q_minus, minus);
-      C.col(k) = (selectRows(plus.jacobian, rows).transpose() * f
-                  - selectRows(minus.jacobian, rows).transpose() * f)
-                 / (2. * h);
-    }
+    const Eigen::MatrixXd C = contactForceStiffness(model, data, contacts, q, rows, f, N);
     const Eigen::MatrixXd KN = K * N;
     const Eigen::MatrixXd reduced = N.transpose() * (KN - C);
     // Where gravity's stiffness and the contacts' cancel (a ball on a floor), what is left is
@@ -508,9 +634,8 @@ namespace pinsettle
     pinocchio::Data & data,
     const GroundContacts & contacts,
     const Eigen::VectorXd & q,
-    const Eigen::VectorXd & tau)
+    const ContactBalance & balance)
   {
-    const ContactBalance balance = balanceContacts(model, data, contacts, q, tau);
     ContactGeometry geometry;
     computeContactGeometry(model, data, contacts, q, geometry);
     std::vector<GroundContact> out;

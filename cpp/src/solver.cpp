@@ -240,7 +240,7 @@ namespace pinsettle
   , constraints_(model, loops, stops, contacts)
   , work_(model)
   , window_(1, 0.)
-  , step_control_(model, constraints_.loops())
+  , step_control_(model, constraints_.loops(), constraints_.allowsStiffModeScaling())
   {
   }
 

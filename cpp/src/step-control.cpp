@@ -54,9 +54,11 @@ namespace pinsettle
     return added;
   }
 
-  StepController::StepController(const pinocchio::Model & model, const LoopConstraints * loops)
+  StepController::StepController(
+    const pinocchio::Model & model, const LoopConstraints * loops, bool stiff_modes)
   : model_(model)
   , loops_(loops)
+  , stiff_modes_allowed_(stiff_modes)
   , q_estimate_(model.nq)
   , moved_(model.nv)
   , a_(model.nv)
@@ -79,7 +81,7 @@ namespace pinsettle
       joint_inertia_.resize(0);
     forces_ = forces;
     automatic_ = settings.dt == 0.;
-    scale_stiff_modes_ = settings.scale_stiff_modes;
+    scale_stiff_modes_ = settings.scale_stiff_modes && stiff_modes_allowed_;
     dt_safety_ = effectiveDtSafety(settings);
     dt_ = settings.dt;
     h_ = dt_;

@@ -81,6 +81,13 @@ namespace pinsettle
     std::string explainFreeFall(
       pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const;
 
+    /// Whether the step may slow stiff modes (StepController): not with ground contacts, whose
+    /// impulses are solved in the mechanism's own mass matrix.
+    bool allowsStiffModeScaling() const
+    {
+      return contacts_ == nullptr;
+    }
+
     // --- The start of a run -------------------------------------------------------------------
 
     ///

@@ -6,6 +6,7 @@
 #define __pinsettle_contacts_hpp__
 
 #include "pinsettle/stability.hpp"
+#include "pinsettle/stops.hpp"
 
 #include <Eigen/Cholesky>
 
@@ -152,13 +153,14 @@ namespace pinsettle
 
   ///
   /// \brief Solve the contact impulses of a step: lambda in the friction cones (three per
-  /// active pair, ordered t1, t2, n) with the contact velocities u = G lambda + b
-  /// complementary to them (projected Gauss-Seidel, started from lambda).
+  /// active pair, ordered t1, t2, n), then one >= 0 per frictionless unilateral row (a joint
+  /// on its stop), with the velocities u = G lambda + b complementary to them (projected
+  /// Gauss-Seidel, started from lambda).
   ///
-  /// \param[in] G Delassus matrix J M^-1 J^T of the active rows (dim 3a x 3a).
-  /// \param[in] b Contact velocities without impulses, the gap terms included (dim 3a).
+  /// \param[in] G Delassus matrix J M^-1 J^T of the active rows (dim 3a + s).
+  /// \param[in] b Velocities without impulses, the gap terms included (dim 3a + s).
   /// \param[in] friction Coefficient of each active pair (dim a).
-  /// \param[in,out] lambda Impulses (dim 3a, N s): the start in, the answer out.
+  /// \param[in,out] lambda Impulses (dim 3a + s, N s or N m s): the start in, the answer out.
   /// \return The number of sweeps.
   ///
   int solveContactImpulses(
@@ -174,11 +176,15 @@ namespace pinsettle
   ///
   /// Pairs that cannot close within the step (gap + h min(0, u_n) > 0) are left out; without
   /// any, the step costs one computeJointJacobians. The impulses start from the last step's.
+  /// With joint stops, the joints that reach a stop within the step are one more unilateral
+  /// row each in the same solve (a stop held apart from the contacts undid their impulses:
+  /// go1 with its motors off sank into the floor).
   ///
   class ContactStepper
   {
   public:
-    explicit ContactStepper(const GroundContacts & contacts);
+    /// \param[in] stops Joint stops solved with the contacts, or nullptr.
+    ContactStepper(const GroundContacts & contacts, const JointStops * stops);
 
     /// Forget the last step's impulses (the start of a run).
     void start();
@@ -198,18 +204,27 @@ namespace pinsettle
       double h);
 
   private:
+    // The stops reached within the step: their rows after the contacts' (sign: +1 at a lower
+    // stop, -1 at an upper one).
+    Eigen::Index addStopRows(const Eigen::VectorXd & q, double h, Eigen::Index row);
+
     const GroundContacts & contacts_;
+    const JointStops * stops_;
     ContactGeometry geometry_;
     std::vector<int> active_;
     Eigen::VectorXd force_; // of each pair at the last step (N), 3 pairs()
     Eigen::MatrixXd Ja_, Y_, G_;
     Eigen::VectorXd b_, lambda_, mu_, vfree_, dv_;
+    Eigen::VectorXd stop_gap_; // of each stop row of the step (rad or m)
     Eigen::LLT<Eigen::MatrixXd> llt_;
   };
 
-  /// \brief The contact forces that balance a static force at a rest, and what is left.
+  /// \brief The contact forces (and the stops' reactions) that balance a static force at a
+  /// rest, and what is left.
   struct ContactBalance
   {
+    /// The joints on a stop with their reactions (>= 0), with stops.
+    std::vector<StopContact> stops;
     /// One per pair (pairs()), 3 rows (t1, t2, n) each (N): J^T f balances tau (the static
     /// force, gravity minus the applied efforts).
     Eigen::VectorXd force;
@@ -229,27 +244,30 @@ namespace pinsettle
   /// gravity and the applied efforts, dim model.nv): among the forces of the closed pairs that
   /// balance tau, in their friction cones and pressing, the one of least norm (for a support of
   /// more points than a rigid body needs, the rigid model leaves the share open: least norm
-  /// shares it evenly where symmetry does).
+  /// shares it evenly where symmetry does). With stops, the reactions of the joints on a stop
+  /// (pushing, >= 0) are solved for with them.
   ///
   ContactBalance balanceContacts(
     const pinocchio::Model & model,
     pinocchio::Data & data,
     const GroundContacts & contacts,
     const Eigen::VectorXd & q,
-    const Eigen::VectorXd & tau);
+    const Eigen::VectorXd & tau,
+    const JointStops * stops = nullptr);
 
   ///
   /// \brief Stability of a rest on the ground: the sticking contacts that carry a force held as
   /// bilateral, the stiffness (with the contact forces' own, from the gap function, so that a
-  /// ball on a floor is neutral) restricted to the motions they leave free. With every motion
-  /// held, stable.
+  /// ball on a floor is neutral) restricted to the motions they leave free, and those of the
+  /// joints pressed on a stop. With every motion held, stable.
   ///
   StabilityReport assessStability(
     const pinocchio::Model & model,
     pinocchio::Data & data,
     const GroundContacts & contacts,
     const Eigen::VectorXd & q,
-    const ForceModel * forces);
+    const ForceModel * forces,
+    const JointStops * stops = nullptr);
 
   ///
   /// \brief The contacts at a rest, for the result: each closed pair with its forces and gap.
@@ -259,7 +277,7 @@ namespace pinsettle
     pinocchio::Data & data,
     const GroundContacts & contacts,
     const Eigen::VectorXd & q,
-    const Eigen::VectorXd & tau);
+    const ContactBalance & balance);
 
 } // namespace pinsettle
 

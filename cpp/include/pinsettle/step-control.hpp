@@ -92,7 +92,10 @@ namespace pinsettle
 
     /// \param[in] loops Loop closures of the model (they must outlive the controller), or
     ///            nullptr.
-    StepController(const pinocchio::Model & model, const LoopConstraints * loops);
+    /// \param[in] stiff_modes Whether the constraints let stiff modes be slowed (not with
+    ///            ground contacts: their impulses use the mass matrix, not the slowed modes').
+    StepController(
+      const pinocchio::Model & model, const LoopConstraints * loops, bool stiff_modes = true);
 
     ///
     /// \brief Start a run with the settings' step (a fixed one, or none yet for the automatic
@@ -230,6 +233,7 @@ namespace pinsettle
 
     const pinocchio::Model & model_;
     const LoopConstraints * loops_;
+    bool stiff_modes_allowed_;
     const ForceModel * forces_ = nullptr;
     bool automatic_ = false, scale_stiff_modes_ = false;
     double dt_safety_ = 0., dt_ = 0., h_ = 0., step_scale_ = 1.;

@@ -34,6 +34,15 @@ class Sphere:
     radius: float
 
 
+def read_joint_springs(path: Path) -> list[tuple[str, float, float]]:
+    """The scene's joint springs: (joint, stiffness, rest)."""
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    return [
+        (s["joint"], float(s["stiffness"]), float(s.get("rest", 0.0)))
+        for s in data.get("joint_spring", [])
+    ]
+
+
 def read_contacts(path: Path) -> tuple[list[Plane], list[Sphere]]:
     """The grounds and contact points of a scene file, named as pinsettle names them."""
     data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -83,15 +92,27 @@ class RestCheck:
     total_tangential: np.ndarray  # sum of f_t (world, N)
 
 
-def check_rest(model, q, planes, spheres, contacts) -> RestCheck:
-    """The rest conditions at q with the reported contacts (pinsettle.Contact)."""
+def check_rest(model, q, planes, spheres, contacts, springs=(), stops=None) -> RestCheck:
+    """The rest conditions at q with the reported contacts (pinsettle.Contact), joint springs
+    (joint, stiffness, rest) and the stops' reactions ({joint: (side, reaction)}: a reaction
+    pushes off its stop, >= 0, and the joint sits on it)."""
     data = model.createData()
     pinocchio.computeJointJacobians(model, data, q)
     pinocchio.updateFramePlacements(model, data)
     by_plane = {p.name: p for p in planes}
     by_point = {s.name: s for s in spheres}
     tau = pinocchio.rnea(model, data, q, np.zeros(model.nv), np.zeros(model.nv))
+    for joint, stiffness, rest in springs:
+        j = model.getJointId(joint)
+        tau[model.idx_vs[j]] += stiffness * (q[model.idx_qs[j]] - rest)
     left = tau.copy()
+    worst_stop = 0.0
+    for joint, (side, reaction) in (stops or {}).items():
+        j = model.getJointId(joint)
+        iq, iv = model.idx_qs[j], model.idx_vs[j]
+        limit = model.lowerPositionLimit[iq] if side == "lower" else model.upperPositionLimit[iq]
+        worst_stop = max(worst_stop, -reaction, abs(q[iq] - limit))
+        left[iv] -= reaction if side == "lower" else -reaction
     worst_cone, worst_touch = -np.inf, 0.0
     total_n, total_t = np.zeros(3), np.zeros(3)
     for c in contacts:
@@ -121,7 +142,7 @@ def check_rest(model, q, planes, spheres, contacts) -> RestCheck:
     return RestCheck(
         float(np.max(np.abs(left))),
         float(np.max(np.abs(tau))),
-        float(worst_cone),
+        float(max(worst_cone, worst_stop)),
         float(min(gaps)),
         float(worst_touch),
         total_n,

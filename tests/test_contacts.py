@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pinsettle
 import pytest
-from contact_reference import Plane, Sphere, check_rest, read_contacts
+from contact_reference import Plane, Sphere, check_rest, read_contacts, read_joint_springs
 
 ROBOTS = Path(__file__).parents[1] / "robots"
-CONTACT_SCENES = ["box_on_floor", "box_on_incline"]
+CONTACT_SCENES = ["box_on_floor", "box_on_incline", "go1_motors_off", "go1_standing"]
 G = 9.81
 MASS = 1.0  # free_body.urdf
 CORNERS = [(x, y, -0.05) for x in (-0.1, 0.1) for y in (-0.05, 0.05)]
@@ -66,18 +66,31 @@ def assert_rest(scene: pinsettle.Scene, result: pinsettle.Result, planes=None, s
     return check
 
 
+def weight(model) -> float:
+    return sum(inertia.mass for inertia in model.inertias) * G
+
+
 @pytest.mark.parametrize("name", CONTACT_SCENES)
 def test_library_scene_rests_with_its_forces_balanced(name):
     path = ROBOTS / f"{name}.toml"
     scene = pinsettle.load_scene(path)
     result = pinsettle.solve(scene)
     planes, spheres = read_contacts(path)
-    check = assert_rest(scene, result, planes, spheres)
+    assert result.status == "converged", result.reason
+    stops = {j: (side, result.limit_reactions[j]) for j, side in result.at_limit.items()}
+    check = check_rest(
+        scene.model, result.q, planes, spheres, result.contacts, read_joint_springs(path), stops
+    )
+    assert check.balance <= 1e-9 * check.scale
+    assert check.worst_cone <= 1e-9 * check.scale
+    assert check.min_gap >= -1e-6 and check.worst_touch <= 1e-6
     assert result.stability == "stable"
-    # The ground carries the weight.
-    weight = MASS * G * np.array([0.0, 0.0, 1.0])
-    assert np.allclose(check.total_normal + check.total_tangential, weight, rtol=1e-9, atol=1e-12)
+    # The ground carries the weight, to 1e-9 relative.
+    lift = check.total_normal + check.total_tangential
+    assert np.allclose(lift, [0.0, 0.0, weight(scene.model)], rtol=1e-9, atol=1e-9)
     assert result.residual <= 1e-9 * check.scale
+    # The weight's number is the one in the header.
+    assert f"{weight(scene.model):.3f}".rstrip("0") in path.read_text(encoding="utf-8")
 
 
 def test_box_on_a_floor_carries_a_quarter_of_its_weight_at_each_corner():
@@ -197,3 +210,79 @@ def test_scene_file_errors_name_the_table_and_key(tmp_path, table, message):
     path.write_text(text + "\n" + table + "\n", encoding="utf-8")
     with pytest.raises(pinsettle.SceneError, match=message):
         pinsettle.load_scene(path)
+
+
+# --- the floating robots of example-robot-data --------------------------------------------
+
+QUADRUPED_FEET = {
+    "anymal": (["LF_FOOT", "LH_FOOT", "RF_FOOT", "RH_FOOT"], 0.031, 200.0, "standing"),
+    "solo12": (["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"], 0.016, 5.0, "standing"),
+    "go1": (["FL_foot", "FR_foot", "RL_foot", "RR_foot"], 0.02, 40.0, "standing"),
+}
+# talos stands on its soles, a rectangle of four points each.
+SOLE_CORNERS = [(x, y, 0.0) for x in (-0.1, 0.1) for y in (-0.065, 0.065)]
+
+
+def robot_on_floor(name: str) -> tuple[pinsettle.Scene, list[tuple[str, float, float]]]:
+    """The robot floating, its joints on springs towards its SRDF stance, 2 cm above a floor
+    (friction 0.8) on its feet (quadrupeds: spheres; talos: its soles' corners)."""
+    import pinocchio
+    from pinsettle._model_files import robot_srdf
+
+    scene = pinsettle.Scene.from_robot(name, floating=True)
+    scene.load_srdf(robot_srdf(name))
+    if name == "talos":
+        scene.set_pose("half_sitting")
+        soles = [f"{side}_sole_link" for side in ("left", "right")]
+        points = [(sole, corner, 0.0) for sole in soles for corner in SOLE_CORNERS]
+        stiffness = 3000.0
+    else:
+        feet, radius, stiffness, pose = QUADRUPED_FEET[name]
+        scene.set_pose(pose)
+        points = [(foot, (0.0, 0.0, 0.0), radius) for foot in feet]
+    model, q = scene.model, scene.q0()
+    springs = []
+    for j in range(2, model.njoints):
+        if model.nqs[j] == 1:
+            rest = float(q[model.idx_qs[j]])
+            scene.add_joint_spring(model.names[j], stiffness, rest)
+            springs.append((model.names[j], stiffness, rest))
+    scene.add_ground(friction=0.8, name="floor")
+    data = model.createData()
+    pinocchio.framesForwardKinematics(model, data, q)
+    low = min(data.oMf[model.getFrameId(f)].act(np.array(p))[2] - r for f, p, r in points)
+    for frame, point, radius in points:
+        scene.add_contact(frame, point, radius)
+    q = q.copy()
+    q[2] += 0.02 - low
+    scene.set_start(root_joint=[*q[:3], q[6], q[3], q[4], q[5]])
+    return scene, springs
+
+
+def com_over_support(model, q, contacts) -> bool:
+    """Whether the centre of mass lies over the convex hull of the contact points (a flat
+    floor: their x, y)."""
+    import pinocchio
+    from scipy.spatial import Delaunay
+
+    com = pinocchio.centerOfMass(model, model.createData(), q)
+    points = np.array([c.point[:2] for c in contacts])
+    return bool(Delaunay(points).find_simplex(com[:2]) >= 0)
+
+
+@pytest.mark.parametrize("name", ["anymal", "solo12", "go1", "talos"])
+def test_floating_robots_stand_on_their_feet(name):
+    scene, springs = robot_on_floor(name)
+    result = pinsettle.solve(scene)
+    assert result.status == "converged", result.reason
+    planes, spheres = parts(scene)
+    stops = {j: (side, result.limit_reactions[j]) for j, side in result.at_limit.items()}
+    check = check_rest(scene.model, result.q, planes, spheres, result.contacts, springs, stops)
+    assert check.balance <= 1e-9 * check.scale
+    assert check.worst_cone <= 1e-9 * check.scale
+    assert check.min_gap >= -1e-6 and check.worst_touch <= 1e-6
+    # The floor carries the weight, to 1e-9 relative (talos: 885.57 N).
+    lift = check.total_normal + check.total_tangential
+    assert np.allclose(lift, [0.0, 0.0, weight(scene.model)], rtol=1e-9, atol=1e-9)
+    assert com_over_support(scene.model, result.q, result.contacts)
+    assert result.stability == "stable"

@@ -70,6 +70,7 @@ def cpp_build(tmp_path_factory) -> Path:
         "test_stops",
         "test_models",
         "test_mimic",
+        "test_contacts",
     ],
 )
 def test_cpp_boost_tests(cpp_build: Path, suite: str) -> None:

@@ -100,6 +100,10 @@ def test_box_on_a_floor_carries_a_quarter_of_its_weight_at_each_corner():
         assert c.normal_force == pytest.approx(MASS * G / 4, rel=1e-9)
         assert np.linalg.norm(c.tangential_force) <= 1e-9
         assert c.sticking
+    # The JSON object carries them too.
+    listed = result.to_dict()["contacts"]
+    assert [c["normal_force"] for c in listed] == [c.normal_force for c in result.contacts]
+    assert listed[0]["point"] == result.contacts[0].point.tolist()
     # Its centre 0.05 m above the floor, level.
     assert result.q[2] == pytest.approx(0.05, abs=1e-6)
     assert abs(result.q[6]) == pytest.approx(1.0, abs=1e-9)

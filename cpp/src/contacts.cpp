@@ -373,37 +373,12 @@ namespace pinsettle
 
   namespace
   {
-    // A joint on its stop at a rest: its reaction is one more unknown, sign e_iv its column.
-    struct StopSupport
-    {
-      const JointStops::Stop * stop;
-      StopSide side;
-      double sign() const
-      {
-        return side == StopSide::Lower ? 1. : -1.;
-      }
-    };
-
-    std::vector<StopSupport> stopsReached(const JointStops * stops, const Eigen::VectorXd & q)
-    {
-      std::vector<StopSupport> on;
-      if (stops != nullptr)
-        for (const JointStops::Stop & s : stops->stops())
-        {
-          if (q[s.iq] <= s.lower)
-            on.push_back(StopSupport{&s, StopSide::Lower});
-          else if (q[s.iq] >= s.upper)
-            on.push_back(StopSupport{&s, StopSide::Upper});
-        }
-      return on;
-    }
-
     // Least-norm forces of the pairs and reactions of the stops with J^T f + E r = tau, by
     // least squares: 3 per pair, then 1 per stop.
     Eigen::VectorXd leastNormSupport(
       const ContactGeometry & geometry,
       const std::vector<int> & pairs,
-      const std::vector<StopSupport> & on,
+      const std::vector<StopReached> & on,
       const Eigen::VectorXd & tau)
     {
       const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
@@ -426,7 +401,7 @@ namespace pinsettle
     bool releasePulling(
       const Eigen::VectorXd & x,
       std::vector<int> & pairs,
-      std::vector<StopSupport> & on,
+      std::vector<StopReached> & on,
       double tiny)
     {
       const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
@@ -465,7 +440,9 @@ namespace pinsettle
         balance.closed.push_back(p);
     // Active set: a support the least-norm balance would pull on lets go, one at a time.
     std::vector<int> pairs = balance.closed;
-    std::vector<StopSupport> on = stopsReached(stops, q);
+    // A joint on its stop: its reaction is one more unknown, sign e_iv its column.
+    std::vector<StopReached> on =
+      stops != nullptr ? findStopsReached(*stops, q) : std::vector<StopReached>();
     Eigen::VectorXd x;
     const double tiny = 1e-12 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
     do

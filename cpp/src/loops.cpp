@@ -619,16 +619,11 @@ namespace pinsettle
       bool active;
     };
 
-    std::vector<OnStop> findStopsReached(const JointStops & stops, const Eigen::VectorXd & q)
+    std::vector<OnStop> stopsToBalance(const JointStops & stops, const Eigen::VectorXd & q)
     {
       std::vector<OnStop> on;
-      for (const JointStops::Stop & s : stops.stops())
-      {
-        if (q[s.iq] <= s.lower)
-          on.push_back(OnStop{&s, StopSide::Lower, true});
-        else if (q[s.iq] >= s.upper)
-          on.push_back(OnStop{&s, StopSide::Upper, true});
-      }
+      for (const StopReached & r : findStopsReached(stops, q))
+        on.push_back(OnStop{r.stop, r.side, true});
       return on;
     }
 
@@ -689,7 +684,7 @@ namespace pinsettle
   {
     // Joints on a stop: their reactions mu (side * mu >= 0) enter as P E^T mu, P the projector
     // onto the allowed motions; a stop that would pull is let go and the others solved again.
-    std::vector<OnStop> on = findStopsReached(stops, q);
+    std::vector<OnStop> on = stopsToBalance(stops, q);
     StopBalance balance;
     balance.unbalanced = tau;
     Eigen::VectorXd mu;

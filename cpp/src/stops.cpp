@@ -260,6 +260,19 @@ namespace pinsettle
     return report;
   }
 
+  std::vector<StopReached> findStopsReached(const JointStops & stops, const Eigen::VectorXd & q)
+  {
+    std::vector<StopReached> on;
+    for (const JointStops::Stop & s : stops.stops())
+    {
+      if (q[s.iq] <= s.lower)
+        on.push_back(StopReached{&s, StopSide::Lower});
+      else if (q[s.iq] >= s.upper)
+        on.push_back(StopReached{&s, StopSide::Upper});
+    }
+    return on;
+  }
+
   void findJointsOnStops(
     const JointStops & stops, const Eigen::VectorXd & q, std::vector<Eigen::Index> & iv)
   {

@@ -369,6 +369,19 @@ class Result:
             "start_clamped": self.start_clamped,
             "equal_limits": list(self.equal_limits),
             "unapplied_limits": list(self.unapplied_limits),
+            "contacts": [
+                {
+                    "name": c.name,
+                    "ground": c.ground,
+                    "point": c.point.tolist(),
+                    "normal": c.normal.tolist(),
+                    "normal_force": c.normal_force,
+                    "tangential_force": c.tangential_force.tolist(),
+                    "gap": c.gap,
+                    "sticking": c.sticking,
+                }
+                for c in self.contacts
+            ],
         }
 
 

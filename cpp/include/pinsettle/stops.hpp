@@ -168,6 +168,21 @@ namespace pinsettle
   std::vector<StopContact> computeStopContacts(
     const JointStops & stops, const Eigen::VectorXd & q, const Eigen::VectorXd & tau);
 
+  /// \brief A joint on one of its stops: the stop and the side.
+  struct StopReached
+  {
+    const JointStops::Stop * stop;
+    StopSide side;
+    /// +1 on a lower stop, -1 on an upper one: the direction the stop pushes the joint.
+    double sign() const
+    {
+      return side == StopSide::Lower ? 1. : -1.;
+    }
+  };
+
+  /// \brief The joints on a stop at q (q[iq] at or past a bound), in the stops' order.
+  std::vector<StopReached> findStopsReached(const JointStops & stops, const Eigen::VectorXd & q);
+
   ///
   /// \brief The residual of a rest against stops: the largest violation of its conditions.
   ///

@@ -927,6 +927,10 @@ def test_srdf_errors(tmp_path):
     assert "SRDF file not found" in one_line_error(run("solve", str(toml)))
     toml.write_text('[model]\nurdf = "pendulum.urdf"\n[start]\npose = "home"\n')
     assert "the model has no named poses" in one_line_error(run("solve", str(toml)))
+    # From Python, a path that is no path is named as such.
+    pendulum = pinsettle.Scene.from_urdf(tmp_path / "pendulum.urdf")
+    with pytest.raises(TypeError, match="path must be an SRDF file's path .*got None"):
+        pendulum.load_srdf(None)
 
 
 def test_mjcf_keyframes_are_poses(tmp_path):

@@ -11,6 +11,7 @@ value as zeros without a word.
 from __future__ import annotations
 
 import math
+import os
 import re
 import sys
 import xml.etree.ElementTree as ET
@@ -189,6 +190,8 @@ def load_srdf_poses(model: pinocchio.Model, path: str | Path) -> dict[str, str]:
         ValueError: not an SRDF, or a pose naming a joint the model does not have, or a value
             that is not a number or has the wrong count for its joint.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be an SRDF file's path (str or Path), got {path!r}")
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"SRDF file not found: {path}")

@@ -15,7 +15,14 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio
-import tomllib
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+#: The library scenes with ground contacts (robots/), checked by tests/test_contacts.py.
+CONTACT_SCENES = ["box_on_floor", "box_on_incline", "go1_motors_off", "go1_standing"]
 
 
 @dataclass

@@ -14,10 +14,16 @@ from pathlib import Path
 import numpy as np
 import pinsettle
 import pytest
-from contact_reference import Plane, Sphere, check_rest, read_contacts, read_joint_springs
+from contact_reference import (
+    CONTACT_SCENES,
+    Plane,
+    Sphere,
+    check_rest,
+    read_contacts,
+    read_joint_springs,
+)
 
 ROBOTS = Path(__file__).parents[1] / "robots"
-CONTACT_SCENES = ["box_on_floor", "box_on_incline", "go1_motors_off", "go1_standing"]
 G = 9.81
 MASS = 1.0  # free_body.urdf
 CORNERS = [(x, y, -0.05) for x in (-0.1, 0.1) for y in (-0.05, 0.05)]

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import contact_reference  # tests/contact_reference.py
 import loop_reference  # tests/loop_reference.py (pytest puts tests/ on sys.path)
 import numpy as np
 import pinocchio
@@ -218,7 +219,7 @@ UNSTABLE_START_SCENES = ["pendulum_upright", "ur5_saddle"]
 # Loop scenes, checked in tests/test_loops.py (and, with a stop, tests/test_limits.py).
 LOOP_SCENES = sorted([*loop_reference.MECHANISMS, "fourbar_stop"])
 # Checked by tests/test_contacts.py against tests/contact_reference.py.
-CONTACT_SCENES = ["box_on_floor", "box_on_incline"]
+CONTACT_SCENES = contact_reference.CONTACT_SCENES
 
 # Points named in the comments: (scene, frame, point in the frame, world position as written).
 POSITIONS = [

@@ -206,6 +206,7 @@ namespace pinsettle
   ContactStepper::ContactStepper(const GroundContacts & contacts, const JointStops * stops)
   : contacts_(contacts)
   , stops_(stops)
+  , llt_(contacts.model().nv) // made in place: a moved-in LLT reads as uninitialized to GCC
   {
     const int stop_rows = stops != nullptr ? static_cast<int>(stops->stops().size()) : 0;
     stop_gap_.resize(stop_rows);
@@ -224,7 +225,6 @@ namespace pinsettle
     mu_.resize(contacts.pairs());
     vfree_.resize(nv);
     dv_.resize(nv);
-    llt_ = Eigen::LLT<Eigen::MatrixXd>(nv);
   }
 
   void ContactStepper::start()

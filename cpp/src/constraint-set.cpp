@@ -176,7 +176,7 @@ namespace pinsettle
     if (contacts_ != nullptr)
     {
       ContactBalance balance = balanceContacts(model_, data, *contacts_, q, tau, stops_);
-      result.ground_contacts = describeContacts(model_, data, *contacts_, q, balance);
+      result.ground_contacts = describeContacts(*contacts_, balance);
       result.stop_contacts = std::move(balance.stops);
     }
     else if (stops_ != nullptr && loops_ != nullptr)

@@ -23,11 +23,6 @@ namespace pinsettle
 
   namespace
   {
-    bool isFinite(const Eigen::Vector3d & x)
-    {
-      return x.allFinite();
-    }
-
     void throwContactError(
       const std::string & what, const std::string & name, const std::string & msg)
     {
@@ -63,6 +58,24 @@ namespace pinsettle
     }
 
     constexpr int kMaxSweeps = 2000;
+
+    // The Cholesky factors of the mass matrix at q (crba fills its upper triangle).
+    void factorMassMatrix(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q,
+      Eigen::LLT<Eigen::MatrixXd> & llt)
+    {
+      prebuilt::crba(model, data, q);
+      data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose();
+      llt.compute(data.M);
+    }
+
+    // Whether a force (t1, t2, n) lies strictly inside the cone of friction mu.
+    bool insideCone(const Eigen::Vector3d & f, double mu)
+    {
+      return f.head<2>().norm() < mu * f[2] * (1. - 1e-9);
+    }
 
     // One contact's projected Gauss-Seidel update: the normal impulse, then the tangential one
     // projected onto the disc mu lambda_n. Returns the largest change.
@@ -110,7 +123,7 @@ namespace pinsettle
     const Eigen::Vector3d & normal,
     double friction)
   {
-    if (!isFinite(point))
+    if (!point.allFinite())
       throwContactError("ground", name, "its point must be finite (m)");
     const double length = normal.norm();
     if (!(length > 1e-12) || !std::isfinite(length))
@@ -139,7 +152,7 @@ namespace pinsettle
         "contact", name,
         "its body must be moved by a joint (1 to " + std::to_string(model_.njoints - 1) + "), got "
           + std::to_string(joint));
-    if (!isFinite(position))
+    if (!position.allFinite())
       throwContactError("contact", name, "its point must be finite (m)");
     if (!(radius >= 0.) || !std::isfinite(radius))
       throwContactError(
@@ -243,7 +256,6 @@ namespace pinsettle
     computeContactGeometry(model, data, contacts_, q, geometry_);
     vfree_ = v + h * ddq;
     active_.clear();
-    const int planes = static_cast<int>(contacts_.planes().size());
     for (int p = 0; p < contacts_.pairs(); ++p)
     {
       const double un = geometry_.jacobian.row(3 * p + 2).dot(vfree_);
@@ -260,7 +272,7 @@ namespace pinsettle
     {
       const int p = active_[static_cast<std::size_t>(k)];
       Ja_.middleRows<3>(3 * k) = geometry_.jacobian.middleRows<3>(3 * p);
-      mu_[k] = contacts_.planes()[static_cast<std::size_t>(p % planes)].friction;
+      mu_[k] = contacts_.planeOf(p).friction;
       lambda_.segment<3>(3 * k) = h * force_.segment<3>(3 * p);
     }
     lambda_.segment(3 * a, rows - 3 * a).setZero();
@@ -269,9 +281,7 @@ namespace pinsettle
     const auto G = G_.topLeftCorner(rows, rows);
     auto b = b_.head(rows);
     auto lambda = lambda_.head(rows);
-    prebuilt::crba(model, data, q);
-    data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose();
-    llt_.compute(data.M);
+    factorMassMatrix(model, data, q, llt_);
     Y_.leftCols(rows) = J.transpose();
     llt_.matrixL().solveInPlace(Y_.leftCols(rows));
     G_.topLeftCorner(rows, rows).noalias() = Y.transpose() * Y;
@@ -279,11 +289,10 @@ namespace pinsettle
     // Open: close the gap in this step and no more; sunk in (round-off, a stop's clamp): come
     // out within the step. Coming out by a fifth per step left go1's feet 1e-5 m deep when
     // the damping had taken the energy below its limit.
-    const auto closing = [h](double gap) { return gap / h; };
     for (Eigen::Index k = 0; k < a; ++k)
-      b[3 * k + 2] += closing(geometry_.gap[active_[static_cast<std::size_t>(k)]]);
+      b[3 * k + 2] += geometry_.gap[active_[static_cast<std::size_t>(k)]] / h;
     for (Eigen::Index r = 3 * a; r < rows; ++r)
-      b[r] += closing(stop_gap_[r - 3 * a]);
+      b[r] += stop_gap_[r - 3 * a] / h;
     solveContactImpulses(G, b, mu_.head(a), lambda);
     dv_.noalias() = Y * lambda;
     llt_.matrixU().solveInPlace(dv_);
@@ -322,11 +331,10 @@ namespace pinsettle
     bool insideCones(
       const GroundContacts & contacts, const std::vector<int> & pairs, const Eigen::VectorXd & f)
     {
-      const std::size_t planes = contacts.planes().size();
       for (std::size_t k = 0; k < pairs.size(); ++k)
       {
         const Eigen::Index r = 3 * static_cast<Eigen::Index>(k);
-        const double mu = contacts.planes()[static_cast<std::size_t>(pairs[k]) % planes].friction;
+        const double mu = contacts.planeOf(pairs[k]).friction;
         if (f.segment<2>(r).norm() > mu * f[r + 2] * (1. + 1e-9) + 1e-12 * f.norm())
           return false;
       }
@@ -349,17 +357,14 @@ namespace pinsettle
       const Eigen::Index rows = 3 * static_cast<Eigen::Index>(pairs.size());
       Eigen::MatrixXd J(rows, model.nv);
       Eigen::VectorXd mu(pairs.size());
-      const std::size_t planes = contacts.planes().size();
       for (std::size_t k = 0; k < pairs.size(); ++k)
       {
         J.middleRows<3>(3 * static_cast<Eigen::Index>(k)) =
           geometry.jacobian.middleRows<3>(3 * pairs[k]);
-        mu[static_cast<Eigen::Index>(k)] =
-          shrink * contacts.planes()[static_cast<std::size_t>(pairs[k]) % planes].friction;
+        mu[static_cast<Eigen::Index>(k)] = shrink * contacts.planeOf(pairs[k]).friction;
       }
-      prebuilt::crba(model, data, q);
-      data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose();
-      const Eigen::LLT<Eigen::MatrixXd> llt(data.M);
+      Eigen::LLT<Eigen::MatrixXd> llt(model.nv);
+      factorMassMatrix(model, data, q, llt);
       const Eigen::MatrixXd Y = llt.matrixL().solve(J.transpose());
       const Eigen::MatrixXd G = Y.transpose() * Y;
       // Velocity after a unit time from rest: M^-1 (J^T f - tau); u = G f - J M^-1 tau.
@@ -433,7 +438,7 @@ namespace pinsettle
   {
     ContactBalance balance;
     balance.force = Eigen::VectorXd::Zero(3 * contacts.pairs());
-    ContactGeometry geometry;
+    ContactGeometry & geometry = balance.geometry;
     computeContactGeometry(model, data, contacts, q, geometry);
     for (int p = 0; p < contacts.pairs(); ++p)
       if (geometry.gap[p] <= kContactGapTolerance)
@@ -489,14 +494,12 @@ namespace pinsettle
       const GroundContacts & contacts, const ContactBalance & balance, double tiny)
     {
       std::vector<Eigen::Index> rows;
-      const std::size_t planes = contacts.planes().size();
       for (const int p : balance.closed)
       {
         const Eigen::Vector3d f = balance.force.segment<3>(3 * p);
         if (!(f[2] > tiny))
           continue;
-        const double mu = contacts.planes()[static_cast<std::size_t>(p) % planes].friction;
-        if (f.head<2>().norm() < mu * f[2] * (1. - 1e-9))
+        if (insideCone(f, contacts.planeOf(p).friction))
         {
           rows.push_back(3 * p);
           rows.push_back(3 * p + 1);
@@ -569,10 +572,8 @@ namespace pinsettle
     const ContactBalance balance = balanceContacts(model, data, contacts, q, tau, stops);
     const double tiny = 1e-9 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
     const std::vector<Eigen::Index> rows = heldRows(contacts, balance, tiny);
-    ContactGeometry geometry;
-    computeContactGeometry(model, data, contacts, q, geometry);
     // The joints pressed on a stop are held too (their rows have no curvature).
-    Eigen::MatrixXd Jh = selectRows(geometry.jacobian, rows);
+    Eigen::MatrixXd Jh = selectRows(balance.geometry.jacobian, rows);
     for (const StopContact & c : balance.stops)
       if (c.reaction > tiny)
       {
@@ -607,30 +608,23 @@ namespace pinsettle
   }
 
   std::vector<GroundContact> describeContacts(
-    const pinocchio::Model & model,
-    pinocchio::Data & data,
-    const GroundContacts & contacts,
-    const Eigen::VectorXd & q,
-    const ContactBalance & balance)
+    const GroundContacts & contacts, const ContactBalance & balance)
   {
-    ContactGeometry geometry;
-    computeContactGeometry(model, data, contacts, q, geometry);
+    const ContactGeometry & geometry = balance.geometry;
     std::vector<GroundContact> out;
-    const std::size_t planes = contacts.planes().size();
     for (const int p : balance.closed)
     {
-      const GroundContacts::Plane & plane = contacts.planes()[static_cast<std::size_t>(p) % planes];
+      const GroundContacts::Plane & plane = contacts.planeOf(p);
       const Eigen::Vector3d f = balance.force.segment<3>(3 * p);
       GroundContact c;
-      c.name = contacts.points()[static_cast<std::size_t>(p) / planes].name;
+      c.name = contacts.pointOf(p).name;
       c.ground = plane.name;
       c.point = geometry.point.col(p);
       c.normal = plane.normal;
       c.normal_force = f[2];
       c.tangential_force = f[0] * plane.t1 + f[1] * plane.t2;
       c.gap = geometry.gap[p];
-      c.sticking =
-        f.head<2>().norm() < plane.friction * f[2] * (1. - 1e-9) || f.head<2>().isZero(0.);
+      c.sticking = insideCone(f, plane.friction) || f.head<2>().isZero(0.);
       out.push_back(c);
     }
     return out;

@@ -114,6 +114,16 @@ namespace pinsettle
     {
       return points_;
     }
+    /// The plane of a pair: pairs run point by point, each against every plane in order.
+    const Plane & planeOf(int pair) const
+    {
+      return planes_[static_cast<std::size_t>(pair) % planes_.size()];
+    }
+    /// The point of a pair (see planeOf).
+    const Point & pointOf(int pair) const
+    {
+      return points_[static_cast<std::size_t>(pair) / planes_.size()];
+    }
     const pinocchio::Model & model() const
     {
       return model_;
@@ -215,8 +225,8 @@ namespace pinsettle
     Eigen::VectorXd force_; // of each pair at the last step (N), 3 pairs()
     Eigen::MatrixXd Ja_, Y_, G_;
     Eigen::VectorXd b_, lambda_, mu_, vfree_, dv_;
-    Eigen::VectorXd stop_gap_; // of each stop row of the step (rad or m)
-    Eigen::LLT<Eigen::MatrixXd> llt_;
+    Eigen::VectorXd stop_gap_;        // of each stop row of the step (rad or m)
+    Eigen::LLT<Eigen::MatrixXd> llt_; // of the mass matrix
   };
 
   /// \brief The contact forces (and the stops' reactions) that balance a static force at a
@@ -234,6 +244,8 @@ namespace pinsettle
     Eigen::VectorXd left;
     /// |left|_inf (N m or N).
     double residual = 0.;
+    /// The pairs at the rest's q the forces act through (its gaps, points and Jacobian).
+    ContactGeometry geometry;
   };
 
   /// Gaps at most this (m) count as closed at a rest.
@@ -270,14 +282,11 @@ namespace pinsettle
     const JointStops * stops = nullptr);
 
   ///
-  /// \brief The contacts at a rest, for the result: each closed pair with its forces and gap.
+  /// \brief The contacts at a rest, for the result: each closed pair of balance (balanceContacts)
+  /// with its forces and gap.
   ///
   std::vector<GroundContact> describeContacts(
-    const pinocchio::Model & model,
-    pinocchio::Data & data,
-    const GroundContacts & contacts,
-    const Eigen::VectorXd & q,
-    const ContactBalance & balance);
+    const GroundContacts & contacts, const ContactBalance & balance);
 
 } // namespace pinsettle
 

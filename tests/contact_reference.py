@@ -23,6 +23,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 #: The library scenes with ground contacts (robots/), checked by tests/test_contacts.py.
 CONTACT_SCENES = ["box_on_floor", "box_on_incline", "go1_motors_off", "go1_standing"]
+CONTACT_SCENES += ["talos_standing", "vehicle"]  # also tests/test_contact_scenes.py
 
 
 @dataclass

@@ -199,7 +199,7 @@ namespace
   }
 
   // The ground contacts of a rest: (name, ground, point, normal, normal force, tangential
-  // force, gap, sticking) each.
+  // force, gap, sticking, marginal) each.
   py::list groundContactsToList(const std::vector<GroundContact> & contacts)
   {
     py::list out;
@@ -207,7 +207,7 @@ namespace
       out.append(
         py::make_tuple(
           c.name, c.ground, c.point, c.normal, c.normal_force, c.tangential_force, c.gap,
-          c.sticking));
+          c.sticking, c.marginal));
     return out;
   }
 

@@ -11,6 +11,7 @@
 
 #include "pinsettle/prebuilt.hpp"
 
+#include <algorithm>
 #include <sstream>
 #include <stdexcept>
 #include <utility>
@@ -159,6 +160,8 @@ namespace pinsettle
 
   bool ConstraintSet::isSatisfied(pinocchio::Data & data, const Eigen::VectorXd & q) const
   {
+    if (contacts_ != nullptr && !isClearOfGrounds(model_, data, *contacts_, q))
+      return false;
     return loops_ == nullptr
            || computeLoopError(model_, data, *loops_, q).lpNorm<Eigen::Infinity>()
                 <= LoopStepper::kLoopTolerance;
@@ -176,7 +179,16 @@ namespace pinsettle
     if (contacts_ != nullptr)
     {
       ContactBalance balance = balanceContacts(model_, data, *contacts_, q, tau, stops_);
-      result.ground_contacts = describeContacts(*contacts_, balance);
+      double mass = 0.; // kg
+      for (const pinocchio::Inertia & body : model_.inertias)
+        mass += body.mass();
+      const double weight = mass * model_.gravity.linear().norm();
+      result.ground_contacts = describeContacts(*contacts_, balance, weight);
+      const auto byAThread = [](const GroundContact & c) { return c.marginal; };
+      if (
+        result.stability == Stability::Stable
+        && std::any_of(result.ground_contacts.begin(), result.ground_contacts.end(), byAThread))
+        result.stability = Stability::Marginal;
       result.stop_contacts = std::move(balance.stops);
     }
     else if (stops_ != nullptr && loops_ != nullptr)
@@ -197,7 +209,8 @@ namespace pinsettle
       findJointsOnStops(*stops_, q, on_stops_);
       open = projectOntoLoops(model_, data, *loops_, q, 1e-13, 50, &on_stops_);
     }
-    return open <= LoopStepper::kLoopTolerance;
+    return open <= LoopStepper::kLoopTolerance
+           && (contacts_ == nullptr || isClearOfGrounds(model_, data, *contacts_, q));
   }
 
   const pinocchio::Model * ConstraintSet::lockedModel(

@@ -191,6 +191,17 @@ namespace pinsettle
     }
   }
 
+  bool isClearOfGrounds(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q)
+  {
+    ContactGeometry geometry;
+    computeContactGeometry(model, data, contacts, q, geometry);
+    return contacts.pairs() == 0 || geometry.gap.minCoeff() >= -kContactGapTolerance;
+  }
+
   int solveContactImpulses(
     const Eigen::Ref<const Eigen::MatrixXd> & G,
     const Eigen::Ref<const Eigen::VectorXd> & b,
@@ -227,7 +238,7 @@ namespace pinsettle
     const int nv = contacts.model().nv;
     geometry_.gap.resize(contacts.pairs());
     geometry_.point.resize(3, contacts.pairs());
-    geometry_.jacobian.resize(3 * contacts.pairs(), nv);
+    body_velocity_.resize(6, contacts.model().njoints);
     active_.reserve(contacts.pairs());
     force_ = Eigen::VectorXd::Zero(3 * contacts.pairs());
     Ja_.resize(rows, nv);
@@ -253,17 +264,8 @@ namespace pinsettle
     Eigen::VectorXd & ddq,
     double h)
   {
-    computeContactGeometry(model, data, contacts_, q, geometry_);
     vfree_ = v + h * ddq;
-    active_.clear();
-    for (int p = 0; p < contacts_.pairs(); ++p)
-    {
-      const double un = geometry_.jacobian.row(3 * p + 2).dot(vfree_);
-      if (geometry_.gap[p] + h * std::min(0., un) <= 0.)
-        active_.push_back(p);
-      else
-        force_.segment<3>(3 * p).setZero();
-    }
+    findClosingPairs(model, data, q, h);
     const Eigen::Index a = static_cast<Eigen::Index>(active_.size());
     const Eigen::Index rows = addStopRows(q, h, 3 * a);
     if (rows == 0)
@@ -271,8 +273,13 @@ namespace pinsettle
     for (Eigen::Index k = 0; k < a; ++k)
     {
       const int p = active_[static_cast<std::size_t>(k)];
-      Ja_.middleRows<3>(3 * k) = geometry_.jacobian.middleRows<3>(3 * p);
-      mu_[k] = contacts_.planeOf(p).friction;
+      const GroundContacts::Plane & plane = contacts_.planeOf(p);
+      const pinocchio::JointIndex joint = contacts_.pointOf(p).joint;
+      const Eigen::Vector3d x = geometry_.point.col(p);
+      writePointRow(model, data, joint, x, plane.t1, Ja_.row(3 * k));
+      writePointRow(model, data, joint, x, plane.t2, Ja_.row(3 * k + 1));
+      writePointRow(model, data, joint, x, plane.normal, Ja_.row(3 * k + 2));
+      mu_[k] = plane.friction;
       lambda_.segment<3>(3 * k) = h * force_.segment<3>(3 * p);
     }
     lambda_.segment(3 * a, rows - 3 * a).setZero();
@@ -299,6 +306,41 @@ namespace pinsettle
     ddq += dv_ / h;
     for (Eigen::Index k = 0; k < a; ++k)
       force_.segment<3>(3 * active_[static_cast<std::size_t>(k)]) = lambda.segment<3>(3 * k) / h;
+  }
+
+  void ContactStepper::findClosingPairs(
+    const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q, double h)
+  {
+    pinocchio::computeJointJacobians(model, data, q);
+    // Each body's velocity at vfree (world axes, at the origin), from its joints' columns: the
+    // normal velocities of all candidates for the price of one pass; the Jacobian rows are
+    // written only for the pairs that close (go1 on its 404 collision points: 228 us a step
+    // with every pair's rows).
+    body_velocity_.col(0).setZero();
+    for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
+      body_velocity_.col(static_cast<Eigen::Index>(j)).noalias() =
+        body_velocity_.col(static_cast<Eigen::Index>(model.parents[j]))
+        + data.J.middleCols(model.idx_vs[j], model.nvs[j])
+            * vfree_.segment(model.idx_vs[j], model.nvs[j]);
+    active_.clear();
+    int p = 0;
+    for (const GroundContacts::Point & s : contacts_.points())
+    {
+      const Eigen::Vector3d centre = data.oMi[s.joint].act(s.position);
+      const auto V = body_velocity_.col(static_cast<Eigen::Index>(s.joint));
+      for (const GroundContacts::Plane & plane : contacts_.planes())
+      {
+        geometry_.gap[p] = plane.normal.dot(centre - plane.point) - s.radius;
+        const Eigen::Vector3d x = centre - s.radius * plane.normal;
+        geometry_.point.col(p) = x;
+        const double un = plane.normal.dot(V.head<3>() + V.tail<3>().cross(x));
+        if (geometry_.gap[p] + h * std::min(0., un) <= 0.)
+          active_.push_back(p);
+        else
+          force_.segment<3>(3 * p).setZero();
+        ++p;
+      }
+    }
   }
 
   Eigen::Index ContactStepper::addStopRows(const Eigen::VectorXd & q, double h, Eigen::Index row)
@@ -329,12 +371,15 @@ namespace pinsettle
   namespace
   {
     bool insideCones(
-      const GroundContacts & contacts, const std::vector<int> & pairs, const Eigen::VectorXd & f)
+      const GroundContacts & contacts,
+      const std::vector<int> & pairs,
+      const Eigen::VectorXd & f,
+      double shrink)
     {
       for (std::size_t k = 0; k < pairs.size(); ++k)
       {
         const Eigen::Index r = 3 * static_cast<Eigen::Index>(k);
-        const double mu = contacts.planeOf(pairs[k]).friction;
+        const double mu = shrink * contacts.planeOf(pairs[k]).friction;
         if (f.segment<2>(r).norm() > mu * f[r + 2] * (1. + 1e-9) + 1e-12 * f.norm())
           return false;
       }
@@ -396,8 +441,12 @@ namespace pinsettle
           geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose();
       for (std::size_t k = 0; k < on.size(); ++k)
         A(on[k].stop->iv, p + static_cast<Eigen::Index>(k)) = on[k].sign();
-      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A);
+      // The cut is set before the decomposition: the rank it gives decides the Z factor, and a
+      // cut set afterwards had solve() apply Z for a rank it was never computed for (reading
+      // uninitialised memory: the same rest gave 66 to 55,296 steps).
+      Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A.rows(), A.cols());
       cod.setThreshold(1e-10);
+      cod.compute(A);
       return cod.solve(tau);
     }
 
@@ -425,6 +474,23 @@ namespace pinsettle
       else
         on.erase(on.begin() + (worst - static_cast<Eigen::Index>(pairs.size())));
       return true;
+    }
+  } // namespace
+
+  namespace
+  {
+    // What forces (3 per pair of pairs) leave of load unbalanced: load - J^T forces.
+    Eigen::VectorXd computeUnbalanced(
+      const ContactGeometry & geometry,
+      const std::vector<int> & pairs,
+      const Eigen::VectorXd & load,
+      const Eigen::VectorXd & forces)
+    {
+      Eigen::VectorXd left = load;
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+        left.noalias() -= geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose()
+                          * forces.segment<3>(3 * static_cast<Eigen::Index>(k));
+      return left;
     }
   } // namespace
 
@@ -463,20 +529,20 @@ namespace pinsettle
       balance.stops.push_back(StopContact{on[k].stop->joint, on[k].side, r});
     }
     const auto unbalanced = [&](const Eigen::VectorXd & forces) {
-      Eigen::VectorXd left = on_contacts;
-      for (std::size_t k = 0; k < pairs.size(); ++k)
-        left.noalias() -= geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose()
-                          * forces.segment<3>(3 * static_cast<Eigen::Index>(k));
-      return left;
+      return computeUnbalanced(geometry, pairs, on_contacts, forces);
     };
-    if (!pairs.empty() && !insideCones(contacts, pairs, f))
+    const double margin = 1. - kMarginalCone;
+    if (!pairs.empty() && !insideCones(contacts, pairs, f, margin))
     {
       // Least norm shares the tangential force evenly and may leave a lightly loaded point's
       // cone where other shares stay inside every cone (a box on a slope, its upper corners):
-      // first cones shrunk by 1 %, whose answer sticks, else the cones themselves.
+      // first cones shrunk by kMarginalCone, whose answer sticks, else the cones themselves
+      // (then the rest is within kMarginalCone of sliding).
       const Eigen::VectorXd start = f;
-      f = conicForces(model, data, contacts, q, geometry, pairs, on_contacts, 0.99, start);
-      if (!(unbalanced(f).lpNorm<Eigen::Infinity>() <= 1e-10 * tau.lpNorm<Eigen::Infinity>()))
+      f = conicForces(model, data, contacts, q, geometry, pairs, on_contacts, margin, start);
+      balance.near_cone_edge =
+        !(unbalanced(f).lpNorm<Eigen::Infinity>() <= 1e-10 * tau.lpNorm<Eigen::Infinity>());
+      if (balance.near_cone_edge)
         f = conicForces(model, data, contacts, q, geometry, pairs, on_contacts, 1., start);
     }
     for (std::size_t k = 0; k < pairs.size(); ++k)
@@ -608,10 +674,11 @@ namespace pinsettle
   }
 
   std::vector<GroundContact> describeContacts(
-    const GroundContacts & contacts, const ContactBalance & balance)
+    const GroundContacts & contacts, const ContactBalance & balance, double load)
   {
     const ContactGeometry & geometry = balance.geometry;
     std::vector<GroundContact> out;
+    double largest = load; // N
     for (const int p : balance.closed)
     {
       const GroundContacts::Plane & plane = contacts.planeOf(p);
@@ -625,8 +692,13 @@ namespace pinsettle
       c.tangential_force = f[0] * plane.t1 + f[1] * plane.t2;
       c.gap = geometry.gap[p];
       c.sticking = insideCone(f, plane.friction) || f.head<2>().isZero(0.);
+      c.marginal = balance.near_cone_edge && !f.head<2>().isZero(0.)
+                   && f.head<2>().norm() >= (1. - kMarginalCone) * plane.friction * f[2];
+      largest = std::max(largest, c.normal_force);
       out.push_back(c);
     }
+    for (GroundContact & c : out)
+      c.marginal = c.marginal || c.normal_force <= kMarginalLoad * largest;
     return out;
   }
 

@@ -32,6 +32,8 @@ namespace pinsettle
       return "neutral";
     case Stability::Unstable:
       return "unstable";
+    case Stability::Marginal:
+      return "marginal";
     case Stability::Unknown:
     default:
       return "unknown";

@@ -90,8 +90,10 @@ class Contact:
     ``ground``, where it touches (``point``, world, m: a sphere's lowest point), the ground's
     unit ``normal``, the force the ground exerts on the body there (``normal_force`` >= 0, N;
     ``tangential_force``, world, N, in the ground's plane), the ``gap`` (m, negative when sunk
-    in) and whether it ``sticking`` (the tangential force strictly inside the friction cone;
-    at its edge the contact would slide)."""
+    in), whether it is ``sticking`` (the tangential force strictly inside the friction cone;
+    at its edge the contact would slide) and whether the rest hangs on it by a thread,
+    ``marginal``: it carries at most 1e-3 of the largest normal force, or its tangential force
+    is within 1 % of the cone's edge (a stable rest held so is ``'marginal'``)."""
 
     name: str
     ground: str
@@ -101,6 +103,7 @@ class Contact:
     tangential_force: np.ndarray
     gap: float
     sticking: bool
+    marginal: bool
 
 
 @dataclass(frozen=True)
@@ -114,9 +117,10 @@ class Result:
     each joint name to its final value (a number for a 1-DoF joint, a list otherwise, each
     quaternion w first as ``Scene.set_start`` takes it: a free-flyer x, y, z, qw, qx, qy, qz,
     a spherical joint qw, qx, qy, qz; ``q`` keeps Pinocchio's order, w last).
-    ``stability`` is 'stable', 'neutral' or 'unstable' from the eigenvalues of the stiffness
-    matrix at ``q`` (``min_stiffness_eigenvalue`` the smallest, N m/rad or N/m;
-    ``neutral_directions`` how many are zero within the tolerance); ``pushes`` counts the
+    ``stability`` is 'stable', 'neutral' or 'unstable' (with contacts also 'marginal', see
+    below) from the eigenvalues of the stiffness matrix at ``q`` (``min_stiffness_eigenvalue``
+    the smallest, N m/rad or N/m; ``neutral_directions`` how many are zero within the
+    tolerance); ``pushes`` counts the
     pushes off an unstable rest (a saddle or a maximum is never reported converged).
     ``status`` 'no_equilibrium' means the potential falls without bound along the motion;
     ``reason`` says what was seen (also for 'diverged'). ``dt`` is the step in force at the end,
@@ -151,7 +155,7 @@ class Result:
     on more points than it needs, a box on four corners, leaves the share open to a rigid
     model). ``residual`` is what those forces leave unbalanced, and the verdict is that of K
     restricted to the motions the sticking contacts leave free (stable when they hold every
-    motion).
+    motion); a stable rest held by a ``marginal`` contact is ``'marginal'``.
     """
 
     q: np.ndarray
@@ -280,6 +284,8 @@ class Result:
         ]
         for c in self.contacts:
             state = "sticking" if c.sticking else "at the cone's edge"
+            if c.marginal:
+                state += ", marginal"
             lines.append(
                 f"  {c.name:<14} on {c.ground}: normal {c.normal_force:.6g} N, tangential "
                 f"{float(np.linalg.norm(c.tangential_force)):.4g} N, gap {c.gap:.2e} m, {state}"
@@ -379,6 +385,7 @@ class Result:
                     "tangential_force": c.tangential_force.tolist(),
                     "gap": c.gap,
                     "sticking": c.sticking,
+                    "marginal": c.marginal,
                 }
                 for c in self.contacts
             ],

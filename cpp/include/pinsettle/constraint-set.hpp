@@ -128,15 +128,17 @@ namespace pinsettle
       pinocchio::Data & data, const Eigen::VectorXd & q, const ForceModel * forces) const;
 
     ///
-    /// \brief Whether q satisfies the equality constraints (the loops closed to
-    /// LoopStepper::kLoopTolerance): a pose that does not is no rest.
+    /// \brief Whether q satisfies the constraints a rest must (the loops closed to
+    /// LoopStepper::kLoopTolerance, no contact sunk into a ground beyond
+    /// kContactGapTolerance): a pose that does not is no rest.
     ///
     bool isSatisfied(pinocchio::Data & data, const Eigen::VectorXd & q) const;
 
     ///
     /// \brief The constraints' part of the answer at q with static force tau: the loops' error
     /// (result.constraint_error), the stops' contacts and reactions (result.stop_contacts) and
-    /// the ground contacts with their forces (result.ground_contacts).
+    /// the ground contacts with their forces (result.ground_contacts); a stable rest held by a
+    /// marginal contact becomes Stability::Marginal (result.stability is set before).
     ///
     void describeRest(
       pinocchio::Data & data,
@@ -149,8 +151,8 @@ namespace pinsettle
     /// loops, into the stops' ranges, onto the loops again with the joints on a stop held.
     ///
     /// \param[in,out] q The configuration (dim model.nq).
-    /// \return Whether the loops close there (isSatisfied's tolerance); a pose the stops hold
-    ///         open is no step to a rest.
+    /// \return Whether the loops close there (isSatisfied's tolerance) and no contact sinks
+    ///         into a ground; a pose the stops hold open, or sunk in, is no step to a rest.
     ///
     bool projectConfiguration(pinocchio::Data & data, Eigen::VectorXd & q);
 

@@ -39,7 +39,18 @@ namespace pinsettle
     /// Whether the tangential force is strictly inside the friction cone (|f_t| < mu f_n); a
     /// contact at the cone's edge would slide.
     bool sticking = true;
+    /// Whether the rest hangs on this contact by a thread: it carries almost no force (at most
+    /// kMarginalLoad of the load: the slightest push lifts it) or, when no forces balance the
+    /// rest inside cones shrunk by kMarginalCone (ContactBalance::near_cone_edge), its
+    /// tangential force is within kMarginalCone of its cone's edge (a push makes it slide).
+    bool marginal = false;
   };
+
+  /// A closed contact carrying at most this share of the load (describeContacts) is marginal.
+  constexpr double kMarginalLoad = 1e-3;
+  /// A rest that no forces balance within cones of (1 - kMarginalCone) mu is within 1 % of
+  /// sliding: its contacts with |f_t| >= (1 - kMarginalCone) mu f_n are marginal.
+  constexpr double kMarginalCone = 1e-2;
 
   ///
   /// \brief Ground planes and the points (spheres of a radius, 0 for a point) of bodies that can
@@ -162,6 +173,17 @@ namespace pinsettle
     ContactGeometry & geometry);
 
   ///
+  /// \brief Whether no contact sinks into a ground deeper than kContactGapTolerance at q: a
+  /// pose that sinks one is no rest, whatever its forces (a Newton step of the springs alone
+  /// may pass through the ground).
+  ///
+  bool isClearOfGrounds(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const GroundContacts & contacts,
+    const Eigen::VectorXd & q);
+
+  ///
   /// \brief Solve the contact impulses of a step: lambda in the friction cones (three per
   /// active pair, ordered t1, t2, n), then one >= 0 per frictionless unilateral row (a joint
   /// on its stop), with the velocities u = G lambda + b complementary to them (projected
@@ -218,9 +240,15 @@ namespace pinsettle
     // stop, -1 at an upper one).
     Eigen::Index addStopRows(const Eigen::VectorXd & q, double h, Eigen::Index row);
 
+    // The pairs that close within the step at vfree_ (active_), their gaps and points
+    // (geometry_, whose Jacobian is left empty: the rows are written for active_ alone).
+    void findClosingPairs(
+      const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q, double h);
+
     const GroundContacts & contacts_;
     const JointStops * stops_;
     ContactGeometry geometry_;
+    Eigen::Matrix<double, 6, Eigen::Dynamic> body_velocity_; // (m/s, rad/s) per joint
     std::vector<int> active_;
     Eigen::VectorXd force_; // of each pair at the last step (N), 3 pairs()
     Eigen::MatrixXd Ja_, Y_, G_;
@@ -246,6 +274,9 @@ namespace pinsettle
     double residual = 0.;
     /// The pairs at the rest's q the forces act through (its gaps, points and Jacobian).
     ContactGeometry geometry;
+    /// Whether no forces balance inside the cones shrunk by kMarginalCone: the rest is within
+    /// that much of sliding (the forces are then those in the cones themselves).
+    bool near_cone_edge = false;
   };
 
   /// Gaps at most this (m) count as closed at a rest.
@@ -283,10 +314,14 @@ namespace pinsettle
 
   ///
   /// \brief The contacts at a rest, for the result: each closed pair of balance (balanceContacts)
-  /// with its forces and gap.
+  /// with its forces and gap, and whether it is marginal.
+  ///
+  /// \param[in] load The scale of the loads the contacts share (N), e.g. the model's weight:
+  ///            a contact carrying at most kMarginalLoad times the larger of it and the largest
+  ///            normal force is marginal.
   ///
   std::vector<GroundContact> describeContacts(
-    const GroundContacts & contacts, const ContactBalance & balance);
+    const GroundContacts & contacts, const ContactBalance & balance, double load = 0.);
 
 } // namespace pinsettle
 

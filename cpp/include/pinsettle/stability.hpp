@@ -21,10 +21,14 @@ namespace pinsettle
     /// vertical axis).
     Neutral,
     /// A negative eigenvalue: a saddle or a maximum; a small push falls away.
-    Unstable
+    Unstable,
+    /// Stable by its stiffness, but held by a ground contact that carries almost no force or
+    /// sits at its friction cone's edge (GroundContact::marginal): a small push may lift or
+    /// slide it. Only a final rest is marked so (ConstraintSet::describeRest).
+    Marginal
   };
 
-  /// \brief snake_case name: "unknown", "stable", "neutral", "unstable".
+  /// \brief snake_case name: "unknown", "stable", "neutral", "unstable", "marginal".
   const char * toString(Stability stability);
 
   /// \brief The stiffness matrix at a configuration and what its eigenvalues say.

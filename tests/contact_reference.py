@@ -51,8 +51,9 @@ def read_joint_springs(path: Path) -> list[tuple[str, float, float]]:
     ]
 
 
-def read_contacts(path: Path) -> tuple[list[Plane], list[Sphere]]:
-    """The grounds and contact points of a scene file, named as pinsettle names them."""
+def read_listed_contacts(path: Path) -> tuple[list[Plane], list[Sphere]]:
+    """The [[ground]] and [[contact]] tables of a scene file, named as pinsettle names them
+    (read_contacts adds an MJCF file's own floors and geoms)."""
     data = tomllib.loads(path.read_text(encoding="utf-8"))
     planes = []
     for k, g in enumerate(data.get("ground", []), start=1):
@@ -156,3 +157,86 @@ def check_rest(model, q, planes, spheres, contacts, springs=(), stops=None) -> R
         total_n,
         total_t,
     )
+
+
+# --- scenes whose contacts come from the model's collision geometry ---------------------------
+
+#: The library scene of an MJCF file's floor and geoms ([model] contacts = "collision").
+CONTACT_SCENES += ["mjcf_ant"]
+
+
+def _mjcf_defaults(root) -> dict[str, dict[str, str]]:
+    """The geom attributes of each default class (nested classes inherit), 'main' at the top."""
+    classes: dict[str, dict[str, str]] = {}
+
+    def visit(element, name: str, inherited: dict[str, str]) -> None:
+        own = dict(inherited)
+        for geom in element.findall("geom"):
+            own.update(geom.attrib)
+        classes[name] = own
+        for child in element.findall("default"):
+            visit(child, child.get("class"), own)
+
+    for top in root.findall("default"):
+        visit(top, "main", {})
+    return classes
+
+
+def read_mjcf_collision(path: Path) -> tuple[list[Plane], list[Sphere]]:
+    """An MJCF file's floors (plane geoms of the world body, not turned) and the spheres of the
+    geoms that collide with them (contype/conaffinity): spheres at their centre, capsules
+    given by fromto at their two ends. Only what the library's files use: anything else is an
+    error here."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(path).getroot()
+    classes = _mjcf_defaults(root)
+
+    def attrs(geom, childclass="main"):
+        return {**classes[geom.get("class", childclass)], **geom.attrib}
+
+    def collides(a, b) -> bool:
+        bits = {k: int(a.get(k, "1")) for k in ("contype", "conaffinity")}
+        return bool(
+            bits["contype"] & int(b.get("conaffinity", "1"))
+            or int(b.get("contype", "1")) & bits["conaffinity"]
+        )
+
+    planes, floors = [], []
+    for geom in root.find("worldbody").findall("geom"):
+        a = attrs(geom)
+        assert a.get("type") == "plane" and not {"quat", "euler", "axisangle"} & set(a)
+        pos = np.array([float(x) for x in a.get("pos", "0 0 0").split()])
+        mu = float(a.get("friction", "1").split()[0])
+        planes.append(Plane(a["name"], pos, np.array([0.0, 0.0, 1.0]), mu))
+        floors.append(a)
+    spheres = []
+    for body in root.find("worldbody").iter("body"):
+        for geom in body.findall("geom"):
+            a = attrs(geom)
+            if not any(collides(f, a) for f in floors):
+                continue
+            radius = float(a["size"].split()[0])
+            if a.get("type", "sphere") == "sphere":
+                centre = [float(x) for x in a.get("pos", "0 0 0").split()]
+                spheres.append(Sphere(a["name"], body.get("name"), np.array(centre), radius))
+                continue
+            assert a.get("type") == "capsule" and "fromto" in a
+            ends = np.array([float(x) for x in a["fromto"].split()])
+            # pinsettle numbers a capsule's end spheres along its z axis, which MuJoCo points
+            # from the 'to' end to the 'from' end.
+            for k, end in enumerate((ends[3:], ends[:3]), start=1):
+                spheres.append(Sphere(f"{a['name']}#{k}", body.get("name"), end, radius))
+    return planes, spheres
+
+
+def read_contacts(path: Path) -> tuple[list[Plane], list[Sphere]]:
+    """The grounds and contact points of a scene file: its [[ground]] and [[contact]] tables
+    (above), and with [model] contacts = "collision" on an MJCF file, the file's floors (where
+    the scene gives no [[ground]]) and its colliding geoms."""
+    planes, spheres = read_listed_contacts(path)
+    model = tomllib.loads(path.read_text(encoding="utf-8"))["model"]
+    if model.get("contacts") != "collision":
+        return planes, spheres
+    floors, geoms = read_mjcf_collision(path.parent / model["mjcf"])
+    return planes or floors, spheres + geoms

@@ -43,7 +43,8 @@ import pinocchio
 
 from ._memory import new_data
 from ._mjcf_actuators import _actuators, _ActuatorSprings
-from ._mjcf_mass import _EPS, _GeomMass, _mesh_mass, _MeshMass, _shape_mass
+from ._mjcf_contacts import MjcfCollision, mjcf_collision
+from ._mjcf_mass import _EPS, _GeomMass, _mesh_mass, _MeshMass, _primitive, _shape_mass
 from ._mjcf_parse import (
     _MASS_SHAPES,
     MjcfError,
@@ -58,7 +59,6 @@ from ._mjcf_parse import (
     _Reader,
     _rotation,
     _to_se3,
-    _z_to,
 )
 from ._mjcf_statics import _joint_statics, _option, _other_sections, _Statics
 
@@ -92,6 +92,8 @@ class MjcfModel:
     #: Each body's mass, centre of mass and rotational inertia about it, in the body's frame,
     #: as MuJoCo compiles them (from its <inertial> or its geoms); massless bodies left out.
     inertias: dict[str, tuple[float, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: The file's floors and geoms, for contacts (``Scene.add_collision_contacts``).
+    collision: MjcfCollision | None = None
 
 
 def is_mjcf(path: str | Path) -> bool:
@@ -340,38 +342,13 @@ class _Writer:
                 "give its body an <inertial>",
             )
             return None
-        rotation, center, size = self._shape(geom, kind, where)
+        rotation, center, size = _primitive(geom, kind, where)
         volume, moments = _shape_mass(kind, size, shell == "true")
         if volume <= _EPS:
             return None
         mass = amount if key == "mass" else amount * volume
         inertia = rotation @ np.diag(moments * mass) @ rotation.T
         return _GeomMass(mass, center, inertia)
-
-    def _shape(
-        self, geom: _Geom, kind: str, where: str
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """A primitive's rotation and centre in the body frame and its sizes (MuJoCo's
-        fromto: the z axis from end to end, the half length its last size)."""
-        needed = _MASS_SHAPES[kind]
-        text = geom.attrs.get("size", "")
-        if geom.fromto is not None:
-            if kind == "sphere":
-                raise MjcfError(f"{where}: fromto needs a capsule, cylinder, box or ellipsoid")
-            ends = geom.fromto
-            half = float(np.linalg.norm(ends[:3] - ends[3:])) / 2
-            if half < _EPS:
-                raise MjcfError(f"{where} fromto: the two ends are too close")
-            radius = float(_floats(text, f"{where} size", (1, 2, 3))[0])
-            size = np.array([radius, half] if needed == 2 else [radius, radius, half])
-            rotation = _z_to(ends[:3] - ends[3:], f"{where} fromto")
-            center = (ends[:3] + ends[3:]) / 2
-        else:
-            size = _floats(text, f"{where} size", tuple(range(needed, 4)))[:needed]
-            rotation, center = geom.pose.rotation, geom.pose.translation
-        if np.any(size <= 0):
-            raise MjcfError(f"{where} size: must be positive, got {text}")
-        return np.asarray(rotation), np.asarray(center, dtype=float), size
 
     def _mesh_geom_mass(
         self, body: _Body, geom: _Geom, key: str, amount: float
@@ -488,8 +465,9 @@ def _free_objects(
         return
     falls = "they fall" if len(objects) > 1 else "it falls"
     reader.notes.append(
-        f'free object{s} {names} kept free (free_objects = "keep"): nothing holds {them} '
-        f"(contacts play no part): under gravity {falls} and the solve ends no_equilibrium; "
+        f'free object{s} {names} kept free (free_objects = "keep"): unless contacts hold {them} '
+        f'([model] contacts = "collision"), under gravity {falls} and the solve ends '
+        "no_equilibrium; "
         f'free_objects = "lock" (--free-objects lock) fixes {them} where the file places {them}'
     )
 
@@ -832,6 +810,7 @@ def load_mjcf(
         inertias=writer.inertias,
         actuator_springs=read.actuators.springs,
         actuator_rests=read.actuators.rests,
+        collision=read.collision,
     )
 
 
@@ -845,6 +824,7 @@ class _FileRead:
     statics: _Statics
     actuators: _ActuatorSprings
     structure: _Structure
+    collision: MjcfCollision
 
 
 def _read_file(path: Path, floating: bool, free_objects: str, actuator_springs: bool) -> _FileRead:
@@ -853,8 +833,12 @@ def _read_file(path: Path, floating: bool, free_objects: str, actuator_springs: 
     statics = _joint_statics(reader, flags)
     _other_sections(reader, flags)
     actuators = _actuators(reader, flags, actuator_springs)
+    collision = mjcf_collision(reader, flags)
+    floor_note = collision.floor_note()
+    if floor_note is not None:
+        reader.notes.append(floor_note)
     structure = _structure(reader, floating, free_objects)
-    return _FileRead(reader, gravity, flags, statics, actuators, structure)
+    return _FileRead(reader, gravity, flags, statics, actuators, structure, collision)
 
 
 def _check_joints(

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio
 
-from ._mjcf_parse import MjcfError, _flag, _floats, _MeshAsset
+from ._mjcf_parse import _MASS_SHAPES, MjcfError, _flag, _floats, _Geom, _MeshAsset, _z_to
 
 # --- masses from meshes, as MuJoCo computes them ----------------------------------------------
 
@@ -43,6 +43,30 @@ class _GeomMass:
 def _mesh_refusal(mesh: _MeshAsset, what: str) -> MjcfError:
     where = f"mesh '{mesh.name}'" + (f" ({mesh.file})" if mesh.file else "")
     return MjcfError(f"{where}: {what}")
+
+
+def _primitive(geom: _Geom, kind: str, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A primitive's rotation and centre in the body frame and its sizes (MuJoCo's fromto: the
+    z axis from end to end, the half length its last size)."""
+    needed = _MASS_SHAPES[kind]
+    text = geom.attrs.get("size", "")
+    if geom.fromto is not None:
+        if kind == "sphere":
+            raise MjcfError(f"{where}: fromto needs a capsule, cylinder, box or ellipsoid")
+        ends = geom.fromto
+        half = float(np.linalg.norm(ends[:3] - ends[3:])) / 2
+        if half < _EPS:
+            raise MjcfError(f"{where} fromto: the two ends are too close")
+        radius = float(_floats(text, f"{where} size", (1, 2, 3))[0])
+        size = np.array([radius, half] if needed == 2 else [radius, radius, half])
+        rotation = _z_to(ends[:3] - ends[3:], f"{where} fromto")
+        center = (ends[:3] + ends[3:]) / 2
+    else:
+        size = _floats(text, f"{where} size", tuple(range(needed, 4)))[:needed]
+        rotation, center = geom.pose.rotation, geom.pose.translation
+    if np.any(size <= 0):
+        raise MjcfError(f"{where} size: must be positive, got {text}")
+    return np.asarray(rotation), np.asarray(center, dtype=float), size
 
 
 def _read_stl(mesh: _MeshAsset, data: bytes) -> tuple[np.ndarray, np.ndarray]:

@@ -275,6 +275,8 @@ class _Reader:
         self.body_names: dict[str, _Body] = {}
         self.joint_names: set[str] = set()
         self.site_body: dict[str, str] = {}
+        #: Geoms of the world body (frames composed in): floors for contacts.
+        self.world_geoms: list[_Geom] = []
         self._count = 0
         for world in self.root.findall("worldbody"):
             self._contents(world, None, pinocchio.SE3.Identity(), None)
@@ -561,8 +563,7 @@ class _Reader:
             elif tag in ("joint", "freejoint") and body is not None:
                 self._joint(el, body, frame, childclass, where)
             elif tag == "geom":
-                if body is not None:  # world geoms have no mass that counts
-                    self._geom(el, body, frame, childclass, where)
+                self._geom(el, body, frame, childclass, where)
             elif tag == "site":
                 self._site(el, body, frame, childclass, where)
             elif tag in _SKIPPED_IN_BODY:
@@ -629,18 +630,21 @@ class _Reader:
     def _geom(
         self,
         el: ET.Element,
-        body: _Body,
+        body: _Body | None,
         frame: pinocchio.SE3,
         childclass: str | None,
         where: str,
     ) -> None:
+        """A geom of a body, or of the world (body None: a floor, for contacts; no mass)."""
         attrs = self._resolved(el, childclass)
         fromto = None
         if "fromto" in attrs:
             ends = _floats(attrs["fromto"], f"{where} fromto", (6,))
             fromto = np.concatenate([frame.act(ends[:3]), frame.act(ends[3:])])
         pose = frame * self._pose(attrs, where)
-        body.geoms.append(_Geom(attrs, pose, fromto, _describe(el)))
+        (body.geoms if body is not None else self.world_geoms).append(
+            _Geom(attrs, pose, fromto, _describe(el))
+        )
 
     def _site(
         self,

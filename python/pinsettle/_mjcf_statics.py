@@ -25,7 +25,7 @@ def _option(reader: _Reader) -> tuple[np.ndarray, dict[str, bool]]:
     """Gravity and the flags of <option> that matter here (enable / disable)."""
     gravity = np.array([0.0, 0.0, -9.81])
     flags = {"gravity": True, "limit": True, "spring": True, "equality": True, "constraint": True}
-    flags |= {"actuation": True, "clampctrl": True}
+    flags |= {"actuation": True, "clampctrl": True, "contact": True}
     for el in reader.root.findall("option"):
         where = f"{reader.path}: <option>"
         if "gravity" in el.attrib:

@@ -23,7 +23,15 @@ import pinocchio
 
 from . import _core
 from ._checks import as_flag, as_vector, unknown_key_message
+from ._collision_contacts import (
+    HULL_POINTS,
+    Collision,
+    geometry_collision,
+    take_contacts,
+    urdf_geometry,
+)
 from ._mjcf import MjcfError, MjcfModel, load_mjcf
+from ._mjcf_contacts import MjcfCollision
 from ._model_files import file_kind, load_srdf_poses, robot_srdf
 from ._scene_compile import _Compiled
 from ._scene_schema import ModelTable, SceneFile, read_scene_file
@@ -175,6 +183,8 @@ class Scene:
         #: them (``add_contact``, ``[[contact]]``).
         self.grounds: list[Ground] = []
         self.contacts: list[ContactPoint] = []
+        #: An MJCF file's floors and geoms (``add_collision_contacts``); None for other models.
+        self._mjcf_collision: MjcfCollision | None = None
         self._start: dict[str, Any] = {}
         if gravity is not None:
             self.gravity = gravity
@@ -289,6 +299,7 @@ class Scene:
         """What an MJCF file says beside its model: notes, joint and actuator springs, loops
         (its equalities) and the start (its qpos0)."""
         self.notes = list(mjcf.notes)
+        self._mjcf_collision = mjcf.collision
         for joint, stiffness, rest in mjcf.joint_springs:
             self.add_joint_spring(joint, stiffness, rest)
         first = len(self.joint_springs)
@@ -783,6 +794,97 @@ class Scene:
         self._changed()
         return self
 
+    def add_collision_contacts(
+        self,
+        *,
+        hull_points: Any = HULL_POINTS,
+        exclude: Sequence[str] = (),
+        geometry: pinocchio.GeometryModel | None = None,
+        floors: Any = True,
+    ) -> Scene:
+        """Contact points from the model's own collision geometry (``[model] contacts =
+        "collision"``): a sphere gives a sphere at its centre, a capsule the spheres at its two
+        ends, a box its 8 corners, a cylinder 8 points on each rim circle, a mesh the vertices
+        of its convex hull (at most ``hull_points``: a hull with more is thinned to that many,
+        those that keep its extent in every direction best; a note says by how much). Each
+        is fixed to the shape's body, named after the shape (``name#1``, ``name#2``, ... for
+        several). Shapes on bodies fixed to the world (or held there by locked joints) are left
+        out; ``exclude``: names of shapes or frames (bodies) to leave out.
+
+        The shapes come from ``geometry`` (a ``pinocchio.GeometryModel`` built on the scene's
+        model) if given, else from the model file: a URDF's ``<collision>`` elements, or the
+        geoms of an MJCF file that MuJoCo would collide with its floors (``contype``,
+        ``conaffinity``, ``<contact>``); ``floors``: an MJCF file's plane geoms become grounds
+        too. The grounds' friction is theirs (``add_ground``); ``notes`` say what was taken.
+
+        Raises:
+            SceneError: no collision geometry, or none on a moving body; a shape of another
+                kind (ellipsoid, cone, height field, ...) or a size that is not positive (the
+                message names the shape); an unknown name in ``exclude``; a contact name taken.
+        """
+        count = _hull_points(hull_points)
+        if isinstance(exclude, str) or not all(isinstance(n, str) for n in exclude):
+            raise SceneError(f"exclude must be a list of shape or frame names, got {exclude!r}")
+        take_floors = as_flag(floors, "floors")
+        collision, where = self._collision(geometry, exclude)
+        for name in exclude:
+            if name not in collision.names:
+                raise SceneError("exclude: " + _close(name, collision.names, "shape or frame"))
+        made, notes = take_contacts(collision, self.model, self.locked, count, where)
+        taken = {c.name for c in self.contacts}
+        for name, _, _, _ in made.contacts:
+            if name in taken:
+                raise SceneError(f"collision contacts: the contact name '{name}' is taken already")
+            taken.add(name)
+        for frame in dict.fromkeys(frame for _, frame, _, _ in made.contacts):
+            self._frame_name(frame, "frame")  # add_contact's checks, once per frame
+        self.contacts += [ContactPoint(*contact) for contact in made.contacts]
+        self._changed()
+        if self._mjcf_collision is not None and geometry is None:
+            notes += self._take_floors(collision, bool(take_floors))
+        self.notes += notes
+        return self
+
+    def _take_floors(self, collision: Collision, take: bool) -> list[str]:
+        """An MJCF file's floors as grounds (``take``), or a note that they are not."""
+        assert self._mjcf_collision is not None
+        self.notes = [n for n in self.notes if n != self._mjcf_collision.floor_note()]
+        if not take:
+            return (
+                [
+                    "the file's floors are not grounds (floors = False, or [[ground]] given): "
+                    "the scene's grounds replace them"
+                ]
+                if collision.grounds
+                else []
+            )
+        for name, point, normal, friction in collision.grounds:
+            self.add_ground(point, normal, friction, name)
+        return []
+
+    def _collision(
+        self, geometry: pinocchio.GeometryModel | None, exclude: Sequence[str]
+    ) -> tuple[Collision, str]:
+        """The collision shapes of ``geometry``, else of the model file, and their source."""
+        if geometry is not None:
+            if not isinstance(geometry, pinocchio.GeometryModel):
+                raise SceneError(
+                    f"geometry must be a pinocchio.GeometryModel, got {type(geometry).__name__}"
+                )
+            return geometry_collision(self.model, geometry, "geometry", exclude), "geometry"
+        if self._mjcf_collision is not None:
+            try:
+                return self._mjcf_collision.collision(self.model, exclude), str(self.mjcf)
+            except MjcfError as error:
+                raise SceneError(str(error)) from None
+        if self.urdf is not None:
+            shapes = urdf_geometry(self.model, self.urdf)
+            return geometry_collision(self.model, shapes, str(self.urdf), exclude), str(self.urdf)
+        raise SceneError(
+            "the scene has no model file to take collision geometry from (a Scene of a "
+            "pinocchio.Model): give geometry=pinocchio.GeometryModel, or points with add_contact"
+        )
+
     def assemble(self, q: Any = None) -> tuple[np.ndarray, float]:
         """The configuration q (the start by default, full model) moved onto the loops, and how
         far it moved (max |difference|, rad or m), as the solver does before it starts.
@@ -1025,6 +1127,13 @@ def load_scene(
         raise SceneError(f"{path}: {error}") from None
 
 
+def _hull_points(value: Any) -> int:
+    """``hull_points``, checked: an integer >= 4 (a solid's fewest vertices)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 4:
+        raise SceneError(f"hull_points must be an integer >= 4, got {value!r}")
+    return int(value)
+
+
 def _check_loops(scene: Scene, where: str) -> None:
     """Elements resolved now, not at the first solve; a start the loops cannot be closed from,
     or loops that lock everything, are errors of the file."""
@@ -1104,6 +1213,7 @@ def _build_scene(file: SceneFile, path: Path) -> Scene:
     _apply_model_options(scene, file.model, path)
     _apply_start(scene, file.model, file.start)
     _add_elements(scene, file)
+    _add_collision_contacts(scene, file)
     scene.settings = file.settings
     _check_loops(scene, "[[loop]]")
     return scene
@@ -1234,3 +1344,18 @@ def _add_elements(scene: Scene, file: SceneFile) -> None:
         _at(f"[[ground]] #{k}", scene.add_ground, g.point, g.normal, g.friction, g.name)
     for k, c in enumerate(file.contacts, start=1):
         _at(f"[[contact]] #{k}", scene.add_contact, c.frame, c.point, c.radius, c.name)
+
+
+def _add_collision_contacts(scene: Scene, file: SceneFile) -> None:
+    """[model] contacts = "collision": the model's collision shapes as contacts, and an MJCF
+    file's floors as grounds unless the scene gives [[ground]] tables."""
+    m = file.model
+    if m.contacts != "collision":
+        return
+    _at(
+        "[model] contacts",
+        scene.add_collision_contacts,
+        hull_points=m.hull_points,
+        exclude=m.contacts_exclude,
+        floors=not file.grounds,
+    )

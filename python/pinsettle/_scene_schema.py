@@ -68,6 +68,10 @@ def _keep_or_lock(value: Any) -> bool:
     return value in ("keep", "lock")
 
 
+def _contacts_kind(value: Any) -> bool:
+    return value in ("collision", "none")
+
+
 _FLAG: dict[str, Any] = {"expect": "true or false", "check": _is_bool}
 _PATH: dict[str, Any] = {"expect": "a path (str)", "check": _is_str}
 _END: dict[str, Any] = {
@@ -152,6 +156,21 @@ class ModelTable:
     )
     actuator_springs: bool = key(
         False, **_FLAG, needs="mjcf", purpose="an MJCF file's actuators ('mjcf')"
+    )
+    contacts: str = key(
+        "none",
+        expect="'collision' (contact points from the model's collision geometry) or 'none'",
+        check=_contacts_kind,
+    )
+    hull_points: Any = key(  # checked by Scene.add_collision_contacts
+        16, needs="contacts", purpose='contacts = "collision" (the most points of a mesh\'s hull)'
+    )
+    contacts_exclude: list[Any] = key(
+        [],
+        expect="a list of shape or frame names",
+        check=_is_list,
+        needs="contacts",
+        purpose='contacts = "collision" (shapes or frames left out)',
     )
 
     SOURCES: ClassVar[tuple[str, ...]] = ("urdf", "robot", "mjcf")

@@ -1,5 +1,6 @@
 """The playback in meshcat: the mechanism, its springs and the event flashes loaded into the
-viewer, the camera placed, and the animation of all of it made.
+viewer (the forces that hold it from ``_play_forces``, the grounds and contacts from
+``_play_contacts``), the camera placed, and the animation of all of it made.
 """
 
 from __future__ import annotations
@@ -166,16 +167,38 @@ class _Tracks:
         _add_visibility(self.animation, path, frames, shown, self.fps)
 
 
+def legend(scene: Scene, result: Result) -> list[dict[str, str]]:
+    """What each kind of mark drawn is (for the overlay): the forces', and the grounds' and
+    contacts' for a scene with grounds."""
+    entries = forces_legend(scene, result)
+    if scene.grounds:  # imported only for a scene that has them
+        from ._play_contacts import contacts_legend
+
+        entries += contacts_legend(scene, result)
+    return entries
+
+
+def _mark_tips(scene: Scene, result: Result, size: float) -> np.ndarray:
+    """Where the arrows drawn at the end of the motion end (world), for the camera to frame."""
+    tips = mark_tips(scene, result, size)
+    if scene.grounds:
+        from ._play_contacts import contact_tips
+
+        tips = np.concatenate([tips, contact_tips(scene, result, size)])
+    return tips
+
+
 def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any, result: Result) -> Any:
-    """Load the mechanism, its springs, the event flashes and the forces that hold it into the
-    viewer, place the camera, and make the animation (returned)."""
+    """Load the mechanism, its springs, the event flashes, the forces that hold it and its
+    grounds and contacts into the viewer, place the camera, and make the animation
+    (returned)."""
     viz.loadViewerModel(rootNodeName="pinocchio")
     keys = _keyframes(viz, scene, timeline, visual)
     # The top of the view is left to the overlay (its lines, 19 px each, of a 600 px view);
-    # the forces' arrows are sized by the view, and framed too.
-    top = (20 + 19 * (3 + len(forces_legend(scene, result)))) / 600
+    # the forces' arrows are sized by the view, and framed too (the grounds' slabs are not).
+    top = (20 + 19 * (3 + len(legend(scene, result)))) / 600
     target, distance, size = _view(keys, visual)
-    target, distance, _ = _view(keys, visual, mark_tips(scene, result, size), top)
+    target, distance, _ = _view(keys, visual, _mark_tips(scene, result, size), top)
     _place_camera(viz, target, distance)
     radius = size / 2
     tracks = _Tracks(timeline)
@@ -187,6 +210,10 @@ def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any, res
     _add_event_flashes(viz.viewer, timeline, keys.com, radius, tracks)
     _add_impact_flashes(viz, timeline, visual, keys, radius, tracks)
     draw_forces(viz, scene, result, timeline, size, tracks)
+    if scene.grounds:
+        from ._play_contacts import draw_contacts
+
+        draw_contacts(viz, scene, result, timeline, size, keys.com[-1], tracks)
     viz.display(timeline.q[-1])  # the final pose, also where the animation ends
     return tracks.animation
 

@@ -3,7 +3,8 @@
 ``pinsettle.play(scene, result)`` draws the scene (its URDF's visual shapes and meshes, or a
 stick figure when it has none), its springs following the motion, what holds it (loads, joint
 springs, the loops' closure points, the stops' reactions at the end; a legend says which mark
-is what), a flash at each damping event, and plays the recorded trajectory with time scaled so
+is what), the grounds and the contacts on them with their forces at the end (a scene with
+grounds), a flash at each damping event, and plays the recorded trajectory with time scaled so
 that a long settle plays in a few seconds (and a short one in slow motion); the final pose is
 held. ``plot_energy(result, path)`` draws both energy measures against time with the damping
 events (PNG).
@@ -14,9 +15,9 @@ imported inside the functions, never by ``import pinsettle`` nor by a solve.
 This module is the front door (``play``, the visualizer it returns, the public names); the
 rooms behind it: ``_play_timeline`` (which pose is shown when), ``_play_meshes`` (the shapes),
 ``_play_animation`` (the scene and its animation in meshcat), ``_play_forces`` (the marks of
-what holds it), ``_play_server`` (the window meshcat talks to and the live server),
-``_play_page`` (the static and live pages), ``_play_plot`` (the energy plot) and
-``_play_extra`` (the optional extra).
+what holds it), ``_play_contacts`` (the grounds, the contacts and their forces),
+``_play_server`` (the window meshcat talks to and the live server), ``_play_page`` (the static
+and live pages), ``_play_plot`` (the energy plot) and ``_play_extra`` (the optional extra).
 """
 
 from __future__ import annotations
@@ -31,9 +32,8 @@ from typing import Any, TypeVar
 
 import pinocchio
 
-from ._play_animation import build_animation
+from ._play_animation import build_animation, legend
 from ._play_extra import VIZ_INSTALL, MissingDependencyError, require
-from ._play_forces import forces_legend
 from ._play_meshes import _normal_mesh_class, _stick_figure, _visual_model, dae_mesh, read_stl
 from ._play_page import _html, live_page
 from ._play_plot import _impact_names as _impact_names  # the legend's names, tested here
@@ -152,7 +152,7 @@ def _overlay(scene: Scene, result: Result, timeline: Timeline) -> dict[str, Any]
     """What the overlay of both pages shows (see ``_play_page``)."""
     status = f"{result.status}: {result.steps} steps, {result.peaks} damping events"
     return {
-        "legend": forces_legend(scene, result),
+        "legend": legend(scene, result),
         "scene": scene.name,
         "status": status,
         "speed": timeline.speed,

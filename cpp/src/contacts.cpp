@@ -88,11 +88,12 @@ namespace pinsettle
     {
       const double old_n = lambda[r + 2];
       const double gnn = G(r + 2, r + 2);
-      const double un = G.row(r + 2).dot(lambda) + b[r + 2];
+      // G is symmetric: its columns, contiguous, stand for its rows.
+      const double un = G.col(r + 2).dot(lambda) + b[r + 2];
       const double ln = gnn > 0. ? std::max(0., old_n - un / gnn) : 0.;
       lambda[r + 2] = ln;
       const Eigen::Vector2d old_t = lambda.segment<2>(r);
-      const Eigen::Vector2d ut(G.row(r).dot(lambda) + b[r], G.row(r + 1).dot(lambda) + b[r + 1]);
+      const Eigen::Vector2d ut(G.col(r).dot(lambda) + b[r], G.col(r + 1).dot(lambda) + b[r + 1]);
       // A projected gradient step of length 1 / (largest eigenvalue of the 2 x 2 block): its
       // fixed point is Coulomb's law. A Newton step on the block (G_tt^-1) projected onto the
       // disc is not: on a box held by four corners it stopped at forces that let it creep.
@@ -216,7 +217,7 @@ namespace pinsettle
       for (Eigen::Index r = 3 * friction.size(); r < lambda.size(); ++r)
       {
         const double old = lambda[r];
-        lambda[r] = G(r, r) > 0. ? std::max(0., old - (G.row(r).dot(lambda) + b[r]) / G(r, r)) : 0.;
+        lambda[r] = G(r, r) > 0. ? std::max(0., old - (G.col(r).dot(lambda) + b[r]) / G(r, r)) : 0.;
         change = std::max(change, std::abs(lambda[r] - old));
       }
       if (change <= 1e-11 * lambda.lpNorm<Eigen::Infinity>() || change == 0.)
@@ -291,7 +292,11 @@ namespace pinsettle
     factorMassMatrix(model, data, q, llt_);
     Y_.leftCols(rows) = J.transpose();
     llt_.matrixL().solveInPlace(Y_.leftCols(rows));
-    G_.topLeftCorner(rows, rows).noalias() = Y.transpose() * Y;
+    // Y^T Y on one triangle, mirrored: half the products, and exactly symmetric.
+    auto Gw = G_.topLeftCorner(rows, rows);
+    Gw.setZero();
+    Gw.selfadjointView<Eigen::Lower>().rankUpdate(Y.transpose());
+    Gw.triangularView<Eigen::StrictlyUpper>() = Gw.transpose();
     b.noalias() = J * vfree_;
     // Open: close the gap in this step and no more; sunk in (round-off, a stop's clamp): come
     // out within the step. Coming out by a fifth per step left go1's feet 1e-5 m deep when
@@ -411,7 +416,9 @@ namespace pinsettle
       Eigen::LLT<Eigen::MatrixXd> llt(model.nv);
       factorMassMatrix(model, data, q, llt);
       const Eigen::MatrixXd Y = llt.matrixL().solve(J.transpose());
-      const Eigen::MatrixXd G = Y.transpose() * Y;
+      Eigen::MatrixXd G = Eigen::MatrixXd::Zero(rows, rows);
+      G.selfadjointView<Eigen::Lower>().rankUpdate(Y.transpose());
+      G.triangularView<Eigen::StrictlyUpper>() = G.transpose();
       // Velocity after a unit time from rest: M^-1 (J^T f - tau); u = G f - J M^-1 tau.
       const Eigen::VectorXd b = -(Y.transpose() * llt.matrixL().solve(tau));
       for (Eigen::Index k = 0; k < mu.size(); ++k)

@@ -189,7 +189,8 @@ namespace pinsettle
   /// on its stop), with the velocities u = G lambda + b complementary to them (projected
   /// Gauss-Seidel, started from lambda).
   ///
-  /// \param[in] G Delassus matrix J M^-1 J^T of the active rows (dim 3a + s).
+  /// \param[in] G Delassus matrix J M^-1 J^T of the active rows (dim 3a + s), symmetric (its
+  ///            columns are read for its rows).
   /// \param[in] b Velocities without impulses, the gap terms included (dim 3a + s).
   /// \param[in] friction Coefficient of each active pair (dim a).
   /// \param[in,out] lambda Impulses (dim 3a + s, N s or N m s): the start in, the answer out.

@@ -159,6 +159,35 @@ def check_rest(model, q, planes, spheres, contacts, springs=(), stops=None) -> R
     )
 
 
+def scene_parts(scene) -> tuple[list[Plane], list[Sphere]]:
+    """A pinsettle.Scene's grounds and contact points, as this module's planes and spheres."""
+    planes = [
+        Plane(g.name, np.array(g.point), np.array(g.normal), g.friction) for g in scene.grounds
+    ]
+    spheres = [Sphere(c.name, c.frame, np.array(c.point), c.radius) for c in scene.contacts]
+    return planes, spheres
+
+
+def weight(model: pinocchio.Model) -> float:
+    """The model's weight (N) under its own gravity."""
+    return sum(inertia.mass for inertia in model.inertias) * -model.gravity.linear[2]
+
+
+def assert_rests_on_the_floor(scene, result, springs=()) -> RestCheck:
+    """The rest conditions, independently (balance to round-off, forces in their cones, nothing
+    sunk in, the loaded points touching), and the floor carrying the weight to 1e-9."""
+    assert result.status == "converged", result.reason
+    planes, spheres = scene_parts(scene)
+    stops = {j: (side, result.limit_reactions[j]) for j, side in result.at_limit.items()}
+    check = check_rest(scene.model, result.q, planes, spheres, result.contacts, springs, stops)
+    assert check.balance <= 1e-9 * check.scale
+    assert check.worst_cone <= 1e-9 * check.scale
+    assert check.min_gap >= -1e-6 and check.worst_touch <= 1e-6
+    lift = check.total_normal + check.total_tangential
+    assert np.allclose(lift, [0.0, 0.0, weight(scene.model)], rtol=1e-9, atol=1e-9)
+    return check
+
+
 # --- scenes whose contacts come from the model's collision geometry ---------------------------
 
 #: The library scene of an MJCF file's floor and geoms ([model] contacts = "collision").

@@ -20,7 +20,11 @@ import numpy as np
 import pinocchio
 import pinsettle
 import pytest
-from contact_reference import Plane, Sphere, check_rest, read_contacts
+from contact_reference import (
+    assert_rests_on_the_floor,
+    read_contacts,
+    weight,
+)
 
 ROBOTS = Path(__file__).parents[1] / "robots"
 G = 9.81
@@ -47,32 +51,6 @@ def world_points(scene: pinsettle.Scene, q: np.ndarray) -> dict[str, tuple[np.nd
         c.name: (data.oMf[model.getFrameId(c.frame)].act(np.array(c.point)), c.radius)
         for c in scene.contacts
     }
-
-
-def parts(scene: pinsettle.Scene) -> tuple[list[Plane], list[Sphere]]:
-    planes = [
-        Plane(g.name, np.array(g.point), np.array(g.normal), g.friction) for g in scene.grounds
-    ]
-    spheres = [Sphere(c.name, c.frame, np.array(c.point), c.radius) for c in scene.contacts]
-    return planes, spheres
-
-
-def weight(model: pinocchio.Model) -> float:
-    return sum(inertia.mass for inertia in model.inertias) * -model.gravity.linear[2]
-
-
-def assert_rests_on_the_floor(scene, result, springs=()):
-    """The rest conditions, independently, and the floor carrying the weight to 1e-9."""
-    assert result.status == "converged", result.reason
-    planes, spheres = parts(scene)
-    stops = {j: (side, result.limit_reactions[j]) for j, side in result.at_limit.items()}
-    check = check_rest(scene.model, result.q, planes, spheres, result.contacts, springs, stops)
-    assert check.balance <= 1e-9 * check.scale
-    assert check.worst_cone <= 1e-9 * check.scale
-    assert check.min_gap >= -1e-6 and check.worst_touch <= 1e-6
-    lift = check.total_normal + check.total_tangential
-    assert np.allclose(lift, [0.0, 0.0, weight(scene.model)], rtol=1e-9, atol=1e-9)
-    return check
 
 
 # --- the shapes, one by one ------------------------------------------------------------------

@@ -16,12 +16,13 @@ import pinsettle
 import pytest
 from contact_reference import (
     CONTACT_SCENES,
-    Plane,
-    Sphere,
+    assert_rests_on_the_floor,
     check_rest,
     read_contacts,
     read_joint_springs,
+    weight,
 )
+from contact_reference import scene_parts as parts
 
 ROBOTS = Path(__file__).parents[1] / "robots"
 G = 9.81
@@ -49,14 +50,6 @@ def body_scene(
     return scene
 
 
-def parts(scene: pinsettle.Scene) -> tuple[list[Plane], list[Sphere]]:
-    planes = [
-        Plane(g.name, np.array(g.point), np.array(g.normal), g.friction) for g in scene.grounds
-    ]
-    spheres = [Sphere(c.name, c.frame, np.array(c.point), c.radius) for c in scene.contacts]
-    return planes, spheres
-
-
 def assert_rest(scene: pinsettle.Scene, result: pinsettle.Result, planes=None, spheres=None):
     """The rest conditions, independently: balance to round-off, forces in their cones,
     nothing sunk in, the loaded points touching."""
@@ -70,10 +63,6 @@ def assert_rest(scene: pinsettle.Scene, result: pinsettle.Result, planes=None, s
     assert check.worst_touch <= 1e-6
     assert result.kinetic_energy <= result.settings.max_e
     return check
-
-
-def weight(model) -> float:
-    return sum(inertia.mass for inertia in model.inertias) * G
 
 
 #: Scenes whose contacts slide before they stick (no spring holds the legs): a foot stops where
@@ -354,15 +343,7 @@ def com_over_support(model, q, contacts) -> bool:
 def test_floating_robots_stand_on_their_feet(name):
     scene, springs = robot_on_floor(name)
     result = pinsettle.solve(scene)
-    assert result.status == "converged", result.reason
-    planes, spheres = parts(scene)
-    stops = {j: (side, result.limit_reactions[j]) for j, side in result.at_limit.items()}
-    check = check_rest(scene.model, result.q, planes, spheres, result.contacts, springs, stops)
-    assert check.balance <= 1e-9 * check.scale
-    assert check.worst_cone <= 1e-9 * check.scale
-    assert check.min_gap >= -1e-6 and check.worst_touch <= 1e-6
     # The floor carries the weight, to 1e-9 relative (talos: 885.57 N).
-    lift = check.total_normal + check.total_tangential
-    assert np.allclose(lift, [0.0, 0.0, weight(scene.model)], rtol=1e-9, atol=1e-9)
+    assert_rests_on_the_floor(scene, result, springs)
     assert com_over_support(scene.model, result.q, result.contacts)
     assert result.stability == "stable"

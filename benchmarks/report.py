@@ -24,6 +24,9 @@ such as a section another tool writes, is kept as it is). The sections:
 - ``gallery``: every robot of example-robot-data, root fixed, with the default settings, side by
   side with MuJoCo's damped settle of the same URDF (``pip install ".[bench]"``), and the
   floating-base robots falling.
+- ``contact``: go1 dropped on a floor (the scenes go1_standing and go1_motors_off) against
+  MuJoCo at its best over its time step, integrator and damping, and the cost of a step on the
+  contacts (benchmarks/contact_drop.py; it needs no C++ program).
 
 The error of a configuration q is measured two ways:
 
@@ -73,6 +76,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "robots"))
 sys.path.insert(0, str(HERE))
+import contact_drop  # noqa: E402  (benchmarks/contact_drop.py: go1 on a floor and MuJoCo)
 import gallery  # noqa: E402  (benchmarks/gallery.py: the robots and MuJoCo)
 import report_readme  # noqa: E402  (benchmarks/report_readme.py: the README's speed section)
 import report_writer  # noqa: E402  (benchmarks/report_writer.py: the report's text)
@@ -780,6 +784,7 @@ QUICK = Config(
     robots=("ur5", "double_pendulum", "finger_edu", "solo12"),
     mujoco_max_sim=60.0,
     gallery_repeats=1,
+    contact_quick=True,
 )
 
 Task = tuple[str, Callable[[], None]]
@@ -1136,6 +1141,17 @@ def gallery_tasks(config: Config, results: Results) -> list[Task]:
     return tasks
 
 
+def contact_tasks(config: Config, results: Results) -> list[Task]:
+    """go1 on a floor against MuJoCo, one task per scene."""
+    sweep = contact_drop.QUICK if config.contact_quick else contact_drop.FULL
+    results.contact = contact_drop.empty_record(sweep)
+
+    def scene(name: str) -> None:
+        results.contact["scenes"].append(contact_drop.measure_scene(name, sweep))
+
+    return [(f"contact: {name}", partial(scene, name)) for name in sweep.scenes]
+
+
 def plan(
     config: Config, results: Results, programs: Path, work: Path, sections: Sequence[str]
 ) -> list[tuple[str, str, Callable[[], None]]]:
@@ -1147,6 +1163,7 @@ def plan(
         "overhead": lambda: overhead_tasks(config, results, programs, work),
         "scaling": lambda: scaling_tasks(config, results, programs, work),
         "gallery": lambda: gallery_tasks(config, results),
+        "contact": lambda: contact_tasks(config, results),
     }
     for section in SECTIONS:
         if section in sections:
@@ -1199,7 +1216,9 @@ def generate(
             print(msg, file=sys.stderr, flush=True)
 
     results = Results(config, machine=machine(), sections=tuple(sections))
-    programs = build_programs(build_dir, log)
+    # The gallery and the contact part run no C++ program of benchmarks/.
+    needs_programs = bool(set(sections) - {"gallery", "contact"})
+    programs = build_programs(build_dir, log) if needs_programs else build_dir
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pinsettle-bench-") as tmp:
         tasks = plan(config, results, programs, Path(tmp), sections)

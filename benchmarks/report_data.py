@@ -18,7 +18,7 @@ from independent import CachedReference
 from scene_statics import Statics
 
 #: The report's sections (``report.py --sections``), in the report's order.
-SECTIONS = ("scenes", "cost", "overhead", "scaling", "gallery")
+SECTIONS = ("scenes", "cost", "overhead", "scaling", "gallery", "contact")
 
 #: A record as the C++ programs print it (JSON) or a measurement gathers it: settings, a
 #: profile, a gallery row.
@@ -279,6 +279,8 @@ class Config:
     robots: Sequence[str] | None = None
     mujoco_max_sim: float = MUJOCO_MAX_SIM
     gallery_repeats: int = 3
+    #: The contact part's small sweep (benchmarks/contact_drop.py's QUICK) instead of its full.
+    contact_quick: bool = False
 
     def sweep(self, family: str) -> list[Record]:
         """The settings a baseline is run with besides its rule (the rule included)."""
@@ -327,6 +329,8 @@ class Results:
     gallery: list[Record] = field(default_factory=list)
     floating: list[Record] = field(default_factory=list)
     mujoco: Record = field(default_factory=dict)  # version, or why it is not there
+    # The contact part (benchmarks/contact_drop.py's measure): go1 on a floor against MuJoCo.
+    contact: Record = field(default_factory=dict)
     machine: Record = field(default_factory=dict)
     seconds: float = 0.0
     sections: Sequence[str] = ()  # the sections measured in this run

@@ -15,6 +15,7 @@ import re
 import statistics
 from pathlib import Path
 
+import contact_drop
 import numpy as np
 import pinsettle
 import report_data as D
@@ -1742,6 +1743,7 @@ REGION_TITLES = {
     "overhead": "Where a solve's time goes",
     "scaling": "Scaling with chain length",
     "gallery": "The robot gallery, and MuJoCo",
+    "contact": "Contact: go1 on a floor, and MuJoCo",
 }
 
 
@@ -1785,6 +1787,8 @@ def parts(results: D.Results, fig_dir: Path, figures: str) -> dict[str, str]:
     if "gallery" in results.sections:
         gallery_figure(results, fig_dir / "gallery.png")
         out["gallery"] = gallery_section(results, figures)
+    if "contact" in results.sections:
+        out["contact"] = contact_drop.section(results.contact)
     for name in list(out):
         out[name] = f"## {REGION_TITLES[name]}\n\n" + stamp(results, name) + out[name]
     if set(results.sections) == set(D.SECTIONS):

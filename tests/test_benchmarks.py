@@ -590,3 +590,130 @@ def test_unfinished_chains_tell_a_refusal_from_a_run_out_of_time():
     )
     results.scaling = rows[:1]
     assert report_goals.unfinished_chains(results) == ""
+
+
+# --- the contact part (benchmarks/contact_drop.py) ---------------------------------------------
+
+import contact_drop  # noqa: E402  (benchmarks/contact_drop.py)
+
+
+@pytest.fixture(scope="module")
+def contact():
+    """The contact part's small sweep, measured alone (no C++ program): a few seconds."""
+    if not HAS_MUJOCO and os.environ.get("PINSETTLE_REQUIRE_MUJOCO") == "1":
+        pytest.fail("MuJoCo is required here (PINSETTLE_REQUIRE_MUJOCO=1) but is not installed")
+    return contact_drop.measure(contact_drop.QUICK)
+
+
+def _go1_weight():
+    """go1's weight from its URDF with Pinocchio alone (N)."""
+    model = pinocchio.buildModelFromUrdf(
+        str(pinsettle.robot_urdf("go1")), pinocchio.JointModelFreeFlyer()
+    )
+    return pinocchio.computeTotalMass(model) * 9.81
+
+
+def test_the_contact_part_rests_on_the_floor(contact):
+    # pinsettle's rest: converged, every contact point on or above the floor within 1e-6 m
+    # (the gaps recomputed from Pinocchio's frames), the floor carrying the weight to 1e-9.
+    weight = _go1_weight()
+    assert [s["name"] for s in contact["scenes"]] == list(contact_drop.QUICK.scenes)
+    for scene in contact["scenes"]:
+        assert scene["weight"] == pytest.approx(weight, rel=1e-12)
+        ours = scene["ours"]
+        assert ours["status"] == "converged" and ours["closed"] == scene["contacts"]
+        assert min(ours["gaps"]) >= -contact_drop.GAP_TOLERANCE
+        assert abs(ours["normal_force"] - 1.0) <= 1e-9 and ours["com_height"] > 0
+        assert len(ours["seconds"]) == contact_drop.QUICK.repeats * contact_drop.OURS_PER_ROUND
+        assert all(s > 0 for s in ours["seconds"])
+        # The step cost: four contacts closed at rest, none while falling free.
+        cost = scene["step_cost"]
+        assert cost["resting_closed"] == scene["contacts"] and cost["free_closed"] == 0
+        assert cost["resting"] > 0 and cost["free"] > 0
+
+
+@pytest.mark.skipif(not HAS_MUJOCO, reason="mujoco is not installed (pip install '.[test]')")
+def test_mujocos_go1_is_pinocchios_and_carries_its_weight(contact):
+    weight = _go1_weight()
+    sweep = contact_drop.QUICK
+    for scene in contact["scenes"]:
+        check = scene["model_check"]
+        # The same mechanism: mass, joints, axes, contact centres and centre of mass.
+        assert check["mass_mujoco"] == pytest.approx(weight / 9.81, rel=1e-9)
+        assert check["hinges"] == check["joints_pinocchio"] == 12
+        assert check["axis"] <= 1e-12 and check["contact_centre"] <= 1e-12
+        assert check["com"] <= 1e-12
+        assert check["springs"] == 12 and check["spring"] <= 1e-12  # go1_standing's
+        assert check["diagonal_inertia"] == ["base"]
+        runs = scene["runs"]
+        assert len(runs) == len(sweep.timesteps) * len(sweep.integrators) * len(sweep.dampings)
+        done = contact_drop.at_rest(runs)
+        assert done, scene["name"]
+        for run in done:
+            # At rest by its own static residual; its (soft) contacts carry the weight to 1 %
+            # and sink in, by less than a centimetre.
+            assert run["residual"] <= contact_drop.LEVEL
+            assert abs(run["normal_force"] - 1.0) <= 1e-2
+            assert 0 < run["penetration"] < 1e-2
+            assert len(run["seconds"]) == sweep.repeats and run["time"] > 0
+            assert run["sim_time"] == pytest.approx(run["steps"] * run["timestep"])
+        # At its best: the fastest of the runs at rest on the floor (centre of mass above it).
+        on_floor = [run for run in done if run["com_height"] > 0]
+        assert contact_drop.best(runs)["time"] == min(run["time"] for run in on_floor)
+
+
+def test_the_contact_section_is_a_well_formed_table(contact):
+    text = contact_drop.section(contact)
+    rows = [line for line in text.splitlines() if line.startswith("| `go1")]
+    assert len(rows) == 2 * len(contact["scenes"])  # the comparison and the step cost
+    header = next(line for line in text.splitlines() if line.startswith("| scene | contacts"))
+    assert rows[0].count("|") == header.count("|")
+    assert "nan" not in text
+    if HAS_MUJOCO:
+        assert f"MuJoCo {contact['mujoco']['version']}" in text
+        assert "came to rest" in text
+
+
+def test_mujocos_model_refuses_what_it_does_not_hold():
+    with pytest.raises(ValueError, match="ur5: needs a URDF robot with a free-flyer root"):
+        contact_drop.mujoco_model(pinsettle.load_scene("ur5"))
+
+
+def test_the_contact_section_tells_rests_below_the_floor_apart():
+    # Synthetic runs: MuJoCo's best is the fastest rest on the floor, not a faster one below
+    # it; whole damping groups are named as such, the others listed.
+    def run(dt, damping, status, time=None, com=0.2):
+        return {
+            "timestep": dt,
+            "integrator": "Euler",
+            "damping": damping,
+            "status": status,
+            "time": time,
+            "com_height": com,
+        }
+
+    runs = [
+        run(1e-3, 0.1, "at rest", 0.01, com=-0.2),
+        run(2e-3, 0.1, "at rest", 0.02, com=-0.2),
+        run(1e-3, 1.0, "at rest", 0.05),
+        run(2e-3, 1.0, "not at rest"),
+    ]
+    assert contact_drop.best(runs) is runs[2]
+    assert contact_drop.below(runs) == runs[:2]
+    assert contact_drop._which(runs[:2], runs, "{time} s") == "every setting with damping 0.1"
+    assert (
+        contact_drop._which([runs[0], runs[3]], runs, "{status}")
+        == "1 ms, Euler, damping 0.1 (at rest); 2 ms, Euler, damping 1 (not at rest)"
+    )
+
+
+def test_the_contact_part_says_when_mujoco_is_missing(monkeypatch):
+    # Without MuJoCo the part still measures pinsettle and says what is missing.
+    monkeypatch.setattr(contact_drop, "mujoco", None)
+    sweep = contact_drop.Sweep(scenes=("go1_standing",), repeats=1, cost_steps=(50, 150))
+    record = contact_drop.empty_record(sweep)
+    record["scenes"] = [contact_drop.measure_scene("go1_standing", sweep)]
+    assert record["scenes"][0]["runs"] == [] and record["scenes"][0]["ours"]["time"] > 0
+    text = contact_drop.section(record)
+    assert "MuJoCo was not measured: mujoco is not installed" in text
+    assert "| not installed | - |" in text and "\n\n\n" not in text

@@ -347,3 +347,22 @@ def test_floating_robots_stand_on_their_feet(name):
     assert_rests_on_the_floor(scene, result, springs)
     assert com_over_support(scene.model, result.q, result.contacts)
     assert result.stability == "stable"
+
+
+def test_anymal_with_its_motors_off_rests_on_its_body():
+    # No spring holds anymal's joints: dropped from its stance on all its collision shapes, its
+    # legs give way and it lies on the floor on its body's boxes, thighs and feet.
+    from pinsettle._model_files import robot_srdf
+
+    scene = pinsettle.Scene.from_robot("anymal", floating=True)
+    scene.load_srdf(robot_srdf("anymal"))
+    scene.set_pose("standing")
+    scene.add_ground(friction=0.8, name="floor")
+    scene.add_collision_contacts()
+    result = pinsettle.solve(scene)
+    check = assert_rests_on_the_floor(scene, result)
+    assert result.stability in ("stable", "marginal")
+    # It lies low: the trunk's boxes carry most of its weight.
+    on_body = sum(c.normal_force for c in result.contacts if c.name.startswith("base"))
+    assert on_body >= 0.5 * check.total_normal[2]
+    assert result.q[2] < 0.2

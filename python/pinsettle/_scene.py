@@ -497,7 +497,7 @@ class Scene:
         Raises:
             SceneError: off unit norm by more than ``UNIT_NORM_SLACK``.
         """
-        norm = float(np.linalg.norm(part))
+        norm = math.hypot(*part)  # scaled: numpy's dot overflows (and warns) past 1e154
         if abs(norm - 1.0) > UNIT_NORM_SLACK:
             if part.size == 4:
                 raise SceneError(

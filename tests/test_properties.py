@@ -57,6 +57,11 @@ from hypothesis import strategies as st  # noqa: E402
 
 MAX_STEPS = 2000
 MAX_TIME = 1.0  # s per solve
+# The wall-time guard of the runs that must converge: a guard against a hang only (their step
+# limit bounds them). In full-suite runs, 4 of the 162 bounded chains of the converged-rest test
+# ended unconverged at a 1 s budget, twice in a row, while alone all 162 converge (the whole test
+# takes 13 s): wall time, not steps, decided them.
+CONVERGE_TIME = 10.0  # s per solve
 WALL_MARGIN = 2.0  # s beyond max_time for the setup and the final stability report
 
 PROPERTIES = settings(
@@ -321,7 +326,7 @@ def test_verdict_of_a_converged_rest_agrees_with_finite_differences():
     def rests(data):
         model, kinds = data.draw(chains(), label="model")
         q0 = configuration(data.draw, model, scale=0.5)
-        result = pinsettle.solve(model, q0, limits=False, max_steps=20000, max_time=MAX_TIME)
+        result = pinsettle.solve(model, q0, limits=False, max_steps=20000, max_time=CONVERGE_TIME)
         bounded = set(kinds) <= BOUNDED
         event(f"{'bounded' if bounded else 'unbounded'}: {result.status}, {result.stability}")
         outcomes[bounded, result.converged] += 1

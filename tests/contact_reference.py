@@ -159,6 +159,19 @@ def check_rest(model, q, planes, spheres, contacts, springs=(), stops=None) -> R
     )
 
 
+def add_stance_springs(scene, stiffness: float) -> list[tuple[str, float, float]]:
+    """A spring of `stiffness` on every 1-DoF joint of the scene towards its start pose (the
+    stance), added to the scene and returned as (joint, stiffness, rest)."""
+    model, q = scene.model, scene.q0()
+    springs = []
+    for j in range(2, model.njoints):
+        if model.nqs[j] == 1:
+            rest = float(q[model.idx_qs[j]])
+            scene.add_joint_spring(model.names[j], stiffness, rest)
+            springs.append((model.names[j], stiffness, rest))
+    return springs
+
+
 def scene_parts(scene) -> tuple[list[Plane], list[Sphere]]:
     """A pinsettle.Scene's grounds and contact points, as this module's planes and spheres."""
     planes = [

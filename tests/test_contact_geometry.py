@@ -21,6 +21,7 @@ import pinocchio
 import pinsettle
 import pytest
 from contact_reference import (
+    add_stance_springs,
     assert_rests_on_the_floor,
     read_contacts,
     weight,
@@ -243,13 +244,8 @@ def robot_drop(name: str):
     scene.load_srdf(robot_srdf(name))
     stiffness, pose = STANCES[name]
     scene.set_pose(pose)
-    model, q = scene.model, scene.q0()
-    springs = []
-    for j in range(2, model.njoints):
-        if model.nqs[j] == 1:
-            rest = float(q[model.idx_qs[j]])
-            scene.add_joint_spring(model.names[j], stiffness, rest)
-            springs.append((model.names[j], stiffness, rest))
+    q = scene.q0()
+    springs = add_stance_springs(scene, stiffness)
     scene.add_ground(friction=0.8, name="floor")
     scene.add_collision_contacts()
     # 2 cm above the floor: the lowest contact of the stance.

@@ -16,6 +16,7 @@ import pinsettle
 import pytest
 from contact_reference import (
     CONTACT_SCENES,
+    add_stance_springs,
     assert_rests_on_the_floor,
     check_rest,
     read_contacts,
@@ -310,12 +311,7 @@ def robot_on_floor(name: str) -> tuple[pinsettle.Scene, list[tuple[str, float, f
         scene.set_pose(pose)
         points = [(foot, (0.0, 0.0, 0.0), radius) for foot in feet]
     model, q = scene.model, scene.q0()
-    springs = []
-    for j in range(2, model.njoints):
-        if model.nqs[j] == 1:
-            rest = float(q[model.idx_qs[j]])
-            scene.add_joint_spring(model.names[j], stiffness, rest)
-            springs.append((model.names[j], stiffness, rest))
+    springs = add_stance_springs(scene, stiffness)
     scene.add_ground(friction=0.8, name="floor")
     data = model.createData()
     pinocchio.framesForwardKinematics(model, data, q)

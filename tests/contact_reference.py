@@ -33,6 +33,34 @@ class Plane:
     normal: np.ndarray  # unit
     friction: float
 
+    def touch(self, centre: np.ndarray, radius: float) -> tuple[float, np.ndarray]:
+        """The gap (m) of a sphere and the unit normal out of the ground where it touches."""
+        return float(self.normal @ (centre - self.point) - radius), self.normal
+
+
+@dataclass
+class Box:
+    name: str
+    centre: np.ndarray
+    rotation: np.ndarray  # its axes (columns) in the world
+    size: np.ndarray  # full, along its axes (m)
+    friction: float
+
+    def touch(self, centre: np.ndarray, radius: float) -> tuple[float, np.ndarray]:
+        """The gap of a sphere and the normal: from the box's closest point to the sphere's
+        centre outside the box; inside it, out of the face with the least depth."""
+        x = self.rotation.T @ (centre - self.centre)
+        half = self.size / 2
+        outside = x - np.clip(x, -half, half)
+        if np.linalg.norm(outside) > 0:
+            distance = np.linalg.norm(outside)
+            return float(distance - radius), self.rotation @ (outside / distance)
+        depths = half - np.abs(x)
+        face = int(np.argmin(depths))
+        n = np.zeros(3)
+        n[face] = 1.0 if x[face] >= 0 else -1.0
+        return float(-depths[face] - radius), self.rotation @ n
+
 
 @dataclass
 class Sphere:
@@ -51,21 +79,20 @@ def read_joint_springs(path: Path) -> list[tuple[str, float, float]]:
     ]
 
 
-def read_listed_contacts(path: Path) -> tuple[list[Plane], list[Sphere]]:
+def read_listed_contacts(path: Path) -> tuple[list[Plane | Box], list[Sphere]]:
     """The [[ground]] and [[contact]] tables of a scene file, named as pinsettle names them
     (read_contacts adds an MJCF file's own floors and geoms)."""
     data = tomllib.loads(path.read_text(encoding="utf-8"))
-    planes = []
+    planes: list[Plane | Box] = []
     for k, g in enumerate(data.get("ground", []), start=1):
+        name, point = g.get("name", f"ground{k}"), np.array(g.get("point", (0, 0, 0)), float)
+        friction = float(g.get("friction", 0.5))
+        if "box" in g:
+            rotation = pinocchio.rpy.rpyToMatrix(*map(float, g.get("rpy", (0.0, 0.0, 0.0))))
+            planes.append(Box(name, point, rotation, np.array(g["box"], float), friction))
+            continue
         n = np.array(g.get("normal", (0.0, 0.0, 1.0)), float)
-        planes.append(
-            Plane(
-                g.get("name", f"ground{k}"),
-                np.array(g.get("point", (0.0, 0.0, 0.0)), float),
-                n / np.linalg.norm(n),
-                float(g.get("friction", 0.5)),
-            )
-        )
+        planes.append(Plane(name, point, n / np.linalg.norm(n), friction))
     spheres: list[Sphere] = []
     for c in data.get("contact", []):
         same = sum(1 for s in spheres if s.frame == c["frame"])
@@ -127,24 +154,25 @@ def check_rest(model, q, planes, spheres, contacts, springs=(), stops=None) -> R
     for c in contacts:
         plane, sphere = by_plane[c.ground], by_point[c.name]
         centre = data.oMf[model.getFrameId(sphere.frame)].act(sphere.point)
-        x = centre - sphere.radius * plane.normal
-        gap = plane.normal @ (centre - plane.point) - sphere.radius
+        gap, normal = plane.touch(centre, sphere.radius)
+        x = centre - sphere.radius * normal
         assert np.allclose(x, c.point, atol=1e-12) and abs(gap - c.gap) < 1e-12
-        f = c.normal_force * plane.normal + c.tangential_force
+        assert np.allclose(normal, c.normal, atol=1e-12)
+        f = c.normal_force * normal + c.tangential_force
         left -= point_jacobian(model, data, sphere.frame, x).T @ f
         ft = np.linalg.norm(c.tangential_force)
         worst_cone = max(
             worst_cone,
             ft - plane.friction * c.normal_force,
             -c.normal_force,
-            abs(c.tangential_force @ plane.normal),
+            abs(c.tangential_force @ normal),
         )
         if c.normal_force > 0:
             worst_touch = max(worst_touch, abs(gap))
-        total_n += c.normal_force * plane.normal
+        total_n += c.normal_force * normal
         total_t += c.tangential_force
     gaps = [
-        plane.normal @ (data.oMf[model.getFrameId(s.frame)].act(s.point) - plane.point) - s.radius
+        plane.touch(data.oMf[model.getFrameId(s.frame)].act(s.point), s.radius)[0]
         for s in spheres
         for plane in planes
     ]
@@ -172,10 +200,20 @@ def add_stance_springs(scene, stiffness: float) -> list[tuple[str, float, float]
     return springs
 
 
-def scene_parts(scene) -> tuple[list[Plane], list[Sphere]]:
-    """A pinsettle.Scene's grounds and contact points, as this module's planes and spheres."""
-    planes = [
-        Plane(g.name, np.array(g.point), np.array(g.normal), g.friction) for g in scene.grounds
+def scene_parts(scene) -> tuple[list[Plane | Box], list[Sphere]]:
+    """A pinsettle.Scene's grounds and contact points, as this module's planes (or boxes) and
+    spheres."""
+    planes: list[Plane | Box] = [
+        Plane(g.name, np.array(g.point), np.array(g.normal), g.friction)
+        if g.box is None
+        else Box(
+            g.name,
+            np.array(g.point),
+            pinocchio.rpy.rpyToMatrix(*g.rpy),
+            np.array(g.box),
+            g.friction,
+        )
+        for g in scene.grounds
     ]
     spheres = [Sphere(c.name, c.frame, np.array(c.point), c.radius) for c in scene.contacts]
     return planes, spheres

@@ -179,6 +179,76 @@ def test_the_ground_is_a_thin_slab_in_its_plane_under_the_robot(name, played):
     assert material["color"] == _contacts_module().GROUND_COLOR
 
 
+def _on_a_turned_block(theta: float) -> Any:
+    """free_body.urdf (0.2 x 0.1 x 0.1 m, 1 kg) on its four lower corners, 2 cm above the top
+    face of a 2 x 1 x 0.2 m block turned by theta (rad) about y, and a floor plane below."""
+    scene = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    scene.add_ground((0.0, 0.0, -1.0), name="floor")
+    scene.add_ground(box=(2.0, 1.0, 0.2), rpy=(0.0, -theta, 0.0), friction=0.5, name="block")
+    for x in (-0.1, 0.1):
+        for y in (-0.05, 0.05):
+            scene.add_contact("body", (x, y, -0.05))
+    up = 0.17 * np.array([-np.sin(theta), 0.0, np.cos(theta)])
+    scene.set_start(root_joint=[*up, np.cos(-theta / 2), 0.0, np.sin(-theta / 2), 0.0])
+    return scene
+
+
+@pytest.fixture(scope="module")
+def on_a_block():
+    scene = _on_a_turned_block(np.arctan(0.2))
+    return scene, _play().play(scene, live=False)
+
+
+def test_a_box_ground_is_drawn_as_its_own_box(on_a_block):
+    scene, viz = on_a_block
+    floor, block = scene.grounds
+    node = _node(viz, "ground_1")
+    box = _object(node)["geometry"]
+    # Its own size along its own axes (meshcat's width, height, depth: x, y, z), at its centre,
+    # turned as the ground is (its top face's normal the ground's).
+    assert box["type"] == "BoxGeometry"
+    assert (box["width"], box["height"], box["depth"]) == pytest.approx(block.box, abs=1e-12)
+    matrix = _matrix(node)
+    assert np.allclose(matrix[:3, 3], block.point, atol=1e-12)
+    assert np.allclose(matrix[:3, :3], block.rotation(), atol=1e-12)
+    assert np.allclose(matrix[:3, 2], block.normal, atol=1e-12)
+    assert _object(node)["material"] == _object(_node(viz, "ground_0"))["material"]
+    # The plane beside it is still a slab, its top face in the plane.
+    slab = _object(_node(viz, "ground_0"))["geometry"]
+    assert slab["width"] == slab["height"] and slab["depth"] < 0.02 * slab["width"]
+    top = _matrix(_node(viz, "ground_0"))[:3, 3] + 0.5 * slab["depth"] * np.asarray(floor.normal)
+    assert top[2] == pytest.approx(floor.point[2], abs=1e-12)
+
+
+def test_the_normal_arrows_on_a_box_ground_are_along_its_face(on_a_block):
+    scene, viz = on_a_block
+    result, block = viz.result, scene.grounds[1]
+    assert result.converged and len(result.contacts) == 4
+    assert all(c.ground == "block" for c in result.contacts)
+    for name, matrix in _arrows(viz, scene, "normal").items():
+        (contact,) = [c for c in result.contacts if c.name == name]
+        # Along the contact's own normal: the block's top face, not the floor's +z.
+        direction = matrix[:3, 1] / np.linalg.norm(matrix[:3, 1])
+        assert np.allclose(direction, contact.normal, atol=1e-9)
+        assert np.allclose(direction, block.normal, atol=1e-9)
+        assert np.allclose(matrix[:3, 3], contact.point, atol=1e-12)
+    assert abs(block.normal[2]) < 0.99  # turned: the check above tells it from +z
+
+
+def test_the_legend_names_box_grounds_apart_from_planes(on_a_block):
+    _, viz = on_a_block
+    texts = [mark["text"] for mark in viz._overlay()["legend"]]
+    assert "slab: ground floor (friction 0.5)" in texts
+    assert "box: ground block (friction 0.5)" in texts
+    # A scene of box grounds only has no slab entry.
+    scene = _on_a_turned_block(0.1)
+    scene.grounds.pop(0)
+    legend = _contacts_module().contacts_legend(scene, viz.result)
+    assert [m["text"] for m in legend if "ground" in m["text"]] == [
+        "box: ground block (friction 0.5)"
+    ]
+
+
 # --- the forces at the end ----------------------------------------------------------------------
 
 

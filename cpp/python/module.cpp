@@ -176,14 +176,15 @@ namespace
     return stops;
   }
 
-  // Ground contacts: None for none, else ([(name, point, normal, friction)], [(name, joint
-  // index, position in the joint's frame, radius)]).
+  // Ground contacts: None for none, else ([(name, point, normal, friction)], [(name, centre,
+  // axes (3 x 3), half sizes, friction)], [(name, joint index, position in the joint's frame,
+  // radius)]).
   std::unique_ptr<GroundContacts> contactsFrom(
     const pinocchio::Model & model, const py::object & spec)
   {
     if (spec.is_none())
       return nullptr;
-    const auto t = spec.cast<std::tuple<py::list, py::list>>();
+    const auto t = spec.cast<std::tuple<py::list, py::list, py::list>>();
     auto contacts = std::make_unique<GroundContacts>(model);
     for (const py::handle & e : std::get<0>(t))
     {
@@ -191,6 +192,13 @@ namespace
       contacts->addPlane(std::get<0>(g), std::get<1>(g), std::get<2>(g), std::get<3>(g));
     }
     for (const py::handle & e : std::get<1>(t))
+    {
+      const auto g = e.cast<
+        std::tuple<std::string, Eigen::Vector3d, Eigen::Matrix3d, Eigen::Vector3d, double>>();
+      contacts->addBox(
+        std::get<0>(g), std::get<1>(g), std::get<2>(g), std::get<3>(g), std::get<4>(g));
+    }
+    for (const py::handle & e : std::get<2>(t))
     {
       const auto c = e.cast<std::tuple<std::string, std::size_t, Eigen::Vector3d, double>>();
       contacts->addPoint(std::get<0>(c), std::get<1>(c), std::get<2>(c), std::get<3>(c));

@@ -137,9 +137,38 @@ namespace pinsettle
       throwContactError(
         "ground", name,
         "friction must be a finite coefficient >= 0, got " + std::to_string(friction));
-    Plane plane{name, point, normal / length, {}, {}, friction};
-    completeFrame(plane.normal, plane.t1, plane.t2);
-    planes_.push_back(plane);
+    Ground plane{name, Ground::Shape::Plane, point, {}, Eigen::Vector3d::Zero(), friction};
+    Eigen::Vector3d t1, t2;
+    const Eigen::Vector3d n = normal / length;
+    completeFrame(n, t1, t2);
+    plane.axes << t1, t2, n;
+    grounds_.push_back(plane);
+  }
+
+  void GroundContacts::addBox(
+    const std::string & name,
+    const Eigen::Vector3d & centre,
+    const Eigen::Matrix3d & axes,
+    const Eigen::Vector3d & half_size,
+    double friction)
+  {
+    if (!centre.allFinite())
+      throwContactError("ground", name, "its centre must be finite (m)");
+    if (
+      !axes.allFinite() || !(axes.transpose() * axes).isIdentity(1e-9)
+      || !(axes.determinant() > 0.))
+      throwContactError("ground", name, "its axes must be a rotation matrix");
+    if (!half_size.allFinite() || !(half_size.minCoeff() > 0.))
+    {
+      std::ostringstream msg;
+      msg << "its half sizes must be finite and > 0 (m), got (" << half_size.transpose() << ")";
+      throwContactError("ground", name, msg.str());
+    }
+    if (!(friction >= 0.) || !std::isfinite(friction))
+      throwContactError(
+        "ground", name,
+        "friction must be a finite coefficient >= 0, got " + std::to_string(friction));
+    grounds_.push_back(Ground{name, Ground::Shape::Box, centre, axes, half_size, friction});
   }
 
   void GroundContacts::addPoint(
@@ -163,6 +192,48 @@ namespace pinsettle
 
   // --- Geometry and impulses --------------------------------------------------------------------
 
+  void touchGround(
+    const GroundContacts::Ground & ground,
+    const Eigen::Vector3d & centre,
+    double radius,
+    double & gap,
+    Eigen::Ref<Eigen::Vector3d> point,
+    Eigen::Ref<Eigen::Matrix3d> axes)
+  {
+    if (ground.shape == GroundContacts::Ground::Shape::Plane)
+    {
+      const auto n = ground.axes.col(2);
+      gap = n.dot(centre - ground.point) - radius;
+      point = centre - radius * n;
+      axes = ground.axes;
+      return;
+    }
+    // In the box's frame: outside, the direction from its closest point; inside, the normal
+    // of the face nearest (the way out).
+    const Eigen::Vector3d x = ground.axes.transpose() * (centre - ground.point);
+    const Eigen::Vector3d & h = ground.half_size;
+    const Eigen::Vector3d out = x - x.cwiseMax(-h).cwiseMin(h);
+    const double distance = out.norm();
+    Eigen::Vector3d n;
+    if (distance > 0.)
+    {
+      n = out / distance;
+      gap = distance - radius;
+    }
+    else
+    {
+      Eigen::Index face = 0;
+      (h - x.cwiseAbs()).minCoeff(&face);
+      n = Eigen::Vector3d::Unit(face) * (x[face] < 0. ? -1. : 1.);
+      gap = -(h[face] - std::abs(x[face])) - radius;
+    }
+    n = ground.axes * n;
+    point = centre - radius * n;
+    Eigen::Vector3d t1, t2;
+    completeFrame(n, t1, t2);
+    axes << t1, t2, n;
+  }
+
   void computeContactGeometry(
     const pinocchio::Model & model,
     pinocchio::Data & data,
@@ -173,20 +244,21 @@ namespace pinsettle
     const int pairs = contacts.pairs();
     geometry.gap.resize(pairs);
     geometry.point.resize(3, pairs);
+    geometry.axes.resize(3, 3 * pairs);
     geometry.jacobian.resize(3 * pairs, model.nv);
     pinocchio::computeJointJacobians(model, data, q);
     int k = 0;
     for (const GroundContacts::Point & s : contacts.points())
     {
       const Eigen::Vector3d centre = data.oMi[s.joint].act(s.position);
-      for (const GroundContacts::Plane & plane : contacts.planes())
+      for (const GroundContacts::Ground & ground : contacts.grounds())
       {
-        geometry.gap[k] = plane.normal.dot(centre - plane.point) - s.radius;
-        const Eigen::Vector3d x = centre - s.radius * plane.normal;
-        geometry.point.col(k) = x;
-        writePointRow(model, data, s.joint, x, plane.t1, geometry.jacobian.row(3 * k));
-        writePointRow(model, data, s.joint, x, plane.t2, geometry.jacobian.row(3 * k + 1));
-        writePointRow(model, data, s.joint, x, plane.normal, geometry.jacobian.row(3 * k + 2));
+        auto axes = geometry.axes.middleCols<3>(3 * k);
+        touchGround(ground, centre, s.radius, geometry.gap[k], geometry.point.col(k), axes);
+        const Eigen::Vector3d x = geometry.point.col(k);
+        for (int r = 0; r < 3; ++r)
+          writePointRow(
+            model, data, s.joint, x, axes.col(r).eval(), geometry.jacobian.row(3 * k + r));
         ++k;
       }
     }
@@ -239,6 +311,7 @@ namespace pinsettle
     const int nv = contacts.model().nv;
     geometry_.gap.resize(contacts.pairs());
     geometry_.point.resize(3, contacts.pairs());
+    geometry_.axes.resize(3, 3 * contacts.pairs());
     body_velocity_.resize(6, contacts.model().njoints);
     active_.reserve(contacts.pairs());
     force_ = Eigen::VectorXd::Zero(3 * contacts.pairs());
@@ -274,13 +347,12 @@ namespace pinsettle
     for (Eigen::Index k = 0; k < a; ++k)
     {
       const int p = active_[static_cast<std::size_t>(k)];
-      const GroundContacts::Plane & plane = contacts_.planeOf(p);
       const pinocchio::JointIndex joint = contacts_.pointOf(p).joint;
       const Eigen::Vector3d x = geometry_.point.col(p);
-      writePointRow(model, data, joint, x, plane.t1, Ja_.row(3 * k));
-      writePointRow(model, data, joint, x, plane.t2, Ja_.row(3 * k + 1));
-      writePointRow(model, data, joint, x, plane.normal, Ja_.row(3 * k + 2));
-      mu_[k] = plane.friction;
+      for (int r = 0; r < 3; ++r)
+        writePointRow(
+          model, data, joint, x, geometry_.axes.col(3 * p + r).eval(), Ja_.row(3 * k + r));
+      mu_[k] = contacts_.groundOf(p).friction;
       lambda_.segment<3>(3 * k) = h * force_.segment<3>(3 * p);
     }
     lambda_.segment(3 * a, rows - 3 * a).setZero();
@@ -333,12 +405,12 @@ namespace pinsettle
     {
       const Eigen::Vector3d centre = data.oMi[s.joint].act(s.position);
       const auto V = body_velocity_.col(static_cast<Eigen::Index>(s.joint));
-      for (const GroundContacts::Plane & plane : contacts_.planes())
+      for (const GroundContacts::Ground & ground : contacts_.grounds())
       {
-        geometry_.gap[p] = plane.normal.dot(centre - plane.point) - s.radius;
-        const Eigen::Vector3d x = centre - s.radius * plane.normal;
-        geometry_.point.col(p) = x;
-        const double un = plane.normal.dot(V.head<3>() + V.tail<3>().cross(x));
+        auto axes = geometry_.axes.middleCols<3>(3 * p);
+        touchGround(ground, centre, s.radius, geometry_.gap[p], geometry_.point.col(p), axes);
+        const Eigen::Vector3d x = geometry_.point.col(p);
+        const double un = axes.col(2).dot(V.head<3>() + V.tail<3>().cross(x));
         if (geometry_.gap[p] + h * std::min(0., un) <= 0.)
           active_.push_back(p);
         else
@@ -384,7 +456,7 @@ namespace pinsettle
       for (std::size_t k = 0; k < pairs.size(); ++k)
       {
         const Eigen::Index r = 3 * static_cast<Eigen::Index>(k);
-        const double mu = shrink * contacts.planeOf(pairs[k]).friction;
+        const double mu = shrink * contacts.groundOf(pairs[k]).friction;
         if (f.segment<2>(r).norm() > mu * f[r + 2] * (1. + 1e-9) + 1e-12 * f.norm())
           return false;
       }
@@ -411,7 +483,7 @@ namespace pinsettle
       {
         J.middleRows<3>(3 * static_cast<Eigen::Index>(k)) =
           geometry.jacobian.middleRows<3>(3 * pairs[k]);
-        mu[static_cast<Eigen::Index>(k)] = shrink * contacts.planeOf(pairs[k]).friction;
+        mu[static_cast<Eigen::Index>(k)] = shrink * contacts.groundOf(pairs[k]).friction;
       }
       Eigen::LLT<Eigen::MatrixXd> llt(model.nv);
       factorMassMatrix(model, data, q, llt);
@@ -572,7 +644,7 @@ namespace pinsettle
         const Eigen::Vector3d f = balance.force.segment<3>(3 * p);
         if (!(f[2] > tiny))
           continue;
-        if (insideCone(f, contacts.planeOf(p).friction))
+        if (insideCone(f, contacts.groundOf(p).friction))
         {
           rows.push_back(3 * p);
           rows.push_back(3 * p + 1);
@@ -688,19 +760,20 @@ namespace pinsettle
     double largest = load; // N
     for (const int p : balance.closed)
     {
-      const GroundContacts::Plane & plane = contacts.planeOf(p);
+      const GroundContacts::Ground & ground = contacts.groundOf(p);
+      const auto axes = geometry.axes.middleCols<3>(3 * p);
       const Eigen::Vector3d f = balance.force.segment<3>(3 * p);
       GroundContact c;
       c.name = contacts.pointOf(p).name;
-      c.ground = plane.name;
+      c.ground = ground.name;
       c.point = geometry.point.col(p);
-      c.normal = plane.normal;
+      c.normal = axes.col(2);
       c.normal_force = f[2];
-      c.tangential_force = f[0] * plane.t1 + f[1] * plane.t2;
+      c.tangential_force = f[0] * axes.col(0) + f[1] * axes.col(1);
       c.gap = geometry.gap[p];
-      c.sticking = insideCone(f, plane.friction) || f.head<2>().isZero(0.);
+      c.sticking = insideCone(f, ground.friction) || f.head<2>().isZero(0.);
       c.marginal = balance.near_cone_edge && !f.head<2>().isZero(0.)
-                   && f.head<2>().norm() >= (1. - kMarginalCone) * plane.friction * f[2];
+                   && f.head<2>().norm() >= (1. - kMarginalCone) * ground.friction * f[2];
       largest = std::max(largest, c.normal_force);
       out.push_back(c);
     }

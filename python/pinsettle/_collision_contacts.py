@@ -66,17 +66,28 @@ class Thinned:
     deviation: float
 
 
+@dataclass(frozen=True)
+class FileGround:
+    """A ground a model file gives, in ``Scene.add_ground``'s terms: a plane through ``point``
+    with ``normal``, or (``box``: its full sizes, m) a box centred at ``point`` turned by
+    ``rpy`` (roll, pitch, yaw, rad), its ``normal`` None (add_ground refuses both)."""
+
+    name: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float] | None
+    friction: float
+    box: tuple[float, float, float] | None = None
+    rpy: tuple[float, float, float] | None = None
+
+
 @dataclass
 class Collision:
     """The collision geometry a source gives: the shapes of moving bodies, the names of shapes
-    left out (fixed to the world, or not colliding with the floors), grounds (name, point,
-    normal, friction) and notes."""
+    left out (fixed to the world, or not colliding with the floors), grounds and notes."""
 
     shapes: list[Shape]
     fixed: list[str] = field(default_factory=list)
-    grounds: list[tuple[str, tuple[float, ...], tuple[float, ...], float]] = field(
-        default_factory=list
-    )
+    grounds: list[FileGround] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     #: Names of the shapes of the source, for the names ``exclude`` may give.
     names: list[str] = field(default_factory=list)

@@ -14,8 +14,11 @@ _Elements = dict[str, list[tuple[Any, ...]]]
 _Loops = list[tuple[Any, ...]]
 # Joint stops: (take the model's position limits, [(joint index, lower, upper), ...]).
 _Stops = tuple[bool, list[tuple[int, float, float]]]
+# Ground contacts: (planes (name, point, normal, friction), boxes (name, centre, axes, half
+# sizes, friction), points (name, joint index, centre in the joint's frame, radius)).
 _Contacts = tuple[
     list[tuple[str, npt.ArrayLike, npt.ArrayLike, float]],
+    list[tuple[str, npt.ArrayLike, npt.ArrayLike, npt.ArrayLike, float]],
     list[tuple[str, int, npt.ArrayLike, float]],
 ]
 

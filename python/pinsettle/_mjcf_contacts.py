@@ -3,10 +3,12 @@ shapes (``Scene.add_collision_contacts`` on an MJCF scene).
 
 A ``<geom type="plane">`` of the world body is a floor: a ground through the geom's position
 with the geom's z axis as its normal (MuJoCo's planes are infinite for collisions, whatever their
-size). A geom of a moving body is a contact shape where MuJoCo would collide it with the floors:
-an explicit ``<contact><pair>`` with the floor, or else its ``contype``/``conaffinity`` against the
-floor's (``(contype1 & conaffinity2) | (contype2 & conaffinity1)``) unless a ``<contact><exclude>``
-of its body and the world leaves it out; geoms of bodies fixed to the world never collide with
+size). A ``<geom type="box">`` of the world body that collides with something is a floor too: a
+box ground of its size (MuJoCo's are half sizes), at its position and orientation. A geom of a
+moving body is a contact shape where MuJoCo would collide it with the floors: an explicit
+``<contact><pair>`` with the floor, or else its ``contype``/``conaffinity`` against the floor's
+(``(contype1 & conaffinity2) | (contype2 & conaffinity1)``) unless a ``<contact><exclude>`` of
+its body and the world leaves it out; geoms of bodies fixed to the world never collide with
 it. The friction of a pair is MuJoCo's: the ``<pair>``'s own, else the geom of higher
 ``priority``'s, else the larger of the two, and none with ``condim="1"``. The core takes one
 friction per ground: each floor takes the smallest of its pairs' (a note names the geoms that
@@ -15,13 +17,13 @@ would grip more in MuJoCo).
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import pinocchio
 
-from ._collision_contacts import SHAPES, Collision, Shape, _a
+from ._collision_contacts import SHAPES, Collision, FileGround, Shape, _a
 from ._mjcf_mass import _convex_hull, _placed_geometry, _primitive
 from ._mjcf_parse import MjcfError, _floats, _Geom, _MeshAsset, _names, _Reader, _to_se3
 
@@ -31,12 +33,21 @@ _FRICTION = "1 0.005 0.0001"
 
 @dataclass(frozen=True)
 class Floor:
-    """A plane geom of the world body: a ground."""
+    """A plane geom of the world body, or (``box``: its full sizes, m; ``rpy``: its orientation,
+    rad) a box geom of it: a ground. ``normal`` is the plane's, or the box's z axis."""
 
     name: str
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     geom: _Geom
+    box: tuple[float, float, float] | None = None
+    rpy: tuple[float, float, float] | None = None
+
+    def ground(self, friction: float) -> FileGround:
+        """The floor as ``Scene.add_ground`` takes it (a box without a normal)."""
+        if self.box is None:
+            return FileGround(self.name, self.point, self.normal, friction)
+        return FileGround(self.name, self.point, None, friction, self.box, self.rpy)
 
 
 def _int(geom: _Geom, key: str, default: str, where: str) -> int:
@@ -85,7 +96,7 @@ class MjcfCollision:
     #: Each body's name and geoms, in MuJoCo's body order.
     bodies: list[tuple[str, list[_Geom]]]
     floors: list[Floor]
-    #: Geoms of the world body other than planes that collide with something.
+    #: Geoms of the world body other than planes and boxes that collide with something.
     other_world: list[str]
     meshes: dict[str, _MeshAsset]
     #: Bodies a <contact><exclude> keeps from the world.
@@ -105,9 +116,12 @@ class MjcfCollision:
         """The note for a scene that takes no contacts: the floors play no part."""
         if not self.floors:
             return None
+        kinds = " and ".join(
+            dict.fromkeys("plane" if f.box is None else "box" for f in self.floors)
+        )
         return (
             f"floor{'s' if len(self.floors) > 1 else ''} "
-            f"{_names([f.name for f in self.floors])} (plane geoms) and the geoms that touch "
+            f"{_names([f.name for f in self.floors])} ({kinds} geoms) and the geoms that touch "
             'them play no part: [model] contacts = "collision" (Scene.add_collision_contacts) '
             "makes them grounds and contacts"
         )
@@ -145,8 +159,8 @@ class MjcfCollision:
         self._grounds(out, frictions)
         if self.other_world:
             out.notes.append(
-                f"world geoms {_names(self.other_world)} are not planes: not grounds (bodies pass "
-                "through them)"
+                f"world geoms {_names(self.other_world)} are not planes or boxes: not grounds "
+                "(bodies pass through them)"
             )
         return out
 
@@ -212,7 +226,7 @@ class MjcfCollision:
             pairs = frictions[floor.name]
             own = _friction(floor.geom.attrs, f"{self.path}: {floor.geom.label}")
             mu = min(pairs.values()) if pairs else own
-            out.grounds.append((floor.name, floor.point, floor.normal, mu))
+            out.grounds.append(floor.ground(mu))
             more = sorted(name for name, value in pairs.items() if value > mu)
             if more:
                 out.notes.append(
@@ -230,26 +244,38 @@ def _moves(model: pinocchio.Model, body: str) -> bool:
     return False  # a locked free object's bodies are not in the model
 
 
-def _floors(reader: _Reader) -> tuple[list[Floor], list[str]]:
-    """The world's plane geoms, and its other geoms that collide with something."""
+def _triple(values: Iterable[float]) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
+def _floor(geom: _Geom, name: str, where: str) -> Floor:
+    """A world plane or box geom as a floor (its friction checked)."""
+    _friction(geom.attrs, where)
+    if geom.attrs.get("type", "sphere") == "plane":
+        pose = geom.pose
+        return Floor(name, _triple(pose.translation), _triple(pose.rotation[:, 2]), geom)
+    # _primitive reads the pose as the shapes' does (fromto included) and checks the sizes.
+    rotation, center, half = _primitive(geom, "box", where)
+    rpy = _triple(pinocchio.rpy.matrixToRpy(rotation))
+    return Floor(name, _triple(center), _triple(rotation[:, 2]), geom, _triple(2 * half), rpy)
+
+
+def _floors(reader: _Reader, paired: Collection[str]) -> tuple[list[Floor], list[str]]:
+    """The world's plane geoms, and its box geoms that collide with something (a visual box,
+    contype = conaffinity = 0 and in no ``paired``, is scenery); its other geoms that collide."""
     floors, others = [], []
     for k, geom in enumerate(reader.world_geoms, start=1):
         where = f"{reader.path}: {geom.label} in <worldbody>"
         name = geom.attrs.get("name") or f"world:geom{k}"
-        if geom.attrs.get("type", "sphere") != "plane":
-            if _int(geom, "contype", "1", where) or _int(geom, "conaffinity", "1", where):
-                others.append(name)
-            continue
-        _friction(geom.attrs, where)
-        normal = geom.pose.rotation[:, 2]
-        floors.append(
-            Floor(
-                name,
-                tuple(float(x) for x in geom.pose.translation),  # type: ignore[arg-type]
-                tuple(float(x) for x in normal),  # type: ignore[arg-type]
-                geom,
-            )
+        kind = geom.attrs.get("type", "sphere")
+        collides = name in paired or bool(
+            _int(geom, "contype", "1", where) or _int(geom, "conaffinity", "1", where)
         )
+        if kind == "plane" or (kind == "box" and collides and "mesh" not in geom.attrs):
+            floors.append(_floor(geom, name, where))
+        elif collides:
+            others.append(name)
     return floors, others
 
 
@@ -271,8 +297,8 @@ def _contact_section(reader: _Reader) -> tuple[set[str], list[tuple[str, str, di
 
 def mjcf_collision(reader: _Reader, flags: dict[str, bool]) -> MjcfCollision:
     """What the file says about contacts with its floors, for later."""
-    floors, others = _floors(reader)
     excluded, pairs = _contact_section(reader)
+    floors, others = _floors(reader, {name for a, b, _ in pairs for name in (a, b)})
     return MjcfCollision(
         path=reader.path,
         bodies=[(body.name, body.geoms) for body in reader.all_bodies()],

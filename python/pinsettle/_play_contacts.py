@@ -1,13 +1,15 @@
 """Ground contacts drawn in the playback: each ground plane as a thin translucent slab under the
-mechanism, each contact point (a small ball) or sphere (of its radius) following its body, and
-at the end the force the ground exerts at each closed contact, normal and tangential, as arrows
-coloured by whether the contact sticks or slides; and their entries of the legend.
+mechanism, each box ground as its own box, each contact point (a small ball) or sphere (of its
+radius) following its body, and at the end the force the ground exerts at each closed contact,
+normal and tangential, as arrows coloured by whether the contact sticks or slides; and their
+entries of the legend.
 
 Imported only for a scene with grounds: a scene without them runs none of this.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -16,6 +18,7 @@ import pinocchio
 from ._play_forces import _frame_points, _hex, _load_arrow, _Sizes, arrow_matrix
 from ._play_timeline import FPS, Timeline
 from ._scene import Scene
+from ._scene_values import Ground
 from ._solve import Contact, Result
 
 #: The colours: grounds (lit, translucent), contact points, and the force arrows of a sticking
@@ -48,15 +51,28 @@ def ground_matrix(
     return m
 
 
+def box_matrix(ground: Ground) -> np.ndarray:
+    """The placement of a box ground's box (meshcat's boxes are centred): at its centre, turned
+    by its rotation."""
+    m = np.eye(4)
+    m[:3, :3] = ground.rotation()
+    m[:3, 3] = ground.point
+    return m
+
+
 def draw_grounds(viz: Any, scene: Scene, size: float, center: np.ndarray) -> None:
-    """Each ground: a thin translucent slab, still, under ``center`` (the final centre of
-    mass), sized by the view's ``size`` (m)."""
+    """Each ground, translucent and still: a plane as a thin slab under ``center`` (the final
+    centre of mass) sized by the view's ``size`` (m), a box ground as its own box."""
     import meshcat.geometry as mg
 
     side, thickness = GROUND_SIDE * size, GROUND_THICKNESS * size
     material = mg.MeshLambertMaterial(color=GROUND_COLOR, opacity=0.45, transparent=True)
     for i, ground in enumerate(scene.grounds):
         node = viz.viewer[f"contacts/ground_{i}"]
+        if ground.box is not None:
+            node.set_object(mg.Box(list(ground.box)), material)
+            node.set_transform(box_matrix(ground))
+            continue
         node.set_object(mg.Box([side, side, thickness]), material)
         point, normal = np.asarray(ground.point), np.asarray(ground.normal)
         node.set_transform(ground_matrix(point, normal, center, size))
@@ -173,10 +189,20 @@ def _forces_text(result: Result, sticking: bool) -> str:
     )
 
 
+def _grounds_text(grounds: Iterable[Ground]) -> str:
+    return ", ".join(f"{g.name} (friction {g.friction:.3g})" for g in grounds)
+
+
 def contacts_legend(scene: Scene, result: Result) -> list[dict[str, str]]:
     """What the grounds, contact points and contact forces drawn are (for the overlay)."""
-    grounds = ", ".join(f"{g.name} (friction {g.friction:.3g})" for g in scene.grounds)
-    entries = [(GROUND_COLOR, f"slab: ground {grounds}")]
+    entries = [
+        (GROUND_COLOR, f"{mark}: ground {grounds}")
+        for mark, grounds in (
+            ("slab", _grounds_text(g for g in scene.grounds if g.box is None)),
+            ("box", _grounds_text(g for g in scene.grounds if g.box is not None)),
+        )
+        if grounds
+    ]
     if scene.contacts:
         points = f"balls: contact points and spheres ({len(scene.contacts)})"
         entries.append((CONTACT_COLOR, points))

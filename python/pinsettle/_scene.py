@@ -733,31 +733,37 @@ class Scene:
     def add_ground(
         self,
         point: Any = (0.0, 0.0, 0.0),
-        normal: Any = (0.0, 0.0, 1.0),
+        normal: Any = None,
         friction: Any = 0.5,
         name: str | None = None,
+        *,
+        box: Any = None,
+        rpy: Any = None,
     ) -> Scene:
         """A ground plane through ``point`` with ``normal`` pointing out of it (world, m; the
-        normal need not be of unit length), and its Coulomb friction coefficient (>= 0). The
-        contact points (``add_contact``) rest on it: unilateral, inelastic, a contact sticks
-        while its tangential force stays within ``friction`` times its normal force.
+        normal need not be of unit length; default +z), and its Coulomb friction coefficient
+        (>= 0). The contact points (``add_contact``) rest on it: unilateral, inelastic, a contact
+        sticks while its tangential force stays within ``friction`` times its normal force.
+
+        With ``box`` (its full size along its own x, y and z axes, m, each > 0) the ground is a
+        box centred at ``point`` and turned by ``rpy`` (roll, pitch, yaw, rad; default level): a
+        table, a step, a block. Its faces, edges and corners all hold: a contact touches the
+        box where it is closest to it, along the normal of that face (or edge, or corner).
 
         Raises:
-            SceneError: a point or normal that is not 3 finite numbers, a normal of zero length,
-                a negative friction, a name given twice.
+            SceneError: a point, normal, size or rpy that is not 3 finite numbers, a normal of
+                zero length, a normal given with a box or an rpy without one, a size that is not
+                > 0, a negative friction, a name given twice.
         """
         name = f"ground{len(self.grounds) + 1}" if name is None else name
         if not isinstance(name, str) or any(g.name == name for g in self.grounds):
             raise SceneError(f"name must be a new ground's name (str), got {name!r}")
-        normal_v = _vector(normal, "normal", 3)
-        length = math.sqrt(sum(x * x for x in normal_v))
-        if not length > 1e-12:
-            raise SceneError(f"normal must have a non-zero length, got {list(normal_v)}")
-        ground = Ground(
-            name,
-            _vector(point, "point", 3),  # type: ignore[arg-type]
-            tuple(x / length for x in normal_v),  # type: ignore[arg-type]
-            _number(friction, "friction", nonnegative=True),
+        centre = _vector(point, "point", 3)
+        mu = _number(friction, "friction", nonnegative=True)
+        ground = (
+            _plane_ground(name, centre, normal, mu, rpy)
+            if box is None
+            else _box_ground(name, centre, box, mu, normal, rpy)
         )
         self.grounds.append(ground)
         self._changed()
@@ -814,8 +820,8 @@ class Scene:
         The shapes come from ``geometry`` (a ``pinocchio.GeometryModel`` built on the scene's
         model) if given, else from the model file: a URDF's ``<collision>`` elements, or the
         geoms of an MJCF file that MuJoCo would collide with its floors (``contype``,
-        ``conaffinity``, ``<contact>``); ``floors``: an MJCF file's plane geoms become grounds
-        too. The grounds' friction is theirs (``add_ground``); ``notes`` say what was taken.
+        ``conaffinity``, ``<contact>``); ``floors``: an MJCF file's plane and box geoms become
+        grounds too. The grounds' friction is theirs (``add_ground``); ``notes`` say what was taken.
 
         Raises:
             SceneError: no collision geometry, or none on a moving body; a shape of another
@@ -858,8 +864,8 @@ class Scene:
                 if collision.grounds
                 else []
             )
-        for name, point, normal, friction in collision.grounds:
-            self.add_ground(point, normal, friction, name)
+        for g in collision.grounds:
+            self.add_ground(g.point, g.normal, g.friction, g.name, box=g.box, rpy=g.rpy)
         return []
 
     def _collision(
@@ -1073,6 +1079,34 @@ class Scene:
         if not self.limits:
             parts.append("model limits off")
         return f"Scene({', '.join(parts)})"
+
+
+def _plane_ground(name: str, point: Any, normal: Any, friction: float, rpy: Any) -> Ground:
+    """A plane ground (Scene.add_ground without a box): its normal made of unit length."""
+    if rpy is not None:
+        raise SceneError(
+            f"rpy turns a box ground; a plane is turned by its normal, got rpy={rpy!r} without box"
+        )
+    normal_v = _vector((0.0, 0.0, 1.0) if normal is None else normal, "normal", 3)
+    length = math.sqrt(sum(x * x for x in normal_v))
+    if not length > 1e-12:
+        raise SceneError(f"normal must have a non-zero length, got {list(normal_v)}")
+    unit = tuple(x / length for x in normal_v)
+    return Ground(name, point, unit, friction)  # type: ignore[arg-type]
+
+
+def _box_ground(name: str, centre: Any, box: Any, friction: float, normal: Any, rpy: Any) -> Ground:
+    """A box ground (Scene.add_ground with a box): its sizes > 0, its top face's normal."""
+    if normal is not None:
+        raise SceneError(
+            f"normal is a plane's; a box ground is turned by rpy, got normal={normal!r} with box"
+        )
+    size = _vector(box, "box", 3)
+    if not all(x > 0 for x in size):
+        raise SceneError(f"box must be 3 sizes > 0 (m), got {list(size)}")
+    angles = _vector((0.0, 0.0, 0.0) if rpy is None else rpy, "rpy", 3)
+    up = tuple(float(x) for x in pinocchio.rpy.rpyToMatrix(*angles)[:, 2])
+    return Ground(name, centre, up, friction, size, angles)  # type: ignore[arg-type]
 
 
 # --- the scene file ----------------------------------------------------------------------------
@@ -1341,7 +1375,16 @@ def _add_elements(scene: Scene, file: SceneFile) -> None:
     for k, limit in enumerate(file.limits, start=1):
         _at(f"[[limit]] #{k}", scene.set_limit, limit.joint, limit.lower, limit.upper)
     for k, g in enumerate(file.grounds, start=1):
-        _at(f"[[ground]] #{k}", scene.add_ground, g.point, g.normal, g.friction, g.name)
+        _at(
+            f"[[ground]] #{k}",
+            scene.add_ground,
+            g.point,
+            g.normal,
+            g.friction,
+            g.name,
+            box=g.box,
+            rpy=g.rpy,
+        )
     for k, c in enumerate(file.contacts, start=1):
         _at(f"[[contact]] #{k}", scene.add_contact, c.frame, c.point, c.radius, c.name)
 

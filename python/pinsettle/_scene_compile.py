@@ -174,8 +174,9 @@ class _Compiled:
         }
         return spec if any(spec.values()) else None
 
-    def _contacts(self, scene: SceneParts) -> tuple[list[Any], list[Any]] | None:
-        """Ground planes and contact points for ``_core``: each point in its joint's frame."""
+    def _contacts(self, scene: SceneParts) -> tuple[list[Any], list[Any], list[Any]] | None:
+        """Ground planes, ground boxes (centre, axes, half sizes) and contact points for
+        ``_core``: each point in its joint's frame."""
         if not scene.grounds and not scene.contacts:
             return None
         if not scene.grounds or not scene.contacts:
@@ -184,7 +185,14 @@ class _Compiled:
                 f"contacts need both a ground and points that touch it; no {missing} given"
             )
         planes = [
-            (g.name, np.array(g.point), np.array(g.normal), g.friction) for g in scene.grounds
+            (g.name, np.array(g.point), np.array(g.normal), g.friction)
+            for g in scene.grounds
+            if g.box is None
+        ]
+        boxes = [
+            (g.name, np.array(g.point), g.rotation(), 0.5 * np.array(g.box), g.friction)
+            for g in scene.grounds
+            if g.box is not None
         ]
         points = []
         for c in scene.contacts:
@@ -196,7 +204,7 @@ class _Compiled:
                 )
             position = frame.placement.act(np.array(c.point, dtype=float))
             points.append((c.name, int(frame.parentJoint), position, c.radius))
-        return planes, points
+        return planes, boxes, points
 
     def _loops(self, scene: SceneParts) -> list[tuple[Any, ...]]:
         frame = self._frame

@@ -268,9 +268,11 @@ class GroundEntry:
     """``[[ground]]``: ``Scene.add_ground``."""
 
     point: Any = key((0.0, 0.0, 0.0))
-    normal: Any = key((0.0, 0.0, 1.0))
+    normal: Any = key(None)
     friction: Any = key(0.5)
     name: Any = key(None)
+    box: Any = key(None)
+    rpy: Any = key(None)
 
 
 @dataclass(frozen=True)

@@ -86,12 +86,20 @@ LOOP_KINDS = ("point", "frame")
 @dataclass(frozen=True)
 class Ground:
     """A ground plane through ``point`` with unit ``normal`` (out of the ground, world, m), and
-    its Coulomb friction coefficient."""
+    its Coulomb friction coefficient; or, with ``box`` (its full size along its own axes, m), a
+    box centred at ``point``, turned by ``rpy`` (roll, pitch, yaw, rad, as a URDF origin), whose
+    ``normal`` is then its top face's (its own z axis in the world)."""
 
     name: str
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     friction: float
+    box: tuple[float, float, float] | None = None
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def rotation(self) -> np.ndarray:
+        """The box's axes in the world (3 x 3, its columns; the identity for a plane)."""
+        return np.asarray(pinocchio.rpy.rpyToMatrix(*self.rpy))
 
 
 @dataclass(frozen=True)

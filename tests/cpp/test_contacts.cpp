@@ -43,11 +43,16 @@ BOOST_AUTO_TEST_CASE(jacobian_rows_are_the_contact_velocity_and_the_gap_gradient
   pinocchio::Data data(model);
   pinsettle::GroundContacts contacts(model);
   contacts.addPlane("slope", Eigen::Vector3d(0., 0., -0.3), Eigen::Vector3d(-0.3, 0.1, 1.), 0.6);
+  // A turned box: the points meet its faces, edges and corners (and its inside) by turns.
+  const Eigen::Matrix3d turn =
+    Eigen::AngleAxisd(0.4, Eigen::Vector3d(1., 1., 0.).normalized()).toRotationMatrix();
+  contacts.addBox(
+    "block", Eigen::Vector3d(0.2, -0.1, -0.2), turn, Eigen::Vector3d(0.3, 0.2, 0.1), 0.5);
   contacts.addPoint("tip", 2, Eigen::Vector3d(0.02, 0.01, -0.2), 0.03);
   contacts.addPoint("corner", 1, Eigen::Vector3d(-0.1, 0.05, -0.05), 0.);
   std::mt19937 rng(3);
   std::normal_distribution<double> normal;
-  for (int trial = 0; trial < 5; ++trial)
+  for (int trial = 0; trial < 20; ++trial)
   {
     Eigen::VectorXd q = pinocchio::randomConfiguration(
       model, -Eigen::VectorXd::Ones(model.nq), Eigen::VectorXd::Ones(model.nq));
@@ -64,8 +69,8 @@ BOOST_AUTO_TEST_CASE(jacobian_rows_are_the_contact_velocity_and_the_gap_gradient
     pinsettle::computeContactGeometry(model, data, contacts, q_minus, behind);
     for (int p = 0; p < contacts.pairs(); ++p)
     {
-      const pinsettle::GroundContacts::Plane & plane = contacts.planes()[0];
-      const pinsettle::GroundContacts::Point & s = contacts.points()[static_cast<std::size_t>(p)];
+      const pinsettle::GroundContacts::Point & s = contacts.pointOf(p);
+      const auto axes = at.axes.middleCols<3>(3 * p);
       // The normal row is the gap's gradient.
       const double dgap = (ahead.gap[p] - behind.gap[p]) / (2. * h);
       BOOST_CHECK_SMALL(at.jacobian.row(3 * p + 2).dot(v) - dgap, 1e-7);
@@ -78,11 +83,53 @@ BOOST_AUTO_TEST_CASE(jacobian_rows_are_the_contact_velocity_and_the_gap_gradient
       pinocchio::forwardKinematics(model, data, q_minus);
       const Eigen::Vector3d x_minus = data.oMi[s.joint].act(local);
       const Eigen::Vector3d velocity = (x_plus - x_minus) / (2. * h);
-      BOOST_CHECK_SMALL(at.jacobian.row(3 * p).dot(v) - plane.t1.dot(velocity), 1e-7);
-      BOOST_CHECK_SMALL(at.jacobian.row(3 * p + 1).dot(v) - plane.t2.dot(velocity), 1e-7);
-      BOOST_CHECK_SMALL(at.jacobian.row(3 * p + 2).dot(v) - plane.normal.dot(velocity), 1e-7);
+      for (int r = 0; r < 3; ++r)
+        BOOST_CHECK_SMALL(at.jacobian.row(3 * p + r).dot(v) - axes.col(r).dot(velocity), 1e-7);
+      // The axes are a right-handed orthonormal frame.
+      BOOST_CHECK_SMALL((axes.transpose() * axes - Eigen::Matrix3d::Identity()).norm(), 1e-12);
+      BOOST_CHECK_CLOSE(axes.determinant(), 1., 1e-10);
     }
   }
+}
+
+BOOST_AUTO_TEST_CASE(a_sphere_touches_a_box_at_its_face_edge_corner_and_from_inside)
+{
+  const pinocchio::Model model = boxWithArm();
+  pinsettle::GroundContacts contacts(model);
+  // A 2 x 1 x 0.4 m box, centred at (1, 0, 0), turned a quarter about z: its x is the world's y.
+  const Eigen::Matrix3d quarter = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()).matrix();
+  contacts.addBox("b", Eigen::Vector3d(1., 0., 0.), quarter, Eigen::Vector3d(1., 0.5, 0.2), 0.5);
+  const pinsettle::GroundContacts::Ground & box = contacts.grounds()[0];
+  double gap = 0.;
+  Eigen::Vector3d point;
+  Eigen::Matrix3d axes;
+  struct Case
+  {
+    Eigen::Vector3d centre;
+    double gap;
+    Eigen::Vector3d normal;
+  };
+  const double d = std::sqrt(0.5);
+  const Case cases[] = {
+    {{1.1, 0.3, 0.5}, 0.3 - 0.05, {0., 0., 1.}},              // over the top
+    {{1.7, 0.0, 0.}, 0.2 - 0.05, {1., 0., 0.}},               // beside a long face
+    {{1.5 + 0.3, 1.0 + 0.3, 0.}, 0.3 / d - 0.05, {d, d, 0.}}, // off a vertical edge
+    {{1.5 + 0.1, -1. - 0.2, -0.2 - 0.2}, 0.3 - 0.05, {1. / 3, -2. / 3, -2. / 3}}, // a corner
+    {{1.0, 0.9, 0.}, -0.1 - 0.05, {0., 1., 0.}}, // inside, near an end
+  };
+  for (const Case & c : cases)
+  {
+    pinsettle::touchGround(box, c.centre, 0.05, gap, point, axes);
+    BOOST_CHECK_CLOSE(gap, c.gap, 1e-9);
+    BOOST_CHECK_SMALL((axes.col(2) - c.normal).norm(), 1e-12);
+    BOOST_CHECK_SMALL((point - (c.centre - 0.05 * c.normal)).norm(), 1e-12);
+  }
+  BOOST_CHECK_THROW(
+    contacts.addBox("flat", Eigen::Vector3d::Zero(), quarter, Eigen::Vector3d(1., 0., 1.), 0.5),
+    std::invalid_argument);
+  BOOST_CHECK_THROW(
+    contacts.addBox("skew", Eigen::Vector3d::Zero(), 2. * quarter, Eigen::Vector3d::Ones(), 0.5),
+    std::invalid_argument);
 }
 
 BOOST_AUTO_TEST_CASE(impulses_meet_coulombs_conditions)

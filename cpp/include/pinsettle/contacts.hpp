@@ -53,24 +53,36 @@ namespace pinsettle
   constexpr double kMarginalCone = 1e-2;
 
   ///
-  /// \brief Ground planes and the points (spheres of a radius, 0 for a point) of bodies that can
-  /// touch them: hard unilateral contacts with Coulomb friction, inelastic.
+  /// \brief Grounds (planes and boxes) and the points (spheres of a radius, 0 for a point) of
+  /// bodies that can touch them: hard unilateral contacts with Coulomb friction, inelastic.
   ///
-  /// Every point is a candidate against every plane (a fixed set, sized once: the step loop
+  /// Every point is a candidate against every ground (a fixed set, sized once: the step loop
   /// allocates nothing). The gap of a sphere of centre c and radius r on a plane through o with
-  /// unit normal n is n.(c - o) - r; the contact point is c - r n.
+  /// unit normal n is n.(c - o) - r; the contact point is c - r n. On a box, n is the direction
+  /// from the box's closest point to c (a face's normal, or an edge's or corner's direction),
+  /// and inside the box the normal of its nearest face (touchGround).
   ///
   class GroundContacts
   {
   public:
-    /// \brief A ground plane: a point on it and its normal (world), its friction coefficient.
-    struct Plane
+    /// \brief A ground: a plane or a box, its friction coefficient.
+    struct Ground
     {
+      enum class Shape
+      {
+        Plane,
+        Box
+      };
       std::string name;
+      Shape shape;
+      /// A plane: a point on it; a box: its centre (world, m).
       Eigen::Vector3d point;
-      Eigen::Vector3d normal; ///< unit, out of the ground
-      Eigen::Vector3d t1, t2; ///< unit tangents, (t1, t2, normal) right-handed
-      double friction;        ///< Coulomb coefficient mu >= 0
+      /// A plane: unit tangents and normal (t1, t2, n) as columns, right-handed, n out of the
+      /// ground; a box: its own axes (world).
+      Eigen::Matrix3d axes;
+      /// A box: half its size along each of its axes (m); a plane: zero.
+      Eigen::Vector3d half_size;
+      double friction; ///< Coulomb coefficient mu >= 0
     };
     /// \brief A contact point: the centre of a sphere fixed to a body.
     struct Point
@@ -96,6 +108,20 @@ namespace pinsettle
       double friction);
 
     ///
+    /// \brief Add a ground box: its centre (world, m), its axes (a rotation: the box's frame
+    /// to the world) and half its size along each axis (m).
+    /// \throws std::invalid_argument naming the ground for axes that are not a rotation (to
+    ///         1e-9), half sizes that are not finite and > 0, a friction coefficient that is
+    ///         negative or not finite, or a non-finite centre.
+    ///
+    void addBox(
+      const std::string & name,
+      const Eigen::Vector3d & centre,
+      const Eigen::Matrix3d & axes,
+      const Eigen::Vector3d & half_size,
+      double friction);
+
+    ///
     /// \brief Add a contact point (a sphere of radius radius centred at position in the frame of
     /// joint).
     /// \throws std::invalid_argument naming the point for a joint out of range, a negative or
@@ -107,33 +133,33 @@ namespace pinsettle
       const Eigen::Vector3d & position,
       double radius);
 
-    /// Whether there is nothing to touch (no plane or no point): the solver runs none of this.
+    /// Whether there is nothing to touch (no ground or no point): the solver runs none of this.
     bool empty() const
     {
-      return planes_.empty() || points_.empty();
+      return grounds_.empty() || points_.empty();
     }
-    /// Number of candidate pairs (points x planes), each of three constraint rows.
+    /// Number of candidate pairs (points x grounds), each of three constraint rows.
     int pairs() const
     {
-      return static_cast<int>(planes_.size() * points_.size());
+      return static_cast<int>(grounds_.size() * points_.size());
     }
-    const std::vector<Plane> & planes() const
+    const std::vector<Ground> & grounds() const
     {
-      return planes_;
+      return grounds_;
     }
     const std::vector<Point> & points() const
     {
       return points_;
     }
-    /// The plane of a pair: pairs run point by point, each against every plane in order.
-    const Plane & planeOf(int pair) const
+    /// The ground of a pair: pairs run point by point, each against every ground in order.
+    const Ground & groundOf(int pair) const
     {
-      return planes_[static_cast<std::size_t>(pair) % planes_.size()];
+      return grounds_[static_cast<std::size_t>(pair) % grounds_.size()];
     }
-    /// The point of a pair (see planeOf).
+    /// The point of a pair (see groundOf).
     const Point & pointOf(int pair) const
     {
-      return points_[static_cast<std::size_t>(pair) / planes_.size()];
+      return points_[static_cast<std::size_t>(pair) / grounds_.size()];
     }
     const pinocchio::Model & model() const
     {
@@ -142,9 +168,25 @@ namespace pinsettle
 
   private:
     const pinocchio::Model & model_;
-    std::vector<Plane> planes_;
+    std::vector<Ground> grounds_;
     std::vector<Point> points_;
   };
+
+  ///
+  /// \brief Where a sphere touches a ground: the gap (m, negative when it sinks in), the contact
+  /// point (world, m: the sphere's point closest to the ground) and the pair's axes (t1, t2, n)
+  /// as columns (world, n out of the ground).
+  ///
+  /// \param[in] centre The sphere's centre (world, m).
+  /// \param[in] radius Its radius (m, >= 0).
+  ///
+  void touchGround(
+    const GroundContacts::Ground & ground,
+    const Eigen::Vector3d & centre,
+    double radius,
+    double & gap,
+    Eigen::Ref<Eigen::Vector3d> point,
+    Eigen::Ref<Eigen::Matrix3d> axes);
 
   ///
   /// \brief The candidate pairs at a configuration: gaps, contact points and the Jacobian of
@@ -156,6 +198,9 @@ namespace pinsettle
     Eigen::VectorXd gap;
     /// Contact point of each pair (world, m), 3 x pairs().
     Eigen::Matrix3Xd point;
+    /// Axes (t1, t2, n) of each pair as columns (world), 3 x 3 pairs(): a plane's own, a
+    /// box's those of the face, edge or corner touched.
+    Eigen::Matrix3Xd axes;
     /// Rows (t1, t2, n) of each pair, 3 pairs() x model.nv: J v is the contact point's velocity
     /// in the ground's axes (m/s).
     Eigen::MatrixXd jacobian;

@@ -41,8 +41,15 @@ def body_on_a_block(theta: float, mu: float = 0.5, corners=CORNERS) -> pinsettle
     for corner in corners:
         scene.add_contact("body", corner)
     up = np.array([-math.sin(theta), 0.0, math.cos(theta)])
-    scene.set_start(root_joint=[*((0.1 + 0.05 + 0.02) * up), math.cos(-theta / 2), 0.0,
-                                math.sin(-theta / 2), 0.0])
+    scene.set_start(
+        root_joint=[
+            *((0.1 + 0.05 + 0.02) * up),
+            math.cos(-theta / 2),
+            0.0,
+            math.sin(-theta / 2),
+            0.0,
+        ]
+    )
     return scene
 
 

@@ -345,11 +345,12 @@ def test_floating_robots_stand_on_their_feet(name):
     assert result.stability == "stable"
 
 
-@pytest.mark.parametrize(("name", "trunk"), [("anymal", "base")])
+@pytest.mark.parametrize(("name", "trunk"), [("anymal", "base"), ("solo12", "")])
 def test_a_quadruped_with_its_motors_off_lies_on_its_body(name, trunk):
     # No spring holds the joints: dropped from its stance on all its collision shapes, its legs
     # give way and it lies on the floor, its trunk at most half its standing height (anymal on
-    # its body's boxes, thighs and feet).
+    # its body's boxes, thighs and feet; solo12, whose trunk has no collision shape, on its
+    # shoulders, upper legs and feet: its forces lie inside their cones, so it is stable).
     from pinsettle._model_files import robot_srdf
 
     scene = pinsettle.Scene.from_robot(name, floating=True)

@@ -145,13 +145,16 @@ BOOST_AUTO_TEST_CASE(impulses_meet_coulombs_conditions)
     for (Eigen::Index i = 0; i < A.rows(); ++i)
       for (Eigen::Index j = 0; j < A.cols(); ++j)
         A(i, j) = normal(rng);
-    const Eigen::MatrixXd G = A * A.transpose() / 12.;
+    const Eigen::MatrixXd Y = A.transpose() / std::sqrt(12.);
+    const Eigen::MatrixXd G = Y.transpose() * Y;
     Eigen::VectorXd b(10), mu(3), lambda = Eigen::VectorXd::Zero(10);
     for (Eigen::Index k = 0; k < 10; ++k)
       b[k] = normal(rng);
     for (Eigen::Index k = 0; k < 3; ++k)
       mu[k] = 0.2 + 0.3 * k;
-    pinsettle::solveContactImpulses(G, b, mu, lambda);
+    pinsettle::ImpulseWorkspace work;
+    pinsettle::solveContactImpulses(Y, b, mu, lambda, work);
+    BOOST_CHECK_SMALL((work.w - Y * lambda).lpNorm<Eigen::Infinity>(), 1e-12);
     const Eigen::VectorXd u = G * lambda + b;
     const double scale = 1e-6 * (1. + lambda.lpNorm<Eigen::Infinity>());
     for (Eigen::Index k = 0; k < 3; ++k)

@@ -229,23 +229,40 @@ namespace pinsettle
     const Eigen::VectorXd & q);
 
   ///
+  /// \brief Memory of solveContactImpulses, grown by it when too small (a step loop's is sized
+  /// by its first solves, then reused).
+  ///
+  struct ImpulseWorkspace
+  {
+    /// Y lambda (dim Y.rows()): out, the impulses' velocity change in Y's space.
+    Eigen::VectorXd w;
+    /// w at the start of a sweep.
+    Eigen::VectorXd w_sweep;
+    /// The step lengths of each contact's update and each unilateral row's.
+    Eigen::Matrix2Xd steps;
+  };
+
+  ///
   /// \brief Solve the contact impulses of a step: lambda in the friction cones (three per
   /// active pair, ordered t1, t2, n), then one >= 0 per frictionless unilateral row (a joint
-  /// on its stop), with the velocities u = G lambda + b complementary to them (projected
-  /// Gauss-Seidel, started from lambda).
+  /// on its stop), with the velocities u = Y^T Y lambda + b complementary to them (projected
+  /// Gauss-Seidel in the space of Y lambda, started from lambda, until a sweep no longer
+  /// changes Y lambda).
   ///
-  /// \param[in] G Delassus matrix J M^-1 J^T of the active rows (dim 3a + s), symmetric (its
-  ///            columns are read for its rows).
+  /// \param[in] Y A factor of the Delassus matrix G = J M^-1 J^T = Y^T Y of the active rows,
+  ///            e.g. L^-1 J^T with M = L L^T (nv x (3a + s)).
   /// \param[in] b Velocities without impulses, the gap terms included (dim 3a + s).
   /// \param[in] friction Coefficient of each active pair (dim a).
   /// \param[in,out] lambda Impulses (dim 3a + s, N s or N m s): the start in, the answer out.
+  /// \param[in,out] work Its memory; work.w = Y lambda out.
   /// \return The number of sweeps.
   ///
   int solveContactImpulses(
-    const Eigen::Ref<const Eigen::MatrixXd> & G,
+    const Eigen::Ref<const Eigen::MatrixXd> & Y,
     const Eigen::Ref<const Eigen::VectorXd> & b,
     const Eigen::Ref<const Eigen::VectorXd> & friction,
-    Eigen::Ref<Eigen::VectorXd> lambda);
+    Eigen::Ref<Eigen::VectorXd> lambda,
+    ImpulseWorkspace & work);
 
   ///
   /// \brief The contacts' part of a step: the impulses of a step of length h from the free
@@ -297,7 +314,8 @@ namespace pinsettle
     Eigen::Matrix<double, 6, Eigen::Dynamic> body_velocity_; // (m/s, rad/s) per joint
     std::vector<int> active_;
     Eigen::VectorXd force_; // of each pair at the last step (N), 3 pairs()
-    Eigen::MatrixXd Ja_, Y_, G_;
+    Eigen::MatrixXd Ja_, Y_;
+    ImpulseWorkspace impulses_;
     Eigen::VectorXd b_, lambda_, mu_, vfree_, dv_;
     Eigen::VectorXd stop_gap_;        // of each stop row of the step (rad or m)
     Eigen::LLT<Eigen::MatrixXd> llt_; // of the mass matrix
@@ -333,8 +351,11 @@ namespace pinsettle
   /// gravity and the applied efforts, dim model.nv): among the forces of the closed pairs that
   /// balance tau, in their friction cones and pressing, the one of least norm (for a support of
   /// more points than a rigid body needs, the rigid model leaves the share open: least norm
-  /// shares it evenly where symmetry does). With stops, the reactions of the joints on a stop
-  /// (pushing, >= 0) are solved for with them.
+  /// shares it evenly where symmetry does). Where least norm leaves a cone shrunk by
+  /// kMarginalCone, the forces nearest it inside those cones (alternating projections); where
+  /// there are none, the rest is near_cone_edge and the forces those in the cones closest to
+  /// balancing tau. With stops, the reactions of the joints on a stop (pushing, >= 0) are solved
+  /// for with them.
   ///
   ContactBalance balanceContacts(
     const pinocchio::Model & model,
@@ -345,10 +366,11 @@ namespace pinsettle
     const JointStops * stops = nullptr);
 
   ///
-  /// \brief Stability of a rest on the ground: the sticking contacts that carry a force held as
-  /// bilateral, the stiffness (with the contact forces' own, from the gap function, so that a
-  /// ball on a floor is neutral) restricted to the motions they leave free, and those of the
-  /// joints pressed on a stop. With every motion held, stable.
+  /// \brief Stability of a rest on the ground: the contacts that carry a force held as
+  /// bilateral (at rest friction holds anywhere in the closed cone), the stiffness (with the
+  /// contact forces' own, from the gap function, so that a ball on a floor is neutral) restricted
+  /// to the motions they leave free, and those of the joints pressed on a stop. With every motion
+  /// held, stable.
   ///
   StabilityReport assessStability(
     const pinocchio::Model & model,

@@ -7,7 +7,9 @@ session-scoped models below are shared; a test that needs to change a model work
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -97,3 +99,19 @@ def chain_urdf() -> Callable[[int], str]:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.chain_urdf
+
+
+@pytest.fixture(scope="session")
+def mujoco():
+    """MuJoCo, the reference of the MJCF checks: skipped without it, except where
+    PINSETTLE_REQUIRE_MUJOCO=1 (CI), where its absence fails (as PINSETTLE_REQUIRE_CHROMIUM does
+    for playback's screenshots)."""
+    try:
+        return importlib.import_module("mujoco")
+    except ImportError as error:
+        if os.environ.get("PINSETTLE_REQUIRE_MUJOCO") == "1":
+            pytest.fail(
+                f"MuJoCo is required here (PINSETTLE_REQUIRE_MUJOCO=1) but does not import: "
+                f"{error}; pip install '.[test]' installs it"
+            )
+        pytest.skip(f"mujoco is not installed ({error}): the MJCF checks against it skip")

@@ -11,9 +11,7 @@ cones, gaps) and the floor carrying m g to 1e-9.
 
 from __future__ import annotations
 
-import importlib
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -29,18 +27,6 @@ from contact_reference import (
 
 ROBOTS = Path(__file__).parents[1] / "robots"
 G = 9.81
-
-
-@pytest.fixture(scope="module")
-def mujoco():
-    """MuJoCo, the reference of the MJCF checks: skipped without it, except where
-    PINSETTLE_REQUIRE_MUJOCO=1 (CI), where its absence fails."""
-    try:
-        return importlib.import_module("mujoco")
-    except ImportError as error:
-        if os.environ.get("PINSETTLE_REQUIRE_MUJOCO") == "1":
-            pytest.fail(f"MuJoCo is required here (PINSETTLE_REQUIRE_MUJOCO=1): {error}")
-        pytest.skip(f"mujoco is not installed ({error})")
 
 
 def world_points(scene: pinsettle.Scene, q: np.ndarray) -> dict[str, tuple[np.ndarray, float]]:

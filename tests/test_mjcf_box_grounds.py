@@ -8,27 +8,12 @@ PINSETTLE_REQUIRE_MUJOCO=1 (CI), where its absence fails.
 
 from __future__ import annotations
 
-import importlib
-import os
-
 import numpy as np
 import pinocchio
 import pinsettle
 import pytest
 
 G = 9.81
-
-
-@pytest.fixture(scope="module")
-def mujoco():
-    """MuJoCo, the reference of the MJCF checks: skipped without it, except where
-    PINSETTLE_REQUIRE_MUJOCO=1 (CI), where its absence fails."""
-    try:
-        return importlib.import_module("mujoco")
-    except ImportError as error:
-        if os.environ.get("PINSETTLE_REQUIRE_MUJOCO") == "1":
-            pytest.fail(f"MuJoCo is required here (PINSETTLE_REQUIRE_MUJOCO=1): {error}")
-        pytest.skip(f"mujoco is not installed ({error})")
 
 
 def write(tmp_path, world: str, bodies: str, name: str = "file.xml"):

@@ -19,10 +19,8 @@ The MJCF reader is checked against MuJoCo itself (the ``mujoco`` package of the 
 from __future__ import annotations
 
 import ctypes
-import importlib
 import json
 import math
-import os
 import subprocess
 import sys
 import textwrap
@@ -66,22 +64,6 @@ def one_line_error(proc: subprocess.CompletedProcess) -> str:
 
 def wrap(angle: float) -> float:
     return math.remainder(angle, 2 * math.pi)
-
-
-@pytest.fixture(scope="module")
-def mujoco():
-    """MuJoCo, the reference of the MJCF checks: skipped without it, except where
-    PINSETTLE_REQUIRE_MUJOCO=1 (CI), where its absence fails (as PINSETTLE_REQUIRE_CHROMIUM does
-    for playback's screenshots)."""
-    try:
-        return importlib.import_module("mujoco")
-    except ImportError as error:
-        if os.environ.get("PINSETTLE_REQUIRE_MUJOCO") == "1":
-            pytest.fail(
-                f"MuJoCo is required here (PINSETTLE_REQUIRE_MUJOCO=1) but does not import: "
-                f"{error}; pip install '.[test]' installs it"
-            )
-        pytest.skip(f"mujoco is not installed ({error}): the MJCF checks against it skip")
 
 
 @pytest.fixture(scope="module")

@@ -29,6 +29,14 @@ namespace pinsettle
       throw std::invalid_argument(what + " '" + name + "': " + msg);
     }
 
+    void checkFriction(const std::string & ground, double friction)
+    {
+      if (!(friction >= 0.) || !std::isfinite(friction))
+        throwContactError(
+          "ground", ground,
+          "friction must be a finite coefficient >= 0, got " + std::to_string(friction));
+    }
+
     // Two unit tangents completing the normal n to a right-handed frame (t1, t2, n).
     void completeFrame(const Eigen::Vector3d & n, Eigen::Vector3d & t1, Eigen::Vector3d & t2)
     {
@@ -152,10 +160,7 @@ namespace pinsettle
       msg << "its normal must have a non-zero finite length, got (" << normal.transpose() << ")";
       throwContactError("ground", name, msg.str());
     }
-    if (!(friction >= 0.) || !std::isfinite(friction))
-      throwContactError(
-        "ground", name,
-        "friction must be a finite coefficient >= 0, got " + std::to_string(friction));
+    checkFriction(name, friction);
     Ground plane{name, Ground::Shape::Plane, point, {}, Eigen::Vector3d::Zero(), friction};
     Eigen::Vector3d t1, t2;
     const Eigen::Vector3d n = normal / length;
@@ -183,10 +188,7 @@ namespace pinsettle
       msg << "its half sizes must be finite and > 0 (m), got (" << half_size.transpose() << ")";
       throwContactError("ground", name, msg.str());
     }
-    if (!(friction >= 0.) || !std::isfinite(friction))
-      throwContactError(
-        "ground", name,
-        "friction must be a finite coefficient >= 0, got " + std::to_string(friction));
+    checkFriction(name, friction);
     grounds_.push_back(Ground{name, Ground::Shape::Box, centre, axes, half_size, friction});
   }
 

@@ -480,6 +480,16 @@ namespace pinsettle
 
   namespace
   {
+    // The Jacobian rows (t1, t2, n) of the given pairs, stacked (3 per pair x nv).
+    Eigen::MatrixXd stackPairRows(const ContactGeometry & geometry, const std::vector<int> & pairs)
+    {
+      Eigen::MatrixXd J(3 * static_cast<Eigen::Index>(pairs.size()), geometry.jacobian.cols());
+      for (std::size_t k = 0; k < pairs.size(); ++k)
+        J.middleRows<3>(3 * static_cast<Eigen::Index>(k)) =
+          geometry.jacobian.middleRows<3>(3 * pairs[k]);
+      return J;
+    }
+
     bool insideCones(
       const GroundContacts & contacts,
       const std::vector<int> & pairs,
@@ -523,10 +533,7 @@ namespace pinsettle
       Eigen::VectorXd & f)
     {
       const Eigen::Index rows = 3 * static_cast<Eigen::Index>(pairs.size());
-      Eigen::MatrixXd A(load.size(), rows);
-      for (std::size_t k = 0; k < pairs.size(); ++k)
-        A.middleCols<3>(3 * static_cast<Eigen::Index>(k)) =
-          geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose();
+      const Eigen::MatrixXd A = stackPairRows(geometry, pairs).transpose();
       Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A.rows(), A.cols());
       cod.setThreshold(1e-10);
       cod.compute(A);
@@ -567,15 +574,10 @@ namespace pinsettle
       const Eigen::VectorXd & tau,
       Eigen::VectorXd f)
     {
-      const Eigen::Index rows = 3 * static_cast<Eigen::Index>(pairs.size());
-      Eigen::MatrixXd J(rows, model.nv);
+      const Eigen::MatrixXd J = stackPairRows(geometry, pairs);
       Eigen::VectorXd mu(pairs.size());
       for (std::size_t k = 0; k < pairs.size(); ++k)
-      {
-        J.middleRows<3>(3 * static_cast<Eigen::Index>(k)) =
-          geometry.jacobian.middleRows<3>(3 * pairs[k]);
         mu[static_cast<Eigen::Index>(k)] = contacts.groundOf(pairs[k]).friction;
-      }
       Eigen::LLT<Eigen::MatrixXd> llt(model.nv);
       factorMassMatrix(model, data, q, llt);
       const Eigen::MatrixXd Y = llt.matrixL().solve(J.transpose());
@@ -604,9 +606,7 @@ namespace pinsettle
         return Eigen::VectorXd(0); // nothing supports: Eigen's decomposition of no column fails
       Eigen::MatrixXd A =
         Eigen::MatrixXd::Zero(tau.size(), p + static_cast<Eigen::Index>(on.size()));
-      for (std::size_t k = 0; k < pairs.size(); ++k)
-        A.middleCols<3>(3 * static_cast<Eigen::Index>(k)) =
-          geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose();
+      A.leftCols(p) = stackPairRows(geometry, pairs).transpose();
       for (std::size_t k = 0; k < on.size(); ++k)
         A(on[k].stop->iv, p + static_cast<Eigen::Index>(k)) = on[k].sign();
       // The cut is set before the decomposition: the rank it gives decides the Z factor, and a

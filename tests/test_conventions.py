@@ -38,11 +38,6 @@ def required(module: str, switch: str):
     return pytest.importorskip(module, reason=f"{module} is not installed ({switch} unset)")
 
 
-@pytest.fixture(scope="module")
-def mujoco():
-    return required("mujoco", "PINSETTLE_REQUIRE_MUJOCO")
-
-
 def rotation(w: float, x: float, y: float, z: float) -> np.ndarray:
     """The rotation matrix of the unit quaternion w + x i + y j + z k (Hamilton), in closed
     form: no library's quaternion order involved."""

@@ -67,6 +67,9 @@ namespace pinsettle
 
     constexpr int kMaxSweeps = 2000;
     constexpr int kRefreshSweeps = 8;
+    // Solves of a step's impulses at most, each with the pairs and stops the last one's
+    // velocities close (ContactStepper::apply).
+    constexpr int kMaxContactRounds = 4;
 
     // The Cholesky factors of the mass matrix at q (crba fills its upper triangle).
     void factorMassMatrix(
@@ -345,15 +348,18 @@ namespace pinsettle
   , stops_(stops)
   , llt_(contacts.model().nv) // made in place: a moved-in LLT reads as uninitialized to GCC
   {
-    const int stop_rows = stops != nullptr ? static_cast<int>(stops->stops().size()) : 0;
-    stop_gap_.resize(stop_rows);
-    const int rows = 3 * contacts.pairs() + stop_rows;
+    const int stop_count = stops != nullptr ? static_cast<int>(stops->stops().size()) : 0;
+    stop_sign_.resize(stop_count);
+    stop_impulse_.resize(stop_count);
+    stop_gap_.resize(stop_count);
+    const int rows = 3 * contacts.pairs() + stop_count;
     const int nv = contacts.model().nv;
     geometry_.gap.resize(contacts.pairs());
     geometry_.point.resize(3, contacts.pairs());
     geometry_.axes.resize(3, 3 * contacts.pairs());
     body_velocity_.resize(6, contacts.model().njoints);
     active_.reserve(contacts.pairs());
+    is_active_.resize(contacts.pairs());
     force_ = Eigen::VectorXd::Zero(3 * contacts.pairs());
     Ja_.resize(rows, nv);
     Y_.resize(nv, rows);
@@ -361,6 +367,7 @@ namespace pinsettle
     lambda_.resize(rows);
     mu_.resize(contacts.pairs());
     vfree_.resize(nv);
+    vnext_.resize(nv);
     dv_.resize(nv);
   }
 
@@ -378,11 +385,44 @@ namespace pinsettle
     double h)
   {
     vfree_ = v + h * ddq;
-    findClosingPairs(model, data, q, h);
-    const Eigen::Index a = static_cast<Eigen::Index>(active_.size());
-    const Eigen::Index rows = addStopRows(q, h, 3 * a);
-    if (rows == 0)
+    pinocchio::computeJointJacobians(model, data, q);
+    findClosingPairs(model, data, h);
+    stop_sign_.setZero();
+    if (!addClosingStops(q, vfree_, h) && active_.empty())
       return;
+    factorMassMatrix(model, data, q, llt_);
+    // The impulses change the velocities of bodies that no row holds: a pair or stop that
+    // opens at vfree_ may close at the velocity after them (talos falling on its collision
+    // shapes sank a hand 2 to 4 cm in a step, and pushing that out within the next one added
+    // energy until the step was rolled back). Those join and the impulses are solved again.
+    for (int round = 1;; ++round)
+    {
+      const Eigen::Index rows = assembleRows(model, data, h);
+      auto lambda = lambda_.head(rows);
+      solveContactImpulses(
+        Y_.leftCols(rows), b_.head(rows), mu_.head(activeCount()), lambda, impulses_);
+      dv_ = impulses_.w;
+      llt_.matrixU().solveInPlace(dv_);
+      keepImpulses(h);
+      vnext_ = vfree_ + dv_;
+      if (round == kMaxContactRounds)
+        break;
+      const bool pairs_added = addClosingPairs(model, data, vnext_, h);
+      if (!addClosingStops(q, vnext_, h) && !pairs_added)
+        break;
+    }
+    ddq += dv_ / h;
+  }
+
+  Eigen::Index ContactStepper::activeCount() const
+  {
+    return static_cast<Eigen::Index>(active_.size());
+  }
+
+  Eigen::Index ContactStepper::assembleRows(
+    const pinocchio::Model & model, const pinocchio::Data & data, double h)
+  {
+    const Eigen::Index a = activeCount();
     for (Eigen::Index k = 0; k < a; ++k)
     {
       const int p = active_[static_cast<std::size_t>(k)];
@@ -393,87 +433,145 @@ namespace pinsettle
           model, data, joint, x, geometry_.axes.col(3 * p + r).eval(), Ja_.row(3 * k + r));
       mu_[k] = contacts_.groundOf(p).friction;
       lambda_.segment<3>(3 * k) = h * force_.segment<3>(3 * p);
+      // Open: close the gap in this step and no more; sunk in (round-off, a stop's clamp):
+      // come out within the step. Coming out by a fifth per step left go1's feet 1e-5 m deep
+      // when the damping had taken the energy below its limit.
+      b_[3 * k + 2] = geometry_.gap[p] / h;
+      b_.segment<2>(3 * k).setZero();
     }
-    lambda_.segment(3 * a, rows - 3 * a).setZero();
-    const auto J = Ja_.topRows(rows);
-    const auto Y = Y_.leftCols(rows);
-    auto b = b_.head(rows);
-    auto lambda = lambda_.head(rows);
-    factorMassMatrix(model, data, q, llt_);
-    Y_.leftCols(rows) = J.transpose();
-    llt_.matrixL().solveInPlace(Y_.leftCols(rows));
-    b.noalias() = J * vfree_;
-    // Open: close the gap in this step and no more; sunk in (round-off, a stop's clamp): come
-    // out within the step. Coming out by a fifth per step left go1's feet 1e-5 m deep when
-    // the damping had taken the energy below its limit.
-    for (Eigen::Index k = 0; k < a; ++k)
-      b[3 * k + 2] += geometry_.gap[active_[static_cast<std::size_t>(k)]] / h;
-    for (Eigen::Index r = 3 * a; r < rows; ++r)
-      b[r] += stop_gap_[r - 3 * a] / h;
-    solveContactImpulses(Y, b, mu_.head(a), lambda, impulses_);
-    dv_ = impulses_.w;
-    llt_.matrixU().solveInPlace(dv_);
-    ddq += dv_ / h;
-    for (Eigen::Index k = 0; k < a; ++k)
-      force_.segment<3>(3 * active_[static_cast<std::size_t>(k)]) = lambda.segment<3>(3 * k) / h;
+    Eigen::Index row = 3 * a;
+    for (Eigen::Index i = 0; i < stop_sign_.size(); ++i)
+    {
+      if (stop_sign_[i] == 0.)
+        continue;
+      Ja_.row(row).setZero();
+      Ja_(row, stops_->stops()[static_cast<std::size_t>(i)].iv) = stop_sign_[i];
+      lambda_[row] = stop_impulse_[i];
+      b_[row] = stop_gap_[i] / h;
+      ++row;
+    }
+    const auto J = Ja_.topRows(row);
+    Y_.leftCols(row) = J.transpose();
+    llt_.matrixL().solveInPlace(Y_.leftCols(row));
+    b_.head(row).noalias() += J * vfree_;
+    return row;
   }
 
-  void ContactStepper::findClosingPairs(
-    const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q, double h)
+  void ContactStepper::keepImpulses(double h)
   {
-    pinocchio::computeJointJacobians(model, data, q);
-    // Each body's velocity at vfree (world axes, at the origin), from its joints' columns: the
-    // normal velocities of all candidates for the price of one pass; the Jacobian rows are
-    // written only for the pairs that close (go1 on its 404 collision points: 228 us a step
-    // with every pair's rows).
+    const Eigen::Index a = activeCount();
+    for (Eigen::Index k = 0; k < a; ++k)
+      force_.segment<3>(3 * active_[static_cast<std::size_t>(k)]) = lambda_.segment<3>(3 * k) / h;
+    Eigen::Index row = 3 * a;
+    for (Eigen::Index i = 0; i < stop_sign_.size(); ++i)
+      if (stop_sign_[i] != 0.)
+        stop_impulse_[i] = lambda_[row++];
+  }
+
+  void ContactStepper::computeBodyVelocities(
+    const pinocchio::Model & model, const pinocchio::Data & data, const Eigen::VectorXd & v)
+  {
     body_velocity_.col(0).setZero();
     for (pinocchio::JointIndex j = 1; j < static_cast<pinocchio::JointIndex>(model.njoints); ++j)
       body_velocity_.col(static_cast<Eigen::Index>(j)).noalias() =
         body_velocity_.col(static_cast<Eigen::Index>(model.parents[j]))
         + data.J.middleCols(model.idx_vs[j], model.nvs[j])
-            * vfree_.segment(model.idx_vs[j], model.nvs[j]);
-    active_.clear();
+            * v.segment(model.idx_vs[j], model.nvs[j]);
+  }
+
+  bool ContactStepper::closesWithin(int p, double h) const
+  {
+    const auto V = body_velocity_.col(static_cast<Eigen::Index>(contacts_.pointOf(p).joint));
+    const Eigen::Vector3d x = geometry_.point.col(p);
+    const double un = geometry_.axes.col(3 * p + 2).dot(V.head<3>() + V.tail<3>().cross(x));
+    return geometry_.gap[p] + h * std::min(0., un) <= 0.;
+  }
+
+  void ContactStepper::findClosingPairs(
+    const pinocchio::Model & model, const pinocchio::Data & data, double h)
+  {
     int p = 0;
     for (const GroundContacts::Point & s : contacts_.points())
     {
       const Eigen::Vector3d centre = data.oMi[s.joint].act(s.position);
-      const auto V = body_velocity_.col(static_cast<Eigen::Index>(s.joint));
       for (const GroundContacts::Ground & ground : contacts_.grounds())
       {
         auto axes = geometry_.axes.middleCols<3>(3 * p);
         touchGround(ground, centre, s.radius, geometry_.gap[p], geometry_.point.col(p), axes);
-        const Eigen::Vector3d x = geometry_.point.col(p);
-        const double un = axes.col(2).dot(V.head<3>() + V.tail<3>().cross(x));
-        if (geometry_.gap[p] + h * std::min(0., un) <= 0.)
-          active_.push_back(p);
-        else
-          force_.segment<3>(3 * p).setZero();
         ++p;
       }
     }
+    active_.clear();
+    std::fill(is_active_.begin(), is_active_.end(), 0);
+    addClosingPairs(model, data, vfree_, h);
   }
 
-  Eigen::Index ContactStepper::addStopRows(const Eigen::VectorXd & q, double h, Eigen::Index row)
+  bool ContactStepper::addClosingPairs(
+    const pinocchio::Model & model,
+    const pinocchio::Data & data,
+    const Eigen::VectorXd & velocity,
+    double h)
   {
-    if (stops_ == nullptr)
-      return row;
-    const Eigen::Index first = row;
-    for (const JointStops::Stop & s : stops_->stops())
+    // Each body's velocity (world axes, at the origin), from its joints' columns: the normal
+    // velocities of all candidates for the price of one pass; the Jacobian rows are written
+    // only for the pairs that close (go1 on its 404 collision points: 228 us a step with every
+    // pair's rows).
+    computeBodyVelocities(model, data, velocity);
+    bool added = false;
+    for (int p = 0; p < contacts_.pairs(); ++p)
     {
+      if (is_active_[static_cast<std::size_t>(p)])
+        continue;
+      if (closesWithin(p, h))
+      {
+        is_active_[static_cast<std::size_t>(p)] = 1;
+        active_.push_back(p);
+        added = true;
+      }
+      else
+        force_.segment<3>(3 * p).setZero();
+    }
+    return added;
+  }
+
+  bool ContactStepper::addClosingStops(
+    const Eigen::VectorXd & q, const Eigen::VectorXd & velocity, double h)
+  {
+    bool added = false;
+    for (Eigen::Index i = 0; i < stop_sign_.size(); ++i)
+    {
+      if (stop_sign_[i] != 0.)
+        continue;
+      const JointStops::Stop & s = stops_->stops()[static_cast<std::size_t>(i)];
       const double to_lower = q[s.iq] - s.lower, to_upper = s.upper - q[s.iq];
-      double sign = 0., gap = 0.;
-      if (to_lower + h * std::min(0., vfree_[s.iv]) <= 0.)
-        sign = 1., gap = to_lower;
-      else if (to_upper + h * std::min(0., -vfree_[s.iv]) <= 0.)
-        sign = -1., gap = to_upper;
+      if (to_lower + h * std::min(0., velocity[s.iv]) <= 0.)
+        stop_sign_[i] = 1., stop_gap_[i] = to_lower;
+      else if (to_upper + h * std::min(0., -velocity[s.iv]) <= 0.)
+        stop_sign_[i] = -1., stop_gap_[i] = to_upper;
       else
         continue;
-      Ja_.row(row).setZero();
-      Ja_(row, s.iv) = sign;
-      stop_gap_[row - first] = gap;
-      ++row;
+      stop_impulse_[i] = 0.;
+      added = true;
     }
-    return row;
+    return added;
+  }
+
+  bool ContactStepper::addStopsReached(
+    const Eigen::VectorXd & q, std::vector<pinocchio::JointIndex> * hits) const
+  {
+    bool reached = false;
+    for (Eigen::Index i = 0; i < stop_sign_.size(); ++i)
+    {
+      if (stop_sign_[i] == 0. || stop_gap_[i] <= kContactGapTolerance)
+        continue;
+      const JointStops::Stop & s = stops_->stops()[static_cast<std::size_t>(i)];
+      if (q[s.iq] != (stop_sign_[i] > 0. ? s.lower : s.upper))
+        continue;
+      reached = true;
+      if (hits != nullptr && std::find(hits->begin(), hits->end(), s.joint) == hits->end())
+        hits->push_back(s.joint);
+    }
+    return reached;
   }
 
   // --- A rest -----------------------------------------------------------------------------------

@@ -645,7 +645,7 @@ namespace pinsettle
     // A joint past a stop at every step is not motion but chatter (each step crosses the range,
     // and the impacts keep the energy at zero): roll back with the step halved, as for a
     // blow-up.
-    const bool hit = constraints_.enforceStops(work_.q, work_.v, trace_.isTracing());
+    const bool hit = constraints_.enforceStops(work_.q, work_.v, trace_.isTracing(), work_.dq);
     state_.impacts = hit ? state_.impacts + 1 : 0;
     for (const pinocchio::JointIndex joint : constraints_.hits())
       trace_.event(state_.step, state_.time + h, EventKind::Impact, joint);

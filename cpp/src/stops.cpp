@@ -158,24 +158,29 @@ namespace pinsettle
     const JointStops & stops,
     Eigen::VectorXd & q,
     Eigen::VectorXd & v,
-    std::vector<pinocchio::JointIndex> * hits)
+    std::vector<pinocchio::JointIndex> * hits,
+    double slack,
+    Eigen::VectorXd * motion)
   {
     bool hit = false;
     for (const JointStops::Stop & s : stops.stops())
     {
       double & x = q[s.iq];
       double & rate = v[s.iv];
-      const bool past = x < s.lower || x > s.upper;
-      if (x <= s.lower)
+      const bool past = x < s.lower - slack || x > s.upper + slack;
+      const double was = x;
+      if (x <= s.lower + slack)
       {
         x = s.lower;
         rate = std::max(rate, 0.);
       }
-      else if (x >= s.upper)
+      else if (x >= s.upper - slack)
       {
         x = s.upper;
         rate = std::min(rate, 0.);
       }
+      if (motion != nullptr)
+        (*motion)[s.iv] += x - was;
       if (past && hits != nullptr)
         hits->push_back(s.joint);
       hit = hit || past;

@@ -1,7 +1,8 @@
 //
 // Boost.Test cases of ground contacts: the contact Jacobian against finite differences of the
-// contact point and the gap, the impulse solve against Coulomb's conditions, and a box resting
-// on a floor checked with Pinocchio's own functions (not the solver's balance).
+// contact point and the gap, the impulse solve against Coulomb's conditions, a step's impulses
+// against a closed form (a rod landing on one end), and a box resting on a floor checked with
+// Pinocchio's own functions (not the solver's balance).
 //
 
 #define BOOST_TEST_MODULE pinsettle_contacts
@@ -9,6 +10,8 @@
 
 #include <pinsettle/pinsettle.hpp>
 
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
@@ -210,4 +213,49 @@ BOOST_AUTO_TEST_CASE(a_box_rests_on_a_floor_on_its_four_corners)
   }
   // The root's linear force, in its local frame at rest level: the total lifts the weight.
   BOOST_CHECK_SMALL((data.oMi[1].rotation() * g.head<3>() - total).norm(), 1e-9);
+}
+
+BOOST_AUTO_TEST_CASE(a_step_holds_the_pairs_its_impulses_close)
+{
+  // A rod (1 kg, 1 m) falling at 1 m/s and turning at 4 rad/s, both ends 0.1 mm above a floor:
+  // its left end comes down at 3 m/s and closes, its right end goes up at 1 m/s. The left end's
+  // inelastic impulse turns the rod the other way: the right end then comes down at about
+  // 0.5 m/s (v_right + v_left / 2 for a uniform rod) and would sink 5 mm in a 10 ms step.
+  pinocchio::Model model;
+  const auto root =
+    model.addJoint(0, pinocchio::JointModelFreeFlyer(), pinocchio::SE3::Identity(), "root");
+  model.appendBodyToJoint(
+    root, pinocchio::Inertia::FromBox(1., 1., 0.01, 0.01), pinocchio::SE3::Identity());
+  pinsettle::GroundContacts contacts(model);
+  contacts.addPlane("floor", Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), 0.5);
+  contacts.addPoint("left", 1, Eigen::Vector3d(-0.5, 0., 0.), 0.);
+  contacts.addPoint("right", 1, Eigen::Vector3d(0.5, 0., 0.), 0.);
+  Eigen::VectorXd q = pinocchio::neutral(model);
+  q[2] = 1e-4;
+  Eigen::VectorXd v = Eigen::VectorXd::Zero(model.nv);
+  v[2] = -1.;
+  v[4] = -4.;
+  const double h = 0.01;
+  pinocchio::Data data(model);
+  Eigen::VectorXd ddq = pinocchio::aba(model, data, q, v, Eigen::VectorXd::Zero(model.nv));
+  const Eigen::VectorXd v_free = v + h * ddq;
+  pinsettle::ContactStepper stepper(contacts, nullptr);
+  stepper.start();
+  stepper.apply(model, data, q, v, ddq, h);
+  const Eigen::VectorXd v_next = v + h * ddq;
+  pinsettle::ContactGeometry geometry;
+  pinsettle::computeContactGeometry(model, data, contacts, q, geometry);
+  for (int p = 0; p < 2; ++p)
+  {
+    const double un = geometry.jacobian.row(3 * p + 2).dot(v_next);
+    BOOST_CHECK_GE(geometry.gap[p] + h * un, -1e-9);   // sinks into the floor by nothing
+    BOOST_CHECK_SMALL(geometry.gap[p] + h * un, 1e-9); // both ends land
+  }
+  // The right end went up before the impulses: a step that held only the pairs closing at the
+  // free velocity would have let it sink.
+  BOOST_CHECK_GT(geometry.jacobian.row(5).dot(v_free), 0.5);
+  // Inelastic, nothing sunk in: the impulses take kinetic energy out.
+  pinocchio::crba(model, data, q);
+  data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose();
+  BOOST_CHECK_LT(v_next.dot(data.M * v_next), v_free.dot(data.M * v_free));
 }

@@ -217,9 +217,12 @@ namespace pinsettle
     /// removed (an inelastic impact; enforceStops).
     ///
     /// \param[in] record Whether to list the joints that hit a stop (hits()).
+    /// \param[in,out] motion The step's motion in tangent coordinates (dim model.nv), corrected
+    ///            by the moves onto the stops (a joint held on a stop makes no net motion).
     /// \return Whether a joint was past a stop.
     ///
-    bool enforceStops(Eigen::VectorXd & q, Eigen::VectorXd & v, bool record);
+    bool enforceStops(
+      Eigen::VectorXd & q, Eigen::VectorXd & v, bool record, Eigen::VectorXd & motion);
     /// The joints that hit a stop in the last enforceStops(record = true).
     const std::vector<pinocchio::JointIndex> & hits() const
     {

@@ -298,26 +298,65 @@ namespace pinsettle
       Eigen::VectorXd & ddq,
       double h);
 
-  private:
-    // The stops reached within the step: their rows after the contacts' (sign: +1 at a lower
-    // stop, -1 at an upper one).
-    Eigen::Index addStopRows(const Eigen::VectorXd & q, double h, Eigen::Index row);
+    ///
+    /// \brief The stops the last step's impulses brought a joint onto from off them (further
+    /// than kContactGapTolerance at the step's start, on them at q).
+    /// \param[in] q The configuration after the step, its joints put on their stops
+    ///            (enforceStops).
+    /// \param[out] hits When given, their joints are appended to it (unless already there).
+    /// \return Whether there were any.
+    ///
+    bool addStopsReached(
+      const Eigen::VectorXd & q, std::vector<pinocchio::JointIndex> * hits) const;
 
-    // The pairs that close within the step at vfree_ (active_), their gaps and points
-    // (geometry_, whose Jacobian is left empty: the rows are written for active_ alone).
-    void findClosingPairs(
-      const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q, double h);
+  private:
+    // The gaps, points and axes of every pair (geometry_, whose Jacobian is left empty: the
+    // rows are written for the active pairs alone) and the pairs that close within the step
+    // at vfree_ (active_).
+    void findClosingPairs(const pinocchio::Model & model, const pinocchio::Data & data, double h);
+
+    // Add the pairs not yet active that close within the step at the velocity (dim model.nv):
+    // whether there were any.
+    bool addClosingPairs(
+      const pinocchio::Model & model,
+      const pinocchio::Data & data,
+      const Eigen::VectorXd & velocity,
+      double h);
+
+    // Add the stops not yet held that the velocity (dim model.nv) reaches within the step:
+    // whether there were any.
+    bool addClosingStops(const Eigen::VectorXd & q, const Eigen::VectorXd & velocity, double h);
+
+    // Whether pair p closes within the step at the body velocities last computed.
+    bool closesWithin(int p, double h) const;
+
+    // Each body's spatial velocity at v (world axes, at the origin) into body_velocity_.
+    void computeBodyVelocities(
+      const pinocchio::Model & model, const pinocchio::Data & data, const Eigen::VectorXd & v);
+
+    // The rows of the active pairs (t1, t2, n) and then of the held stops: Y_, b_ and the
+    // impulses to start from (the last ones); their number.
+    Eigen::Index assembleRows(
+      const pinocchio::Model & model, const pinocchio::Data & data, double h);
+
+    // The solved impulses kept as the pairs' forces and the stops' impulses.
+    void keepImpulses(double h);
+
+    Eigen::Index activeCount() const;
 
     const GroundContacts & contacts_;
     const JointStops * stops_;
     ContactGeometry geometry_;
     Eigen::Matrix<double, 6, Eigen::Dynamic> body_velocity_; // (m/s, rad/s) per joint
     std::vector<int> active_;
-    Eigen::VectorXd force_; // of each pair at the last step (N), 3 pairs()
+    std::vector<char> is_active_; // per pair
+    Eigen::VectorXd force_;       // of each pair at the last step (N), 3 pairs()
     Eigen::MatrixXd Ja_, Y_;
     ImpulseWorkspace impulses_;
-    Eigen::VectorXd b_, lambda_, mu_, vfree_, dv_;
-    Eigen::VectorXd stop_gap_;        // of each stop row of the step (rad or m)
+    Eigen::VectorXd b_, lambda_, mu_, vfree_, vnext_, dv_;
+    Eigen::VectorXd stop_sign_;       // of each stop: +1 held at its lower end, -1 at its upper, 0
+    Eigen::VectorXd stop_gap_;        // of each held stop (rad or m)
+    Eigen::VectorXd stop_impulse_;    // of each held stop (N m s or N s)
     Eigen::LLT<Eigen::MatrixXd> llt_; // of the mass matrix
   };
 

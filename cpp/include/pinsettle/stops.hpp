@@ -140,13 +140,19 @@ namespace pinsettle
   /// \param[in,out] q The configuration (dim model.nq).
   /// \param[in,out] v The joint velocity (dim model.nv).
   /// \param[out] hits When given, the joints that were past a stop are appended to it.
-  /// \return Whether a joint was past a stop.
+  /// \param[in] slack How near a stop (rad or m), on either side, a joint lands on it: it is
+  ///            put on it, and counts as having hit it only from further past.
+  /// \param[in,out] motion When given, the step's motion in tangent coordinates (dim
+  ///            model.nv), corrected by the moves onto the stops.
+  /// \return Whether a joint was past a stop by more than the slack.
   ///
   bool enforceStops(
     const JointStops & stops,
     Eigen::VectorXd & q,
     Eigen::VectorXd & v,
-    std::vector<pinocchio::JointIndex> * hits = nullptr);
+    std::vector<pinocchio::JointIndex> * hits = nullptr,
+    double slack = 0.,
+    Eigen::VectorXd * motion = nullptr);
 
   ///
   /// \brief The joints exactly on a stop at q.

@@ -345,17 +345,21 @@ def test_floating_robots_stand_on_their_feet(name):
     assert result.stability == "stable"
 
 
-@pytest.mark.parametrize(("name", "trunk"), [("anymal", "base"), ("solo12", "")])
-def test_a_quadruped_with_its_motors_off_lies_on_its_body(name, trunk):
+@pytest.mark.parametrize(
+    ("name", "pose", "trunk"),
+    [("anymal", "standing", "base"), ("solo12", "standing", ""), ("talos", "half_sitting", "")],
+)
+def test_a_floating_robot_with_its_motors_off_lies_on_its_body(name, pose, trunk):
     # No spring holds the joints: dropped from its stance on all its collision shapes, its legs
     # give way and it lies on the floor, its trunk at most half its standing height (anymal on
     # its body's boxes, thighs and feet; solo12, whose trunk has no collision shape, on its
-    # shoulders, upper legs and feet: its forces lie inside their cones, so it is stable).
+    # shoulders, upper legs and feet: its forces lie inside their cones, so it is stable;
+    # talos, 824 collision points, on its knees, arms and head, several joints on their stops).
     from pinsettle._model_files import robot_srdf
 
     scene = pinsettle.Scene.from_robot(name, floating=True)
     scene.load_srdf(robot_srdf(name))
-    scene.set_pose("standing")
+    scene.set_pose(pose)
     scene.add_ground(friction=0.8, name="floor")
     scene.add_collision_contacts()
     result = pinsettle.solve(scene)

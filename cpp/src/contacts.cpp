@@ -588,17 +588,14 @@ namespace pinsettle
       return J;
     }
 
-    bool insideCones(
-      const GroundContacts & contacts,
-      const std::vector<int> & pairs,
-      const Eigen::VectorXd & f,
-      double shrink)
+    // Whether the pairs' forces (the first 3 mu.size() entries of x: t1, t2, n each) lie in
+    // their cones shrunk by shrink.
+    bool insideCones(const Eigen::VectorXd & mu, const Eigen::VectorXd & x, double shrink)
     {
-      for (std::size_t k = 0; k < pairs.size(); ++k)
+      for (Eigen::Index k = 0; k < mu.size(); ++k)
       {
-        const Eigen::Index r = 3 * static_cast<Eigen::Index>(k);
-        const double mu = shrink * contacts.groundOf(pairs[k]).friction;
-        if (f.segment<2>(r).norm() > mu * f[r + 2] * (1. + 1e-9) + 1e-12 * f.norm())
+        const Eigen::Index r = 3 * k;
+        if (x.segment<2>(r).norm() > shrink * mu[k] * x[r + 2] * (1. + 1e-9) + 1e-12 * x.norm())
           return false;
       }
       return true;
@@ -616,97 +613,98 @@ namespace pinsettle
       return Eigen::Vector3d(f[0] * mu * along / t, f[1] * mu * along / t, along);
     }
 
-    // Forces of the pairs that balance what f balances (the least-squares set of J^T f = load)
-    // inside the cones shrunk by kMarginalCone, found by alternating projections from f between
-    // that set and cones a tenth of the margin smaller still (so that the iterates enter the
-    // shrunk cones in finitely many steps): whether they were found (then f holds them).
-    // Least norm and the projected Gauss-Seidel of the mass metric stopped short of the
-    // inside of the cones on solo12 lying on eleven of its collision points, where a linear
-    // programme found forces 1 % inside: its rest read as sliding, hence unstable.
+    // The supports' share x (3 per pair, then 1 per stop) that balances what x balances (the
+    // least-squares set of A x = load, A = [J^T E]) with the pairs' forces inside their cones
+    // shrunk by kMarginalCone and the stops pushing, found by alternating projections from x
+    // between that set and cones a tenth of the margin smaller still (so that the iterates enter
+    // the shrunk cones in finitely many steps): whether it was found (then x holds it). Least
+    // norm and the projected Gauss-Seidel of the mass metric stopped short of the inside of the
+    // cones on solo12 lying on eleven of its collision points, where a linear programme found
+    // forces 1 % inside: its rest read as sliding, hence unstable. The stops' share is solved
+    // with the pairs': held at its least-norm value, talos lying with its knees on their stops
+    // found no forces in the cones and kept 0.9 N m unbalanced.
     bool findForcesInsideCones(
-      const GroundContacts & contacts,
-      const ContactGeometry & geometry,
-      const std::vector<int> & pairs,
+      const Eigen::MatrixXd & A,
+      const Eigen::VectorXd & mu,
       const Eigen::VectorXd & load,
-      Eigen::VectorXd & f)
+      Eigen::VectorXd & x)
     {
-      const Eigen::Index rows = 3 * static_cast<Eigen::Index>(pairs.size());
-      const Eigen::MatrixXd A = stackPairRows(geometry, pairs).transpose();
       Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(A.rows(), A.cols());
       cod.setThreshold(1e-10);
       cod.compute(A);
       const Eigen::MatrixXd pinv = cod.pseudoInverse();
       const double target = 1. - 1.1 * kMarginalCone;
+      const Eigen::Index pair_rows = 3 * mu.size();
       constexpr int kMaxProjections = 20000;
-      Eigen::VectorXd p(rows), moved(rows);
+      Eigen::VectorXd p(x.size()), moved(x.size());
       for (int it = 0; it < kMaxProjections; ++it)
       {
-        if (insideCones(contacts, pairs, f, 1. - kMarginalCone))
+        if (insideCones(mu, x, 1. - kMarginalCone))
           return true;
-        for (std::size_t k = 0; k < pairs.size(); ++k)
-        {
-          const Eigen::Index r = 3 * static_cast<Eigen::Index>(k);
-          p.segment<3>(r) =
-            projectOntoCone(f.segment<3>(r), target * contacts.groundOf(pairs[k]).friction);
-        }
-        moved = p - pinv * (A * p - load) - f;
-        f += moved;
+        for (Eigen::Index k = 0; k < mu.size(); ++k)
+          p.segment<3>(3 * k) = projectOntoCone(x.segment<3>(3 * k), target * mu[k]);
+        p.tail(x.size() - pair_rows) = x.tail(x.size() - pair_rows).cwiseMax(0.);
+        moved = p - pinv * (A * p - load) - x;
+        x += moved;
         // Stalled: the two sets do not meet, the iterates settle on the points closest
         // between them (go1 with its feet slid to their cones' edge ran all 20,000 at every
         // assessment: 42.7 to 144 ms a solve).
-        if (moved.lpNorm<Eigen::Infinity>() <= 1e-12 * f.lpNorm<Eigen::Infinity>())
+        if (moved.lpNorm<Eigen::Infinity>() <= 1e-12 * x.lpNorm<Eigen::Infinity>())
           return false;
       }
       return false;
     }
 
-    // Forces in the cones closest to balancing tau in the mass metric (the step's problem at
-    // zero velocity), when no forces inside the shrunk cones balance it.
+    // The supports' share x (as findForcesInsideCones) in the cones, with the stops pushing,
+    // closest to balancing tau in the mass metric (the step's problem at zero velocity), when
+    // none inside the shrunk cones balances it.
     Eigen::VectorXd conicForces(
       const pinocchio::Model & model,
       pinocchio::Data & data,
-      const GroundContacts & contacts,
       const Eigen::VectorXd & q,
-      const ContactGeometry & geometry,
-      const std::vector<int> & pairs,
+      const Eigen::MatrixXd & A,
+      const Eigen::VectorXd & mu,
       const Eigen::VectorXd & tau,
-      Eigen::VectorXd f)
+      Eigen::VectorXd x)
     {
-      const Eigen::MatrixXd J = stackPairRows(geometry, pairs);
-      Eigen::VectorXd mu(pairs.size());
-      for (std::size_t k = 0; k < pairs.size(); ++k)
-        mu[static_cast<Eigen::Index>(k)] = contacts.groundOf(pairs[k]).friction;
       Eigen::LLT<Eigen::MatrixXd> llt(model.nv);
       factorMassMatrix(model, data, q, llt);
-      const Eigen::MatrixXd Y = llt.matrixL().solve(J.transpose());
-      // Velocity after a unit time from rest: M^-1 (J^T f - tau); u = Y^T Y f - J M^-1 tau.
+      const Eigen::MatrixXd Y = llt.matrixL().solve(A);
+      // Velocity after a unit time from rest: M^-1 (A x - tau); u = Y^T Y x - A^T M^-1 tau.
       const Eigen::VectorXd b = -(Y.transpose() * llt.matrixL().solve(tau));
       for (Eigen::Index k = 0; k < mu.size(); ++k)
-        f[3 * k + 2] = std::max(f[3 * k + 2], 0.);
+        x[3 * k + 2] = std::max(x[3 * k + 2], 0.);
+      x.tail(x.size() - 3 * mu.size()) = x.tail(x.size() - 3 * mu.size()).cwiseMax(0.);
       ImpulseWorkspace work;
-      solveContactImpulses(Y, b, mu, f, work);
-      return f;
+      solveContactImpulses(Y, b, mu, x, work);
+      return x;
     }
   } // namespace
 
   namespace
   {
-    // Least-norm forces of the pairs and reactions of the stops with J^T f + E r = tau, by
-    // least squares: 3 per pair, then 1 per stop.
-    Eigen::VectorXd leastNormSupport(
+    // The columns of the supports' generalized forces, A = [J^T E]: 3 per pair (t1, t2, n),
+    // then 1 per stop (the direction it pushes its joint).
+    Eigen::MatrixXd supportMatrix(
       const ContactGeometry & geometry,
       const std::vector<int> & pairs,
-      const std::vector<StopReached> & on,
-      const Eigen::VectorXd & tau)
+      const std::vector<StopReached> & on)
     {
       const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
-      if (p == 0 && on.empty())
-        return Eigen::VectorXd(0); // nothing supports: Eigen's decomposition of no column fails
       Eigen::MatrixXd A =
-        Eigen::MatrixXd::Zero(tau.size(), p + static_cast<Eigen::Index>(on.size()));
+        Eigen::MatrixXd::Zero(geometry.jacobian.cols(), p + static_cast<Eigen::Index>(on.size()));
       A.leftCols(p) = stackPairRows(geometry, pairs).transpose();
       for (std::size_t k = 0; k < on.size(); ++k)
         A(on[k].stop->iv, p + static_cast<Eigen::Index>(k)) = on[k].sign();
+      return A;
+    }
+
+    // Least-norm forces of the pairs and reactions of the stops with A x = tau, by least
+    // squares.
+    Eigen::VectorXd leastNormSupport(const Eigen::MatrixXd & A, const Eigen::VectorXd & tau)
+    {
+      if (A.cols() == 0)
+        return Eigen::VectorXd(0); // nothing supports: Eigen's decomposition of no column fails
       // The cut is set before the decomposition: the rank it gives decides the Z factor, and a
       // cut set afterwards had solve() apply Z for a rank it was never computed for (reading
       // uninitialised memory: the same rest gave 66 to 55,296 steps).
@@ -743,23 +741,6 @@ namespace pinsettle
     }
   } // namespace
 
-  namespace
-  {
-    // What forces (3 per pair of pairs) leave of load unbalanced: load - J^T forces.
-    Eigen::VectorXd computeUnbalanced(
-      const ContactGeometry & geometry,
-      const std::vector<int> & pairs,
-      const Eigen::VectorXd & load,
-      const Eigen::VectorXd & forces)
-    {
-      Eigen::VectorXd left = load;
-      for (std::size_t k = 0; k < pairs.size(); ++k)
-        left.noalias() -= geometry.jacobian.middleRows<3>(3 * pairs[k]).transpose()
-                          * forces.segment<3>(3 * static_cast<Eigen::Index>(k));
-      return left;
-    }
-  } // namespace
-
   ContactBalance balanceContacts(
     const pinocchio::Model & model,
     pinocchio::Data & data,
@@ -777,41 +758,41 @@ namespace pinsettle
         balance.closed.push_back(p);
     // Active set: a support the least-norm balance would pull on lets go, one at a time.
     std::vector<int> pairs = balance.closed;
-    // A joint on its stop: its reaction is one more unknown, sign e_iv its column.
-    std::vector<StopReached> on =
-      stops != nullptr ? findStopsReached(*stops, q) : std::vector<StopReached>();
+    // A joint on its stop: its reaction is one more unknown, sign e_iv its column. Within
+    // kContactGapTolerance of it, as the step lands it (enforceStops) and as a Newton step held
+    // on it leaves it (a round-off inside: talos's knee reaction went missing, 27 N m).
+    std::vector<StopReached> on = stops != nullptr
+                                    ? findStopsReached(*stops, q, kContactGapTolerance)
+                                    : std::vector<StopReached>();
+    Eigen::MatrixXd A;
     Eigen::VectorXd x;
     const double tiny = 1e-12 * std::max(tau.lpNorm<Eigen::Infinity>(), 1e-300);
     do
-      x = leastNormSupport(geometry, pairs, on, tau);
-    while (releasePulling(x, pairs, on, tiny));
-    const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
-    Eigen::VectorXd f = x.head(p);
-    Eigen::VectorXd on_contacts = tau; // what the stops leave to the contacts
-    for (std::size_t k = 0; k < on.size(); ++k)
     {
-      const double r = x[p + static_cast<Eigen::Index>(k)];
-      on_contacts[on[k].stop->iv] -= on[k].sign() * r;
-      balance.stops.push_back(StopContact{on[k].stop->joint, on[k].side, r});
-    }
-    const auto unbalanced = [&](const Eigen::VectorXd & forces) {
-      return computeUnbalanced(geometry, pairs, on_contacts, forces);
-    };
-    const double margin = 1. - kMarginalCone;
-    if (!pairs.empty() && !insideCones(contacts, pairs, f, margin))
+      A = supportMatrix(geometry, pairs, on);
+      x = leastNormSupport(A, tau);
+    } while (releasePulling(x, pairs, on, tiny));
+    Eigen::VectorXd mu(pairs.size());
+    for (std::size_t k = 0; k < pairs.size(); ++k)
+      mu[static_cast<Eigen::Index>(k)] = contacts.groundOf(pairs[k]).friction;
+    if (!insideCones(mu, x, 1. - kMarginalCone))
     {
       // Least norm shares the tangential force evenly and may leave a lightly loaded point's
       // cone where other shares stay inside every cone (a box on a slope, its upper corners):
       // first cones shrunk by kMarginalCone, whose answer sticks, else the cones themselves
       // (then the rest is within kMarginalCone of sliding).
-      const Eigen::VectorXd start = f;
-      balance.near_cone_edge = !findForcesInsideCones(contacts, geometry, pairs, on_contacts, f);
+      const Eigen::VectorXd start = x;
+      balance.near_cone_edge = !findForcesInsideCones(A, mu, tau, x);
       if (balance.near_cone_edge)
-        f = conicForces(model, data, contacts, q, geometry, pairs, on_contacts, start);
+        x = conicForces(model, data, q, A, mu, tau, start);
     }
+    const Eigen::Index p = 3 * static_cast<Eigen::Index>(pairs.size());
     for (std::size_t k = 0; k < pairs.size(); ++k)
-      balance.force.segment<3>(3 * pairs[k]) = f.segment<3>(3 * static_cast<Eigen::Index>(k));
-    balance.left = unbalanced(f);
+      balance.force.segment<3>(3 * pairs[k]) = x.segment<3>(3 * static_cast<Eigen::Index>(k));
+    for (std::size_t k = 0; k < on.size(); ++k)
+      balance.stops.push_back(
+        StopContact{on[k].stop->joint, on[k].side, x[p + static_cast<Eigen::Index>(k)]});
+    balance.left = tau - A * x;
     balance.residual = balance.left.lpNorm<Eigen::Infinity>();
     return balance;
   }

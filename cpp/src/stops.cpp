@@ -265,14 +265,15 @@ namespace pinsettle
     return report;
   }
 
-  std::vector<StopReached> findStopsReached(const JointStops & stops, const Eigen::VectorXd & q)
+  std::vector<StopReached> findStopsReached(
+    const JointStops & stops, const Eigen::VectorXd & q, double slack)
   {
     std::vector<StopReached> on;
     for (const JointStops::Stop & s : stops.stops())
     {
-      if (q[s.iq] <= s.lower)
+      if (q[s.iq] <= s.lower + slack)
         on.push_back(StopReached{&s, StopSide::Lower});
-      else if (q[s.iq] >= s.upper)
+      else if (q[s.iq] >= s.upper - slack)
         on.push_back(StopReached{&s, StopSide::Upper});
     }
     return on;

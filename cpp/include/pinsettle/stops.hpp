@@ -186,8 +186,10 @@ namespace pinsettle
     }
   };
 
-  /// \brief The joints on a stop at q (q[iq] at or past a bound), in the stops' order.
-  std::vector<StopReached> findStopsReached(const JointStops & stops, const Eigen::VectorXd & q);
+  /// \brief The joints on a stop at q (q[iq] at or past a bound, or within slack of it: rad or
+  /// m), in the stops' order.
+  std::vector<StopReached> findStopsReached(
+    const JointStops & stops, const Eigen::VectorXd & q, double slack = 0.);
 
   ///
   /// \brief The residual of a rest against stops: the largest violation of its conditions.

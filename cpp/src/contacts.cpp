@@ -107,8 +107,21 @@ namespace pinsettle
       const double un = Y.col(r + 2).dot(w) + b[r + 2];
       const double ln = std::max(0., old_n - un * steps[0]);
       lambda[r + 2] = ln;
-      w.noalias() += (ln - old_n) * Y.col(r + 2);
+      if (ln != old_n)
+        w.noalias() += (ln - old_n) * Y.col(r + 2);
       const Eigen::Vector2d old_t = lambda.segment<2>(r);
+      // No normal impulse, no friction, whatever the sliding velocity: its two products are
+      // skipped (most of a step's rows on talos lying on its collision points are pairs that
+      // may close but stay open).
+      if (ln == 0.)
+      {
+        if (!old_t.isZero(0.))
+        {
+          lambda.segment<2>(r).setZero();
+          w.noalias() += Y.middleCols<2>(r) * (Eigen::Vector2d::Zero() - old_t);
+        }
+        return;
+      }
       const Eigen::Vector2d ut(Y.col(r).dot(w) + b[r], Y.col(r + 1).dot(w) + b[r + 1]);
       // A projected gradient step of length 1 / (largest eigenvalue of the 2 x 2 block): its
       // fixed point is Coulomb's law. A Newton step on the block (G_tt^-1) projected onto the
@@ -119,7 +132,8 @@ namespace pinsettle
       if (norm > radius)
         lt *= norm > 0. ? radius / norm : 0.;
       lambda.segment<2>(r) = lt;
-      w.noalias() += Y.middleCols<2>(r) * (lt - old_t);
+      if (lt != old_t)
+        w.noalias() += Y.middleCols<2>(r) * (lt - old_t);
     }
 
     // The step lengths of each contact's update (updateContact) and of each unilateral row's

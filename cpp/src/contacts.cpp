@@ -118,7 +118,7 @@ namespace pinsettle
         if (!old_t.isZero(0.))
         {
           lambda.segment<2>(r).setZero();
-          w.noalias() += Y.middleCols<2>(r) * (Eigen::Vector2d::Zero() - old_t);
+          w.noalias() -= Y.middleCols<2>(r) * old_t;
         }
         return;
       }

@@ -38,6 +38,17 @@ namespace
       pinocchio::SE3::Identity());
     return model;
   }
+
+  // A uniform box (kg; m along x, y, z) on a free-flyer, its centre at the joint's origin.
+  pinocchio::Model freeBox(double mass, double x, double y, double z)
+  {
+    pinocchio::Model model;
+    const auto root =
+      model.addJoint(0, pinocchio::JointModelFreeFlyer(), pinocchio::SE3::Identity(), "root");
+    model.appendBodyToJoint(
+      root, pinocchio::Inertia::FromBox(mass, x, y, z), pinocchio::SE3::Identity());
+    return model;
+  }
 } // namespace
 
 BOOST_AUTO_TEST_CASE(jacobian_rows_are_the_contact_velocity_and_the_gap_gradient)
@@ -181,11 +192,7 @@ BOOST_AUTO_TEST_CASE(impulses_meet_coulombs_conditions)
 
 BOOST_AUTO_TEST_CASE(a_box_rests_on_a_floor_on_its_four_corners)
 {
-  pinocchio::Model model;
-  const auto root =
-    model.addJoint(0, pinocchio::JointModelFreeFlyer(), pinocchio::SE3::Identity(), "root");
-  model.appendBodyToJoint(
-    root, pinocchio::Inertia::FromBox(2., 0.2, 0.1, 0.1), pinocchio::SE3::Identity());
+  const pinocchio::Model model = freeBox(2., 0.2, 0.1, 0.1);
   pinsettle::GroundContacts contacts(model);
   contacts.addPlane("floor", Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), 0.5);
   for (const double x : {-0.1, 0.1})
@@ -221,11 +228,7 @@ BOOST_AUTO_TEST_CASE(a_step_holds_the_pairs_its_impulses_close)
   // its left end comes down at 3 m/s and closes, its right end goes up at 1 m/s. The left end's
   // inelastic impulse turns the rod the other way: the right end then comes down at about
   // 0.5 m/s (v_right + v_left / 2 for a uniform rod) and would sink 5 mm in a 10 ms step.
-  pinocchio::Model model;
-  const auto root =
-    model.addJoint(0, pinocchio::JointModelFreeFlyer(), pinocchio::SE3::Identity(), "root");
-  model.appendBodyToJoint(
-    root, pinocchio::Inertia::FromBox(1., 1., 0.01, 0.01), pinocchio::SE3::Identity());
+  const pinocchio::Model model = freeBox(1., 1., 0.01, 0.01);
   pinsettle::GroundContacts contacts(model);
   contacts.addPlane("floor", Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), 0.5);
   contacts.addPoint("left", 1, Eigen::Vector3d(-0.5, 0., 0.), 0.);

@@ -59,6 +59,23 @@ for _ in range(calls):
 print(json.dumps({"walls": walls, "cores": cores}))
 """
 
+# A bare Pinocchio call in a fresh process, for reference: its first and next times.
+_PINOCCHIO_FIRST = """
+import json, sys, time
+import numpy as np
+import pinocchio
+import pinsettle
+model = pinsettle.load_robot(sys.argv[1])
+data = model.createData()
+q, zero = pinocchio.neutral(model), np.zeros(model.nv)
+walls = []
+for _ in range(3):
+    start = time.perf_counter()
+    pinocchio.aba(model, data, q, zero, zero)
+    walls.append(time.perf_counter() - start)
+print(json.dumps({"walls": walls}))
+"""
+
 
 def warm(repeats: int, calls: int) -> dict[str, dict[str, float]]:
     """Median wall time, C++ run and overhead (s) of warm ``Solver.solve`` and
@@ -120,8 +137,33 @@ def first(processes: int, calls: int = 21) -> dict[str, dict[str, float]]:
             "ratio_later": statistics.median(f / s for f, s in zip(firsts, laters, strict=True)),
             "core_first": statistics.median(core_first),
             "core_next": statistics.median(core_next),
+            "core_ratio": statistics.median(
+                f / s for f, s in zip(core_first, core_next, strict=True)
+            ),
         }
+    out["aba"] = pinocchio_first(processes)
     return out
+
+
+def pinocchio_first(processes: int) -> dict[str, float]:
+    """Median over fresh processes of Pinocchio's ``aba`` on the model, its first call and the
+    next, and their ratio: what a first call costs on this machine without pinsettle."""
+    firsts, seconds = [], []
+    for _ in range(processes):
+        done = subprocess.run(
+            [sys.executable, "-c", _PINOCCHIO_FIRST, ROBOT],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        walls = json.loads(done.stdout.splitlines()[-1])["walls"]
+        firsts.append(walls[0])
+        seconds.append(walls[1])
+    return {
+        "first": statistics.median(firsts),
+        "next": statistics.median(seconds),
+        "ratio": statistics.median(f / s for f, s in zip(firsts, seconds, strict=True)),
+    }
 
 
 US = 1e6  # us per s
@@ -167,7 +209,7 @@ def first_lines(cold: dict[str, dict[str, float]]) -> list[str]:
             f"| {label} | {c['first'] * US:.0f} us | {c['next'] * US:.0f} us | "
             f"{c['ratio']:.2f} | {c['later'] * US:.0f} us | {c['ratio_later']:.2f} |"
         )
-    c = cold["solve"]
+    c, a = cold["solve"], cold["aba"]
     return lines + [
         "",
         f"The C++ run itself is slower the first time in a process: {c['core_first'] * US:.0f} us "
@@ -177,6 +219,20 @@ def first_lines(cold: dict[str, dict[str, float]]) -> list[str]:
         "processor's caches (a second mechanism's first solve in the same process runs at the "
         "warm speed). What the Python layer did only once (finding numpy's C API, reading a "
         "model's joints one vector at a time) is done at import or in one call now.",
+        "",
+        "The target is below what a first call costs on this machine: the C++ run alone is "
+        f"{c['core_ratio']:.2f} "
+        "times its next run (median over the processes), above the 1.5 target before any "
+        "Python is counted, and a bare Pinocchio call is slower still the first time: "
+        f"`pinocchio.aba` on the {ROBOT.upper()} takes {a['first'] * US:.0f} us in a fresh "
+        f"process and {a['next'] * US:.1f} us the next time ({a['ratio']:.0f} times). The "
+        "first call's extra time is not extra work: counted in instructions "
+        "(`valgrind --tool=callgrind`), the first and the second C++ run are the same, and "
+        "with every page of pinsettle's and Pinocchio's code touched before the first solve "
+        "(no page faults left in it; measured once, in three processes) the first run was "
+        "still 1.7 to 2.1 times the next. Only running "
+        "a solve before the user's (a warm-up at import) would meet the target, and that "
+        "would move the time, not save it.",
     ]
 
 

@@ -18,6 +18,7 @@
 #include <optional>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <thread>
 
 namespace
@@ -349,6 +350,39 @@ BOOST_AUTO_TEST_CASE(step_controller_grows_between_damping_events)
   BOOST_CHECK_EQUAL(pinsettle::effectiveDtGrowth(settings), 1.5);
   settings.dt_growth = 0.5;
   BOOST_CHECK_THROW(pinsettle::checkSettings(settings), std::invalid_argument);
+}
+
+// The message of a rejected setting names the field, what it must be and the value given.
+std::string settingsError(const pinsettle::Settings & settings)
+{
+  try
+  {
+    pinsettle::checkSettings(settings);
+  }
+  catch (const std::invalid_argument & error)
+  {
+    return error.what();
+  }
+  return "";
+}
+
+BOOST_AUTO_TEST_CASE(a_rejected_setting_is_named_with_its_value)
+{
+  BOOST_CHECK_EQUAL(settingsError(pinsettle::Settings()), "");
+  pinsettle::Settings settings;
+  settings.kt = 1.5;
+  BOOST_CHECK_EQUAL(settingsError(settings), "kt must be in [0, 1), got 1.5");
+  settings = pinsettle::Settings();
+  settings.max_steps = 0;
+  BOOST_CHECK_EQUAL(settingsError(settings), "max_steps must be an integer >= 1, got 0");
+  settings = pinsettle::Settings();
+  settings.dt = -0.25;
+  BOOST_CHECK_EQUAL(
+    settingsError(settings),
+    "dt must be a finite number > 0 (seconds), or 0 for 'auto', got -0.25");
+  settings = pinsettle::Settings();
+  settings.energy = static_cast<pinsettle::EnergyMeasure>(7);
+  BOOST_CHECK_EQUAL(settingsError(settings), "energy must be \"exact\" or \"simplified\", got 7");
 }
 
 BOOST_AUTO_TEST_CASE(step_controller_scales_a_stiff_mode_consistently)

@@ -3,8 +3,10 @@
 // as pinsettle's solver and timed the same way (std::chrono::steady_clock around the run):
 //
 //   viscous  plain viscous damping, what users of physics simulators do to let a robot settle:
-//            a = ABA(q, v, tau_elements(q, v) - c v), the same damper c on every joint,
-//            semi-implicit Euler with a fixed step.
+//            the same damper c on every joint, integrated implicitly as simulators do (MuJoCo's
+//            implicitfast): (M + dt c I) a = tau_elements(q, v) - c v - b(q, v), one ABA on the
+//            model with dt c added to each joint's armature; then semi-implicit Euler with a
+//            fixed step.
 //   mass_damping  viscous damping proportional to the mass matrix (dynamic relaxation's
 //            classic form): a = ABA(q, v, tau_elements(q, v)) - c v, which damps every mode at the
 //            same rate c / 2 (where the joint dampers damp light links far faster than heavy ones).
@@ -33,9 +35,11 @@
 // linearisation critically (K phi = lambda M phi, phi M-normalised, the smallest |lambda| above
 // 1e-6 omega_max^2, omega = sqrt|lambda|; none: omega = omega_max, as on a chain held
 // horizontal, whose motion only the pull of gravity sets): c = 2 omega (mass-proportional) or
-// 2 omega / |phi|^2 (joint dampers), times damping_factor; the viscous step is dt_safety times
-// the stability limit with that damping, 4 / (r + sqrt(r^2 + 4 omega_max^2)), r = c (mass) or
-// c max eig(M^-1) (joint dampers). FIRE's dt_max is dt_max times the limit, dt0 = dt_max / 10.
+// 2 omega / |phi|^2 (joint dampers), times damping_factor. The mass-proportional step is
+// dt_safety times the stability limit with that damping, 4 / (c + sqrt(c^2 + 4 omega_max^2));
+// the joint dampers', integrated implicitly, dt_safety times the undamped limit 2 / omega_max
+// (their damping does not bound the step). FIRE's dt_max is dt_max times the limit,
+// dt0 = dt_max / 10.
 //
 // A run that blows up (non-finite values, or a residual 1e6 times the start's) or stalls (FIRE:
 // 1,000 velocity resets without the residual falling tenfold; FIRE 2.0 also after 2,000 uphill
@@ -147,11 +151,10 @@ namespace
         && (softest < 0 || std::abs(lambda[k]) < std::abs(lambda[softest])))
         softest = k;
     out.omega_rule = softest >= 0 ? std::sqrt(std::abs(lambda[softest])) : omega;
-    double rate;
     if (spec.method == "mass_damping")
     {
-      out.damping = spec.damping_factor * 2. * out.omega_rule;
-      rate = out.damping;
+      const double rate = out.damping = spec.damping_factor * 2. * out.omega_rule;
+      out.dt = scale * spec.dt_safety * 4. / (rate + std::sqrt(rate * rate + 4. * omega * omega));
     }
     else
     {
@@ -159,12 +162,8 @@ namespace
       const double phi2 = softest >= 0 ? modes.eigenvectors().col(softest).squaredNorm()
                                        : static_cast<double>(model.nv) / M.trace();
       out.damping = spec.damping_factor * 2. * out.omega_rule / phi2;
-      rate = out.damping
-             / Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(M, Eigen::EigenvaluesOnly)
-                 .eigenvalues()
-                 .minCoeff();
+      out.dt = scale * spec.dt_safety * out.limit;
     }
-    out.dt = scale * spec.dt_safety * 4. / (rate + std::sqrt(rate * rate + 4. * omega * omega));
     out.dt_max = out.dt;
   }
 
@@ -206,6 +205,7 @@ namespace
       const Spec & spec,
       double scale)
     : model_(model)
+    , damped_(model)
     , elements_(elements)
     , spec_(spec)
     , w_(model)
@@ -225,6 +225,8 @@ namespace
       dt_min_ = kFire2DtMinFactor * out_.dt;
       start_residual_ = residual();
       progress_ = start_residual_;
+      if (viscous_) // the dampers taken implicitly: M + dt c I in ABA
+        damped_.armature.array() += dt_ * out_.damping;
     }
 
     Outcome run(Recorder & recorder)
@@ -361,7 +363,7 @@ namespace
       bench::appliedForces(model_, elements_, w_.q, w_.v, w_);
       if (viscous_)
         w_.tau.noalias() -= out_.damping * w_.v;
-      bench::forwardDynamics(model_, elements_, w_.q, w_.v, w_);
+      bench::forwardDynamics(viscous_ ? damped_ : model_, elements_, w_.q, w_.v, w_);
       if (mass_damping_)
         w_.data.ddq.noalias() -= out_.damping * w_.v;
       w_.v.noalias() += dt_ * w_.data.ddq;
@@ -377,6 +379,7 @@ namespace
     }
 
     const pinocchio::Model & model_;
+    pinocchio::Model damped_; // model_ with dt c added to the armature (viscous only)
     const pinsettle::ForceElements * elements_;
     const Spec & spec_;
     Workspace w_;

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import re
 import statistics
+from collections.abc import Sequence
 from pathlib import Path
 
 import contact_drop
@@ -214,8 +215,10 @@ K = `pinsettle::computeStiffnessMatrix`, the static force; the explicit stabilit
 `2 / omega_max` of `pinsettle::computeTimeScale` without stiff-mode scaling, which they do not
 have):
 
-- *viscous, joint dampers*: `a = ABA(q, v, tau - c v)`, the same c on every joint: what users of
-  physics simulators do to let a robot settle. Rule: c damps the softest mode of the start's
+- *viscous, joint dampers*: the same damper c on every joint, what users of physics simulators
+  do to let a robot settle, integrated implicitly as simulators do (MuJoCo's `implicitfast`):
+  `(M + dt c I) a = tau - c v - b(q, v)`, one ABA on the model with `dt c` added to each
+  joint's armature. Rule: c damps the softest mode of the start's
   linearisation critically (`K phi = lambda M phi`, phi M-normalised, the smallest `|lambda|`
   above 1e-6 `omega_max^2`, `omega = sqrt|lambda|`; without one, `omega = omega_max`, as on a
   chain held horizontal, which has no stiffness there and moves only by the pull of gravity):
@@ -223,8 +226,9 @@ have):
 - *viscous, mass-proportional*: `a = ABA(q, v, tau) - c v` (damping `c M v`), dynamic
   relaxation's classic form: every mode decays at the rate c / 2. Rule: `c = 2 omega`.
 - Their step: a safety factor (rule: {dt_safety:g}, KD's default `dt_safety`) times the
-  stability limit of semi-implicit Euler with the damping, `4 / (r + sqrt(r^2 + 4
-  omega_max^2))`, r = c max eig(M^-1) (joint dampers) or c (mass-proportional).
+  stability limit: with the mass-proportional damping, semi-implicit Euler's
+  `4 / (c + sqrt(c^2 + 4 omega_max^2))`; with the implicit joint dampers, the undamped
+  `2 / omega_max` (their damping does not bound the step).
 - *FIRE* (Bitzek et al., 2006), classic parameters (N_min 5, f_inc 1.1, f_dec 0.5, alpha_start
   0.1, f_alpha 0.99), power `P = F . v` with `F = -tau_static(q)` (one extra RNEA per step).
   Rule: dt_max twice the stability limit, dt0 = dt_max / 10, mixing
@@ -1394,6 +1398,9 @@ def settings_table(results: D.Results) -> str:
                 if time_to(best) is not None or best.status == "converged"
                 else "-"
             )
+            edges = grid_edges(results.config.sweep(family), best.settings)
+            if best_label != "-" and edges:
+                best_label += f" (**on the grid's edge**: {', '.join(edges)})"
             rows.append(
                 [
                     f"`{name}`" if family == BASELINES[0] else "",
@@ -1417,6 +1424,18 @@ def settings_table(results: D.Results) -> str:
         )
         + "\n"
     )
+
+
+def grid_edges(grid: Sequence[D.Record], settings: D.Record) -> list[str]:
+    """The numeric settings of ``settings`` at the smallest or largest value the sweep ``grid``
+    tries (a best there may lie beyond the grid)."""
+    edges = []
+    for key, value in settings.items():
+        values = sorted({g[key] for g in grid if isinstance(g.get(key), int | float)})
+        if len(values) > 1 and value in (values[0], values[-1]):
+            side = "smallest" if value == values[0] else "largest"
+            edges.append(f"{key} {value:g}, the {side} tried")
+    return edges
 
 
 def sweep_tables(results: D.Results) -> str:

@@ -59,6 +59,24 @@ def test_stays_below():
     assert report_data.stays_below(np.array([1.0, np.nan, 1e-9]), 1e-6) == 2
 
 
+def test_a_best_on_the_edge_of_its_sweep_grid_is_named():
+    grid = report_data.Config(scenes=(), chain_lengths=(), repeats=1, sweep_repeats=1).sweep(
+        "viscous"
+    )
+    safeties = sorted({g["dt_safety"] for g in grid})
+    factors = sorted({g["damping_factor"] for g in grid})
+    inside = {"dt_safety": safeties[1], "damping_factor": factors[1]}
+    assert report_writer.grid_edges(grid, inside) == []
+    corner = {"dt_safety": safeties[-1], "damping_factor": factors[0]}
+    assert report_writer.grid_edges(grid, corner) == [
+        f"dt_safety {safeties[-1]:g}, the largest tried",
+        f"damping_factor {factors[0]:g}, the smallest tried",
+    ]
+    # FIRE's metric is a choice, not a range: never an edge.
+    fire = report_data.Config(scenes=(), chain_lengths=(), repeats=1, sweep_repeats=1).sweep("fire")
+    assert report_writer.grid_edges(fire, {"dt_max": 1.0, "metric": "mass"}) == []
+
+
 def test_the_report_and_its_figures_are_written(quick):
     results, output, _ = quick
     text = (output / "benchmarks.md").read_text()
@@ -384,6 +402,9 @@ def test_the_baselines_take_the_start_only_and_are_swept(quick):
         if family in ("fire", "fire2"):
             assert rule.extra["dt_max"] == pytest.approx(2.0 * limit, rel=1e-12)
             assert rule.extra["dt"] == pytest.approx(0.2 * limit, rel=1e-12)
+        if family == "viscous":  # dampers taken implicitly: the undamped limit bounds the step
+            safety = report_data.BASELINE_RULES[family]["dt_safety"]
+            assert rule.extra["dt"] == pytest.approx(safety * limit, rel=1e-12)
         # The sweep covers its settings, the rule among them; the best is its fastest.
         points = d.baseline_sweep[family]
         assert [p.settings for p in points] == config.sweep(family)

@@ -10,6 +10,13 @@
 //   mass_damping  viscous damping proportional to the mass matrix (dynamic relaxation's
 //            classic form): a = ABA(q, v, tau_elements(q, v)) - c v, which damps every mode at the
 //            same rate c / 2 (where the joint dampers damp light links far faster than heavy ones).
+//   adr      adaptive dynamic relaxation (Underwood, 1983), on the true dynamics: the
+//            mass-proportional damping above with its c re-estimated every step from the
+//            Rayleigh quotient of the last step's motion, omega^2 = dq . dtau_static / dq^T M dq
+//            (c = damping_factor 2 omega, 0 where the quotient is not positive, at most
+//            2 omega_max), and the step re-estimated with it (dt_safety times the damped limit
+//            below). Every step also evaluates tau_static (one RNEA) and dq^T M dq (a kinetic
+//            energy pass).
 //   fire     FIRE (Bitzek et al., 2006) with its classic parameters: the power P = F . v of the
 //            static force F = -tau_static(q) is watched; P <= 0 zeroes the velocity, halves the
 //            step and resets the mixing; P > 0 mixes the velocity toward F and after N_min such
@@ -151,7 +158,7 @@ namespace
         && (softest < 0 || std::abs(lambda[k]) < std::abs(lambda[softest])))
         softest = k;
     out.omega_rule = softest >= 0 ? std::sqrt(std::abs(lambda[softest])) : omega;
-    if (spec.method == "mass_damping")
+    if (spec.method == "mass_damping" || spec.method == "adr")
     {
       const double rate = out.damping = spec.damping_factor * 2. * out.omega_rule;
       out.dt = scale * spec.dt_safety * 4. / (rate + std::sqrt(rate * rate + 4. * omega * omega));
@@ -212,8 +219,10 @@ namespace
     , fire_(spec.method == "fire")
     , fire2_(spec.method == "fire2")
     , viscous_(spec.method == "viscous")
-    , mass_damping_(spec.method == "mass_damping")
+    , mass_damping_(spec.method == "mass_damping" || spec.method == "adr")
+    , adr_(spec.method == "adr")
     , mass_metric_(spec.metric == "mass")
+    , scale_(scale)
     {
       w_.q = spec.q0;
       w_.v.setZero();
@@ -263,10 +272,31 @@ namespace
       return w_.force.lpNorm<Eigen::Infinity>();
     }
 
-    // FIRE needs the static force at every step; viscous damping checks every check_every.
+    // FIRE and ADR need the static force at every step; viscous damping checks every
+    // check_every.
     bool checksResidual(long step) const
     {
-      return fire_ || fire2_ || step % spec_.check_every == 0;
+      return fire_ || fire2_ || adr_ || step % spec_.check_every == 0;
+    }
+
+    // ADR: c from the Rayleigh quotient of the last step's motion w_.dq, tau_static having
+    // gone from force_prev_ to w_.force along it; the step re-estimated with c.
+    void adaptDamping()
+    {
+      if (have_prev_)
+      {
+        const double stiffness = w_.dq.dot(w_.force - force_prev_); // dq^T K dq
+        const double inertia = 2. * pinocchio::computeKineticEnergy(model_, w_.data, w_.q, w_.dq);
+        const double omega_max = 2. / out_.limit;
+        const double omega2 = inertia > 0. ? stiffness / inertia : 0.;
+        out_.damping = omega2 > 0.
+                         ? std::min(spec_.damping_factor * 2. * std::sqrt(omega2), 2. * omega_max)
+                         : 0.;
+        const double c = out_.damping;
+        dt_ = scale_ * spec_.dt_safety * 4. / (c + std::sqrt(c * c + 4. * omega_max * omega_max));
+      }
+      force_prev_ = w_.force;
+      have_prev_ = true;
     }
 
     bool end(const char * status)
@@ -360,6 +390,8 @@ namespace
     // non-finite.
     bool advance()
     {
+      if (adr_)
+        adaptDamping();
       bench::appliedForces(model_, elements_, w_.q, w_.v, w_);
       if (viscous_)
         w_.tau.noalias() -= out_.damping * w_.v;
@@ -384,8 +416,11 @@ namespace
     const Spec & spec_;
     Workspace w_;
     Outcome out_;
-    const bool fire_, fire2_, viscous_, mass_damping_, mass_metric_;
+    const bool fire_, fire2_, viscous_, mass_damping_, adr_, mass_metric_;
+    const double scale_;
     double dt_ = 0., alpha_ = 0., dt_min_ = 0.;
+    Eigen::VectorXd force_prev_; // ADR: tau_static at the last step's start
+    bool have_prev_ = false;
     int positive_ = 0, uphill_ = 0;
     long stall_resets_ = 0;
     double start_residual_ = 0.;
@@ -405,10 +440,10 @@ namespace
 
   void checkMethod(const Spec & spec)
   {
-    const char * const methods[] = {"viscous", "mass_damping", "fire", "fire2"};
+    const char * const methods[] = {"viscous", "mass_damping", "adr", "fire", "fire2"};
     if (std::find(std::begin(methods), std::end(methods), spec.method) == std::end(methods))
       throw std::runtime_error(
-        "method must be viscous, mass_damping, fire or fire2, got '" + spec.method + "'");
+        "method must be viscous, mass_damping, adr, fire or fire2, got '" + spec.method + "'");
   }
 
   bool blewUpOrStalled(const Outcome & out)

@@ -70,10 +70,11 @@ DT_SAFETY = pinsettle.Settings().effective_dt_safety
 
 # --- the baselines: their rules and the sweeps of their own parameters ----------------------
 
-#: The four baselines, by the key of their runs.
+#: The five baselines, by the key of their runs.
 BASELINE_LABELS = {
     "viscous": "viscous (joint dampers)",
     "mass_damping": "viscous (mass-proportional)",
+    "adr": "adaptive DR",
     "fire": "FIRE",
     "fire2": "FIRE 2.0",
 }
@@ -84,6 +85,7 @@ BASELINES = tuple(BASELINE_LABELS)
 BASELINE_RULES: dict[str, Record] = {
     "viscous": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
     "mass_damping": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
+    "adr": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
     "fire": {"dt_max": 2.0, "metric": "euclid"},
     "fire2": {"dt_max": 2.0, "metric": "euclid"},
 }

@@ -21,6 +21,8 @@ STYLE: dict[str, dict[str, Any]] = {
     "viscous_best": dict(color="C1", ls="--", label="viscous, joint dampers (best)"),
     "mass_damping_rule": dict(color="C2", ls="-", label="viscous, mass-proportional (rule)"),
     "mass_damping_best": dict(color="C2", ls="--", label="viscous, mass-proportional (best)"),
+    "adr_rule": dict(color="C7", ls="-", label="adaptive DR (rule)"),
+    "adr_best": dict(color="C7", ls="--", label="adaptive DR (best)"),
     "fire_rule": dict(color="C3", ls="-", label="FIRE (rule)"),
     "fire_best": dict(color="C3", ls="--", label="FIRE (best)"),
     "fire2_rule": dict(color="C6", ls="-", label="FIRE 2.0 (rule)"),

@@ -225,8 +225,14 @@ have):
   `c = 2 omega / |phi|^2` (`|phi|^2 = nv / trace(M)` without a mode).
 - *viscous, mass-proportional*: `a = ABA(q, v, tau) - c v` (damping `c M v`), dynamic
   relaxation's classic form: every mode decays at the rate c / 2. Rule: `c = 2 omega`.
+- *adaptive DR* (adaptive dynamic relaxation, Underwood 1983, on the true dynamics): the
+  mass-proportional damping with c re-estimated at every step from the Rayleigh quotient of the
+  last step's motion, `omega^2 = dq . d tau_static / dq^T M dq` (`c = 2 omega`, 0 where the
+  quotient is not positive, at most `2 omega_max`; the sweep's factor multiplies it), and the
+  step re-estimated with c. Each step costs one RNEA and one kinetic-energy pass more. Rule at
+  the start: the mass-proportional one's.
 - Their step: a safety factor (rule: {dt_safety:g}, KD's default `dt_safety`) times the
-  stability limit: with the mass-proportional damping, semi-implicit Euler's
+  stability limit: with the mass-proportional damping (and adaptive DR's), semi-implicit Euler's
   `4 / (c + sqrt(c^2 + 4 omega_max^2))`; with the implicit joint dampers, the undamped
   `2 / omega_max` (their damping does not bound the step).
 - *FIRE* (Bitzek et al., 2006), classic parameters (N_min 5, f_inc 1.1, f_dec 0.5, alpha_start

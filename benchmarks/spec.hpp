@@ -6,7 +6,7 @@
 // SPEC is a text file, one "key values..." per line:
 //   model PATH           the (reduced) pinocchio::Model, saved by Python with saveToBinary
 //   q0 nq x...           start configuration (at rest)
-//   method NAME          baselines: viscous, mass_damping, fire or fire2; kd_profile: kd
+//   method NAME          baselines: viscous, mass_damping, adr, fire or fire2; kd_profile: kd
 //   metric euclid|mass   FIRE's velocity mixing: Euclidean in joint coordinates, or in the
 //                        mass-matrix metric (|v|_M, direction M^-1 F)
 //   dt_safety X          viscous: the step as a fraction of the stability limit at the start

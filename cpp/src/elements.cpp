@@ -9,6 +9,7 @@
 #include <pinocchio/algorithm/kinematics.hpp>
 
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -51,6 +52,17 @@ namespace pinsettle
         return Eigen::Vector3d::Zero();
       const pinocchio::Motion & vi = data.v[at.joint];
       return data.oMi[at.joint].rotation() * (vi.linear() + vi.angular().cross(at.point));
+    }
+
+    // A joint spring's stretch q - rest (rad or m); for a continuous joint, (cos, sin), the
+    // angle less rest wrapped to [-pi, pi].
+    double jointStretch(
+      const pinocchio::Model & model, const JointSpring & s, const Eigen::VectorXd & q)
+    {
+      const int iq = model.idx_qs[s.joint];
+      if (model.nqs[s.joint] == 2)
+        return std::remainder(std::atan2(q[iq + 1], q[iq]) - s.rest, 2. * M_PI);
+      return q[iq] - s.rest;
     }
 
     // A point spring's span at the kinematics in data: its ends (world), its length, the unit
@@ -323,6 +335,43 @@ namespace pinsettle
         model, data, l.at.joint, worldPoint(data, l.at), l.force, l.torque, K);
   }
 
+  double ForceElements::pointEnergy(
+    const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q) const
+  {
+    pinocchio::forwardKinematics(model, data, q);
+    double energy = 0.;
+    for (const PointSpring & s : point_springs_)
+    {
+      const Span span = springSpan(data, s);
+      energy += 0.5 * s.stiffness * std::pow(span.length - s.rest_length, 2);
+    }
+    for (const PointLoad & l : point_loads_)
+      energy -= l.force.dot(worldPoint(data, l.at));
+    return energy;
+  }
+
+  double ForceElements::computeWork(
+    const pinocchio::Model & model,
+    pinocchio::Data & data,
+    const Eigen::VectorXd & q_from,
+    const Eigen::VectorXd & q_to,
+    const Eigen::VectorXd & motion) const
+  {
+    double work = 0.;
+    if (has_joint_loads_)
+      work += joint_loads_.dot(motion);
+    for (const JointSpring & s : joint_springs_)
+      work +=
+        0.5 * s.stiffness
+        * (std::pow(jointStretch(model, s, q_from), 2) - std::pow(jointStretch(model, s, q_to), 2));
+    for (const PointLoad & l : point_loads_)
+      if (!l.torque.isZero(0.))
+        return std::numeric_limits<double>::quiet_NaN();
+    if (hasExternalForces())
+      work += pointEnergy(model, data, q_from) - pointEnergy(model, data, q_to);
+    return work;
+  }
+
   void ForceElements::computeForces(
     const pinocchio::Model & model,
     pinocchio::Data & data,
@@ -340,16 +389,8 @@ namespace pinsettle
 
     for (const JointSpring & s : joint_springs_)
     {
-      const int iq = model.idx_qs[s.joint], iv = model.idx_vs[s.joint];
-      double stretch;
-      if (model.nqs[s.joint] == 2) // continuous joint: (cos, sin)
-      {
-        stretch = std::atan2(q[iq + 1], q[iq]) - s.rest;
-        stretch = std::remainder(stretch, 2. * M_PI);
-      }
-      else
-        stretch = q[iq] - s.rest;
-      tau[iv] -= s.stiffness * stretch + s.damping * v[iv];
+      const int iv = model.idx_vs[s.joint];
+      tau[iv] -= s.stiffness * jointStretch(model, s, q) + s.damping * v[iv];
     }
 
     if (!hasExternalForces())

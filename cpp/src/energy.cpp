@@ -55,4 +55,15 @@ namespace pinsettle
     return {computeBodyKineticEnergy(model, data), computeSimplifiedKineticEnergy(model, data)};
   }
 
+  double computeGravityPotentialEnergy(
+    const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q)
+  {
+    pinocchio::forwardKinematics(model, data, q);
+    const Eigen::Vector3d g = model.gravity.linear();
+    double energy = 0.;
+    for (pinocchio::JointIndex i = 1; i < static_cast<pinocchio::JointIndex>(model.njoints); ++i)
+      energy -= model.inertias[i].mass() * g.dot(data.oMi[i].act(model.inertias[i].lever()));
+    return energy;
+  }
+
 } // namespace pinsettle

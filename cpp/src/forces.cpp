@@ -27,6 +27,18 @@ namespace pinsettle
     tau += tau_;
   }
 
+  double ConstantGeneralizedForce::computeWork(
+    const pinocchio::Model & model,
+    pinocchio::Data & /*data*/,
+    const Eigen::VectorXd & /*q_from*/,
+    const Eigen::VectorXd & /*q_to*/,
+    const Eigen::VectorXd & motion) const
+  {
+    if (tau_.size() != model.nv || motion.size() != model.nv)
+      return std::numeric_limits<double>::quiet_NaN();
+    return tau_.dot(motion);
+  }
+
   bool ConstantGeneralizedForce::tiesToWorld(
     const pinocchio::Model & model, pinocchio::JointIndex root) const
   {

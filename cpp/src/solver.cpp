@@ -254,6 +254,7 @@ namespace pinsettle
   , tau(Eigen::VectorXd::Zero(model.nv))
   , q_before(model.nq)
   , q_before2(model.nq)
+  , q_runaway(model.nq)
   , fext(model.joints.size(), pinocchio::Force::Zero())
   {
   }
@@ -337,8 +338,15 @@ namespace pinsettle
     if (guard_.isDiverging(e.exact, e.simplified, data.ddq, peaks_.hasPrevious()))
       return rollBack(result) ? std::nullopt : std::optional<Status>(Status::Diverged);
     trace_.sample(state_.step, state_.time, e.exact, e.simplified, work_.q);
-    if (isRunaway(e, result))
+    switch (checkRunaway(e, result))
+    {
+    case Runaway::Fall:
       return Status::NoEquilibrium;
+    case Runaway::Integration:
+      return rollBack(result) ? std::nullopt : std::optional<Status>(Status::Diverged);
+    case Runaway::None:
+      break;
+    }
     if (isAssessedAtRest(e))
     {
       if (rest_.accepts())
@@ -424,6 +432,7 @@ namespace pinsettle
       settings.energy, restEnergyLimit(model_, settings));
     trace_.start(settings);
     runaway_.start(model_.nv, RunawayMonitor::kFirstSample, std::max(10. * settings.max_e, 1e-30));
+    work_.q_runaway = work_.q;
     step_control_.start(settings, forces);
     if (step_control_.isAutomatic())
       runaway_.addRemoved(step_control_.estimate(data, work_.q, work_.v, state_.step));
@@ -517,14 +526,32 @@ namespace pinsettle
     step_control_.halve(
       data, work_.q, work_.v, state_.step); // what it takes is forgotten by the reset below
     restartStretch();
-    runaway_.reset(state_.step, 0.);
+    resetRunaway(0.);
     return true;
   }
 
-  bool Solver::isRunaway(const StepEnergies & e, Result & result)
+  void Solver::resetRunaway(double e)
+  {
+    runaway_.reset(state_.step, e);
+    work_.q_runaway = work_.q;
+  }
+
+  bool Solver::isMadeByIntegration()
+  {
+    // What gravity and the applied efforts did on the way: a fall releases about that much (the
+    // dampers, stops and contacts only take energy away), a step too large for the mechanism
+    // makes energy of its own and releases far more. Unknown work (NaN) is no evidence.
+    double work = computeGravityPotentialEnergy(model_, data, work_.q_runaway)
+                  - computeGravityPotentialEnergy(model_, data, work_.q);
+    if (state_.forces != nullptr)
+      work += state_.forces->computeWork(model_, data, work_.q_runaway, work_.q, runaway_.motion());
+    return runaway_.released() > kRunawayWorkFactor * std::max(work, 0.) + runaway_.floor();
+  }
+
+  Solver::Runaway Solver::checkRunaway(const StepEnergies & e, Result & result)
   {
     if (!runaway_.isDue(state_.step) || !runaway_.sample(e.exact + e.added))
-      return false;
+      return Runaway::None;
     // Partial damping can lose to a potential that falls by a fixed amount per turn although a
     // well exists (a pendulum under a constant torque just below what gravity holds): the first
     // verdict lowers kt to 0, which stops the mechanism at every peak, near the bottom of each
@@ -533,9 +560,11 @@ namespace pinsettle
     {
       state_.kt = 0.;
       result.reason = "kt lowered to 0: with partial damping the released energy kept growing";
-      runaway_.reset(state_.step, e.exact);
-      return false;
+      resetRunaway(e.exact);
+      return Runaway::None;
     }
+    if (isMadeByIntegration())
+      return Runaway::Integration;
     std::ostringstream msg;
     msg.precision(3);
     msg << "the potential energy falls without bound: " << runaway_.released() << " J released and "
@@ -547,7 +576,7 @@ namespace pinsettle
         << RunawayMonitor::kRunawayRatio << "x, " << RunawayMonitor::kRunawayDoublings
         << " times in a row";
     result.reason = msg.str();
-    return true;
+    return Runaway::Fall;
   }
 
   bool Solver::isAssessedAtRest(const StepEnergies & e)
@@ -581,7 +610,7 @@ namespace pinsettle
     guard_.keep(work_.q, work_.v, state_.time);
     step_control_.restartGrowth();
     restartStretch();
-    runaway_.reset(state_.step, 0.);
+    resetRunaway(0.);
   }
 
   void Solver::damp(const StepEnergies & e, Result & result)

@@ -108,6 +108,59 @@ BOOST_AUTO_TEST_CASE(static_force_is_the_gradient_of_the_potential)
   }
 }
 
+BOOST_AUTO_TEST_CASE(work_is_the_integral_of_the_efforts_along_the_path)
+{
+  const pinocchio::Model model = ur5();
+  pinocchio::Data data(model), ref(model);
+  const pinocchio::FrameIndex tool = model.getFrameId("tool0");
+  const pinocchio::FrameIndex forearm = model.getFrameId("forearm_link");
+  pinsettle::ForceElements elements(model);
+  elements.addPointSpring(
+    tool, Eigen::Vector3d(0.01, 0.02, 0.03), 0, Eigen::Vector3d(0.4, 0.2, 0.6), 200., 0.1);
+  elements.addJointSpring(model.getJointId("elbow_joint"), 20., 0.4);
+  elements.addJointLoad(model.getJointId("wrist_2_joint"), Eigen::VectorXd::Constant(1, 1.5));
+  elements.addPointLoad(forearm, Eigen::Vector3d(0., 0.1, 0.), Eigen::Vector3d(3., -2., -10.));
+
+  std::srand(5);
+  const Eigen::VectorXd q0 = pinocchio::randomConfiguration(model);
+  const Eigen::VectorXd motion = 0.8 * Eigen::VectorXd::Random(model.nv);
+  const Eigen::VectorXd q1 = pinocchio::integrate(model, q0, motion);
+  // The work along the straight path, by the midpoint rule: the applied efforts are the static
+  // force without the elements less the one with them; gravity's is the force without them.
+  const int n = 4000;
+  double elements_work = 0., gravity_work = 0.;
+  for (int k = 0; k < n; ++k)
+  {
+    const Eigen::VectorXd q = pinocchio::integrate(model, q0, ((k + 0.5) / n) * motion);
+    const Eigen::VectorXd bare = pinsettle::computeStaticForce(model, ref, q);
+    const Eigen::VectorXd with = pinsettle::computeStaticForce(model, ref, q, &elements);
+    elements_work += (bare - with).dot(motion) / n;
+    gravity_work -= bare.dot(motion) / n;
+  }
+  BOOST_CHECK_CLOSE(elements.computeWork(model, data, q0, q1, motion), elements_work, 1e-5);
+  const double gravity = pinsettle::computeGravityPotentialEnergy(model, data, q0)
+                         - pinsettle::computeGravityPotentialEnergy(model, data, q1);
+  BOOST_CHECK_CLOSE(gravity, gravity_work, 1e-5);
+  BOOST_CHECK_CLOSE(
+    pinsettle::computeGravityPotentialEnergy(model, data, q0),
+    pinocchio::computePotentialEnergy(model, ref, q0), 1e-10);
+
+  // A point torque's work depends on how the body turned on the way: not told.
+  elements.addPointLoad(
+    forearm, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d(0., 0., 1.));
+  BOOST_CHECK(std::isnan(elements.computeWork(model, data, q0, q1, motion)));
+  // A constant effort does tau . dq on every step: a wheel that turned twice under it has
+  // received twice the turn's work, although it ends where it started.
+  pinocchio::Model wheel;
+  wheel.addJoint(0, pinocchio::JointModelRUBY(), pinocchio::SE3::Identity(), "wheel");
+  pinocchio::Data wheel_data(wheel);
+  const pinsettle::ConstantGeneralizedForce torque(Eigen::VectorXd::Constant(1, 0.5));
+  const Eigen::VectorXd start = pinocchio::neutral(wheel);
+  BOOST_CHECK_CLOSE(
+    torque.computeWork(wheel, wheel_data, start, start, Eigen::VectorXd::Constant(1, 4. * M_PI)),
+    2. * M_PI, 1e-12);
+}
+
 BOOST_AUTO_TEST_CASE(point_torque_acts_about_the_world_axis)
 {
   const pinocchio::Model model = pendulum();

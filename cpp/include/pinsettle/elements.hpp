@@ -150,6 +150,18 @@ namespace pinsettle
       Eigen::VectorXd & tau,
       ForceVector & fext) const override;
 
+    ///
+    /// The springs' elastic energy, 1/2 k stretch^2, at q_from less at q_to; the joint loads'
+    /// effort . motion; the point loads' force . the point's displacement. NaN with a point load
+    /// that has a torque (its work depends on how the body turned on the way).
+    ///
+    double computeWork(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q_from,
+      const Eigen::VectorXd & q_to,
+      const Eigen::VectorXd & motion) const override;
+
     /// A joint spring or load on root, or a point spring with one end in root's subtree and the
     /// other outside it; point loads are constant world forces.
     bool tiesToWorld(const pinocchio::Model & model, pinocchio::JointIndex root) const override;
@@ -173,6 +185,10 @@ namespace pinsettle
     }
 
   private:
+    // The point springs' elastic energy and the point loads' potential -force . point (J) at q.
+    double pointEnergy(
+      const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q) const;
+
     Attachment attach(
       pinocchio::FrameIndex frame, const Eigen::Vector3d & point, const char * what) const;
 

@@ -56,6 +56,15 @@ namespace pinsettle
     const Eigen::VectorXd & q,
     const Eigen::VectorXd & v);
 
+  ///
+  /// \brief The potential energy of gravity at q, -sum_i m_i g . c_i (J, with model.gravity;
+  /// zero at the world origin): runs pinocchio::forwardKinematics.
+  ///
+  /// \param[in] q The joint configuration (dim model.nq).
+  ///
+  double computeGravityPotentialEnergy(
+    const pinocchio::Model & model, pinocchio::Data & data, const Eigen::VectorXd & q);
+
 } // namespace pinsettle
 
 #endif // ifndef __pinsettle_energy_hpp__

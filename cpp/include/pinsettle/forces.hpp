@@ -7,6 +7,7 @@
 
 #include <pinocchio/multibody.hpp>
 
+#include <limits>
 #include <string>
 
 namespace pinsettle
@@ -82,6 +83,30 @@ namespace pinsettle
     }
 
     ///
+    /// \brief The work (J) the efforts do on a motion from q_from to q_to: the elastic energy
+    /// the springs release plus the work of the constant loads. The dampers are left out (they
+    /// only take energy away). The solver compares it with the energy a runaway released, to
+    /// tell a mechanism that really falls from a time step too large for it.
+    ///
+    /// \param[in] model The model of the mechanism.
+    /// \param[in] data Scratch data of the model (its kinematic quantities are overwritten).
+    /// \param[in] q_from, q_to The configurations at the two ends (dim model.nq).
+    /// \param[in] motion The net tangent motion from q_from to q_to, summed step by step (dim
+    ///            model.nv, rad or m): a joint that turned several times has its whole angle.
+    /// \return The work (J); NaN where the two ends and the net motion do not tell it (the
+    ///         default; a constant torque on a body that turns in space).
+    ///
+    virtual double computeWork(
+      const pinocchio::Model & /*model*/,
+      pinocchio::Data & /*data*/,
+      const Eigen::VectorXd & /*q_from*/,
+      const Eigen::VectorXd & /*q_to*/,
+      const Eigen::VectorXd & /*motion*/) const
+    {
+      return std::numeric_limits<double>::quiet_NaN();
+    }
+
+    ///
     /// \brief Add the applied efforts at the state (q, v).
     ///
     /// \param[in] model The model of the mechanism.
@@ -130,6 +155,15 @@ namespace pinsettle
     {
       return tau_;
     }
+
+    /// The effort's work on the net motion: constant in tangent coordinates, it does
+    /// tau . dq on every step.
+    double computeWork(
+      const pinocchio::Model & model,
+      pinocchio::Data & data,
+      const Eigen::VectorXd & q_from,
+      const Eigen::VectorXd & q_to,
+      const Eigen::VectorXd & motion) const override;
 
     /// Only an effort on root's own coordinates: any other is a pair inside the subtree.
     bool tiesToWorld(const pinocchio::Model & model, pinocchio::JointIndex root) const override;

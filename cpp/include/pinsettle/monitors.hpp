@@ -225,6 +225,16 @@ namespace pinsettle
     {
       return drift_sample_;
     }
+    /// \brief Energy (J) a doubling must release to count at all (start's floor).
+    double floor() const
+    {
+      return floor_;
+    }
+    /// \brief The net motion since the reset (dim model.nv, tangent, rad or m).
+    const Eigen::VectorXd & motion() const
+    {
+      return drift_;
+    }
     /// \brief The tangent coordinate (index in model.nv) that has moved furthest since the reset.
     Eigen::Index furthestCoordinate() const
     {

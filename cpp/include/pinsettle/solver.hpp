@@ -83,6 +83,15 @@ namespace pinsettle
   /// Measured with polish and the takeover off (docs/method.md, When is it a rest).
   constexpr double kRestEnergyFactor = 100.;
 
+  /// \brief A runaway whose released energy exceeds this many times the work gravity and the
+  /// applied efforts did on the way (plus the monitor's floor) was made by the integration: the
+  /// step is rolled back and halved instead of the run ending with no equilibrium. A fall
+  /// releases no more than that work (dampers, stops and contacts only take energy away). Steps
+  /// too large for the mechanism released 71 (xarm7) to 3e6 (vehicle) times it, or the
+  /// potential rose; a sphere rolling down a slope, a true runaway, 5.2 times (its contact
+  /// impulses add energy as it spins).
+  constexpr double kRunawayWorkFactor = 10.;
+
   ///
   /// \brief The most potential energy (J) a rest may have left to end a run:
   /// kRestEnergyFactor * settings.max_e, or for max_e = 0 round-off of the model's gravity
@@ -204,7 +213,18 @@ namespace pinsettle
     void correctAcceleration();
     void restartStretch();
     bool rollBack(Result & result);
-    bool isRunaway(const StepEnergies & e, Result & result);
+    // A runaway the monitor confirmed, and whether the energy it released was released by the
+    // potential (a fall) or made by the integration (a time step too large: the work of gravity
+    // and the applied efforts falls short of it).
+    enum class Runaway
+    {
+      None,
+      Fall,
+      Integration
+    };
+    Runaway checkRunaway(const StepEnergies & e, Result & result);
+    bool isMadeByIntegration();
+    void resetRunaway(double e);
     bool isAssessedAtRest(const StepEnergies & e);
     void pushOff(Result & result);
     void damp(const StepEnergies & e, Result & result);
@@ -302,6 +322,7 @@ namespace pinsettle
       Eigen::VectorXd q, v, dq, q_next, tau;
       Eigen::VectorXd drift; // v, or from rest the acceleration, at the last rest assessment
       Eigen::VectorXd q_before, q_before2; // q one and two samples back (backtracking)
+      Eigen::VectorXd q_runaway;           // q at the runaway monitor's last reset
       ForceVector fext;
     };
 

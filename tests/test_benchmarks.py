@@ -738,3 +738,24 @@ def test_the_contact_part_says_when_mujoco_is_missing(monkeypatch):
     text = contact_drop.section(record)
     assert "MuJoCo was not measured: mujoco is not installed" in text
     assert "| not installed | - |" in text and "\n\n\n" not in text
+
+
+def test_mujocos_stopping_rule_is_the_static_residual_pinocchio_gives():
+    # benchmarks/mujoco_best.py stops MuJoCo at the same static residual as pinsettle: M qacc
+    # at zero velocity. Off the limits that is gravity's generalized force, recomputed here by
+    # Pinocchio on the same URDF at random configurations.
+    pytest.importorskip("mujoco")  # the test extra installs it
+    import gallery
+    import mujoco_best
+
+    m, why, _ = gallery.load_mujoco(pinsettle.robot_urdf("ur5"))
+    assert m is not None, why
+    model = pinsettle.load_robot("ur5", floating=False)
+    data = model.createData()
+    check = mujoco_best.Checker(m, 1.0)
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        qpos = rng.uniform(-2.0, 2.0, m.nq)  # inside the UR5's limits of 2 pi
+        q = gallery.mujoco_q(m, qpos, model)
+        gravity = pinocchio.computeGeneralizedGravity(model, data, q)
+        assert check(qpos) == pytest.approx(np.max(np.abs(gravity)), rel=1e-9)

@@ -357,6 +357,9 @@ namespace pinsettle
     const Eigen::VectorXd & q_to,
     const Eigen::VectorXd & motion) const
   {
+    for (const PointLoad & l : point_loads_)
+      if (!l.torque.isZero(0.))
+        return std::numeric_limits<double>::quiet_NaN();
     double work = 0.;
     if (has_joint_loads_)
       work += joint_loads_.dot(motion);
@@ -364,9 +367,6 @@ namespace pinsettle
       work +=
         0.5 * s.stiffness
         * (std::pow(jointStretch(model, s, q_from), 2) - std::pow(jointStretch(model, s, q_to), 2));
-    for (const PointLoad & l : point_loads_)
-      if (!l.torque.isZero(0.))
-        return std::numeric_limits<double>::quiet_NaN();
     if (hasExternalForces())
       work += pointEnergy(model, data, q_from) - pointEnergy(model, data, q_to);
     return work;

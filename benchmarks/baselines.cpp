@@ -122,6 +122,13 @@ namespace
   // The viscous rule damps the softest mode with lambda above this fraction of omega_max^2.
   constexpr double kSoftestMode = 1e-6;
 
+  // factor times semi-implicit Euler's stability limit under mass-proportional damping c (1/s)
+  // with the fastest mode omega_max (rad/s): 4 / (c + sqrt(c^2 + 4 omega_max^2)) (s).
+  double dampedStep(double factor, double c, double omega_max)
+  {
+    return factor * 4. / (c + std::sqrt(c * c + 4. * omega_max * omega_max));
+  }
+
   // What a baseline takes from the start: its steps and damping (see the top of the file).
   void setUp(
     const pinocchio::Model & model,
@@ -160,8 +167,8 @@ namespace
     out.omega_rule = softest >= 0 ? std::sqrt(std::abs(lambda[softest])) : omega;
     if (spec.method == "mass_damping" || spec.method == "adr")
     {
-      const double rate = out.damping = spec.damping_factor * 2. * out.omega_rule;
-      out.dt = scale * spec.dt_safety * 4. / (rate + std::sqrt(rate * rate + 4. * omega * omega));
+      out.damping = spec.damping_factor * 2. * out.omega_rule;
+      out.dt = dampedStep(scale * spec.dt_safety, out.damping, omega);
     }
     else
     {
@@ -292,8 +299,7 @@ namespace
         out_.damping = omega2 > 0.
                          ? std::min(spec_.damping_factor * 2. * std::sqrt(omega2), 2. * omega_max)
                          : 0.;
-        const double c = out_.damping;
-        dt_ = scale_ * spec_.dt_safety * 4. / (c + std::sqrt(c * c + 4. * omega_max * omega_max));
+        dt_ = dampedStep(scale_ * spec_.dt_safety, out_.damping, omega_max);
       }
       force_prev_ = w_.force;
       have_prev_ = true;

@@ -29,10 +29,8 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import statistics
-import subprocess
 import sys
 import textwrap
 import time
@@ -46,6 +44,7 @@ import pinocchio
 import pinsettle
 from gallery import distance, load_mujoco, mujoco_q, rest_check
 from independent import CachedReference
+from python_overhead import fresh_process
 from sweep_throughput import DOC, write
 
 BEGIN = "<!-- mujoco:best (written by benchmarks/mujoco_best.py) -->"
@@ -277,10 +276,7 @@ def pinsettle_warm(model: pinocchio.Model) -> tuple[float, pinsettle.Result]:
 def pinsettle_first(name: str) -> float:
     firsts = []
     for _ in range(FIRST_PROCESSES):
-        done = subprocess.run(
-            [sys.executable, "-c", _FIRST, name], capture_output=True, text=True, check=True
-        )
-        firsts.append(float(json.loads(done.stdout.splitlines()[-1])["first"]))
+        firsts.append(float(fresh_process(_FIRST, name)["first"]))
     return statistics.median(firsts)
 
 
@@ -511,14 +507,15 @@ def section(rows: list[dict[str, Any]], seconds: float) -> str:
     return "\n".join([*lines, END]) + "\n"
 
 
-def put(text: str, path: Path = DOC) -> None:
-    """The block in place of the old one, or right after the gallery the first time."""
+def put(text: str, path: Path, after: str) -> None:
+    """The block in place of the old one in ``path``, or the first time right after the line
+    ``after`` (at the end without it)."""
     old = path.read_text(encoding="utf-8")
-    if BEGIN in old or AFTER not in old:
+    if BEGIN in old or after not in old:
         write(text, path, BEGIN, END)
         return
-    head, tail = old.split(AFTER, 1)
-    path.write_text(f"{head}{AFTER}\n\n{text.rstrip()}\n{tail}", encoding="utf-8")
+    head, tail = old.split(after, 1)
+    path.write_text(f"{head}{after}\n\n{text.rstrip()}\n{tail}", encoding="utf-8")
 
 
 README = DOC.parents[1] / "README.md"
@@ -541,16 +538,6 @@ def readme_block(doc: Path = DOC) -> str:
     return f"{BEGIN}\n{wrapped}\n{END}\n"
 
 
-def put_readme(text: str, path: Path = README) -> None:
-    """The paragraph in place of the old one, or right after the speed summary."""
-    old = path.read_text(encoding="utf-8")
-    if BEGIN in old or README_AFTER not in old:
-        write(text, path, BEGIN, END)
-        return
-    head, tail = old.split(README_AFTER, 1)
-    path.write_text(f"{head}{README_AFTER}\n\n{text.rstrip()}\n{tail}", encoding="utf-8")
-
-
 def robots() -> list[str]:
     """The gallery's robots (all, root fixed) that MuJoCo loads."""
     names = []
@@ -571,7 +558,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     if args.readme:
-        put_readme(readme_block())
+        put(readme_block(), README, README_AFTER)
         return
     names = args.robots.split(",") if args.robots else robots()
     began = time.perf_counter()
@@ -583,8 +570,8 @@ def main() -> None:
     text = section(rows, time.perf_counter() - began)
     print(text)
     if args.write:
-        put(text)
-        put_readme(readme_block())
+        put(text, DOC, AFTER)
+        put(readme_block(), README, README_AFTER)
         print(f"wrote the section into {DOC} and {README}", file=sys.stderr)
 
 

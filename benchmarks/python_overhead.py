@@ -77,6 +77,15 @@ print(json.dumps({"walls": walls}))
 """
 
 
+def fresh_process(script: str, *args: str) -> dict[str, Any]:
+    """The JSON object ``script`` prints last, run with ``args`` in a fresh Python process."""
+    done = subprocess.run(
+        [sys.executable, "-c", script, *args], capture_output=True, text=True, check=True
+    )
+    record: dict[str, Any] = json.loads(done.stdout.splitlines()[-1])
+    return record
+
+
 def warm(repeats: int, calls: int) -> dict[str, dict[str, float]]:
     """Median wall time, C++ run and overhead (s) of warm ``Solver.solve`` and
     ``pinsettle.solve`` calls, in alternating blocks."""
@@ -116,13 +125,7 @@ def first(processes: int, calls: int = 21) -> dict[str, dict[str, float]]:
     for kind in ("solve", "solver"):
         firsts, seconds, laters, core_first, core_next = [], [], [], [], []
         for _ in range(processes):
-            done = subprocess.run(
-                [sys.executable, "-c", _FIRST, ROBOT, kind, str(calls)],
-                capture_output=True,
-                text=True,
-                check=True,
-            )
-            record = json.loads(done.stdout.splitlines()[-1])
+            record = fresh_process(_FIRST, ROBOT, kind, str(calls))
             walls, cores = record["walls"], record["cores"]
             core_first.append(cores[0])
             core_next.append(cores[1])
@@ -150,13 +153,7 @@ def pinocchio_first(processes: int) -> dict[str, float]:
     next, and their ratio: what a first call costs on this machine without pinsettle."""
     firsts, seconds = [], []
     for _ in range(processes):
-        done = subprocess.run(
-            [sys.executable, "-c", _PINOCCHIO_FIRST, ROBOT],
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        walls = json.loads(done.stdout.splitlines()[-1])["walls"]
+        walls = fresh_process(_PINOCCHIO_FIRST, ROBOT)["walls"]
         firsts.append(walls[0])
         seconds.append(walls[1])
     return {

@@ -866,11 +866,27 @@ namespace pinsettle
       || state_.step - state_.newton_tried_at < spacing)
       return false;
     state_.newton_tried_at = state_.step;
-    StabilityReport report = assess(work_.q, state_.forces);
-    if (report.verdict == Stability::Unstable)
+    std::optional<Takeover> took = takeOver(work_.q, *state_.settings, state_.forces);
+    if (!took)
       return false;
-    const Eigen::VectorXd tau = staticForce(work_.q, state_.forces);
-    const double residual = residualOf(work_.q, tau);
+    result.info.residual_before_polish = took->residual_from;
+    result.info.polish_iterations = took->run.iterations;
+    result.info.polished = took->run.iterations > 0;
+    work_.q = std::move(took->run.q);
+    work_.v.setZero();
+    rest_.record(std::move(took->report), work_.q, state_.step, took->energy);
+    state_.settled_by_newton = true;
+    return true;
+  }
+
+  std::optional<Solver::Takeover> Solver::takeOver(
+    const Eigen::VectorXd & q, const Settings & settings, const ForceModel * forces)
+  {
+    StabilityReport report = assess(q, forces);
+    if (report.verdict == Stability::Unstable)
+      return std::nullopt;
+    const Eigen::VectorXd tau = staticForce(q, forces);
+    const double residual = residualOf(q, tau);
     // Within the polish's reach and near where the mechanism stands: far from its rest the
     // reach (residual over the softest stiffness) is long, and Newton, clamped onto a stop,
     // found a 'rest' 2.8 rad away and 3.7 J above the start of a bistable pendulum's release.
@@ -879,30 +895,61 @@ namespace pinsettle
     const double reach =
       held ? kTakeoverReach : std::min(newtonReach(report, residual), kTakeoverReach);
     if (reach < 0.)
-      return false;
+      return std::nullopt;
     // Only a Newton run that gets to round-off within the reach (iterateNewton gives up as soon
     // as it moves further) ends the run: anything less (a stall, a step beyond the reach,
     // another kind of rest) leaves the mechanism to the damping, where it was.
-    NewtonRun run = iterateNewton(work_.q, tau, residual, report, state_.forces, reach);
+    NewtonRun run = iterateNewton(q, tau, residual, report, forces, reach);
     if (!run.at_round_off)
-      return false;
+      return std::nullopt;
     // Not moved (held, or a zero residual): the rest is the one just assessed.
-    StabilityReport after = run.iterations == 0 ? report : assess(run.q, state_.forces);
+    StabilityReport after = run.iterations == 0 ? report : assess(run.q, forces);
     if (after.verdict != report.verdict)
-      return false;
+      return std::nullopt;
     // Newton leaves neutral directions alone: a force still pulling along one (a slider on a
     // tilted arm, 3.6 N along it) is no rest, whatever the round-off of the rest.
     const double energy = computeRestEnergy(after, run.tau);
-    if (!(energy <= restEnergyLimit(model_, *state_.settings)))
-      return false;
-    result.info.residual_before_polish = residual;
-    result.info.polish_iterations = run.iterations;
-    result.info.polished = run.iterations > 0;
-    work_.q = std::move(run.q);
-    work_.v.setZero();
-    rest_.record(std::move(after), work_.q, state_.step, energy);
-    state_.settled_by_newton = true;
-    return true;
+    if (!(energy <= restEnergyLimit(model_, settings)))
+      return std::nullopt;
+    return Takeover{std::move(run), std::move(after), residual, energy};
+  }
+
+  void Solver::checkNewtonEntry(const Eigen::VectorXd & q, const char * who) const
+  {
+    if (!constraints_.empty())
+      throw std::logic_error(
+        std::string(who)
+        + " works on a mechanism without constraints: loops, stops and contacts keep a state "
+          "that belongs to a run (use solve)");
+    checkSupportedModel(model_);
+    checkConfiguration(model_, q, "q");
+  }
+
+  std::optional<Solver::NewtonRest> Solver::settleByNewton(
+    const Eigen::VectorXd & q, const Settings & settings, const ForceModel * forces)
+  {
+    checkNewtonEntry(q, "settleByNewton");
+    checkSettings(settings);
+    std::optional<Takeover> took = takeOver(q, settings, forces);
+    if (!took)
+      return std::nullopt;
+    return NewtonRest{
+      std::move(took->run.q), took->run.residual, took->residual_from, took->run.iterations,
+      took->report.verdict};
+  }
+
+  Solver::NewtonRest Solver::polishRest(const Eigen::VectorXd & q, const ForceModel * forces)
+  {
+    checkNewtonEntry(q, "polishRest");
+    Result rest;
+    rest.q = q;
+    Eigen::VectorXd tau = staticForce(q, forces);
+    rest.residual = residualOf(q, tau);
+    StabilityReport report = assess(q, forces);
+    const double from = rest.residual;
+    polish(report, forces, tau, rest);
+    const int iterations = rest.info.polished ? rest.info.polish_iterations : 0;
+    return NewtonRest{std::move(rest.q), rest.residual, from, iterations, report.verdict};
   }
 
 } // namespace pinsettle

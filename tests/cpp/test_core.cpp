@@ -23,6 +23,7 @@
 #include <cstdlib>
 #include <limits>
 #include <new>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -884,6 +885,57 @@ BOOST_AUTO_TEST_CASE(newton_takes_over_at_a_damping_event_at_the_same_strict_min
     pinocchio::computeGeneralizedGravity(model, data, taken.q).lpNorm<Eigen::Infinity>(),
     1e-14 * weight);
   BOOST_CHECK_LT(pinocchio::difference(model, damped.q, taken.q).lpNorm<Eigen::Infinity>(), 1e-12);
+}
+
+BOOST_AUTO_TEST_CASE(newton_from_another_methods_state_takes_over_near_a_rest_only)
+{
+  // settleByNewton is the takeover a run tries at a damping event, offered to other methods:
+  // from 0.05 rad off the UR5's rest it ends at that rest to round-off (g(q) recomputed with
+  // Pinocchio); from the start, 1.3 rad and more away, it refuses and leaves q to the method.
+  const pinocchio::Model model =
+    pinsettle::buildModelFromUrdf(robots_dir + "/ur_description/urdf/ur5_robot.urdf");
+  pinsettle::Solver solver(model);
+  const pinsettle::Settings settings;
+  const Eigen::VectorXd q0 = pinocchio::neutral(model);
+  const pinsettle::Result rest = solver.solve(q0, settings);
+  BOOST_REQUIRE(rest.status == pinsettle::Status::Converged);
+  BOOST_CHECK(!solver.settleByNewton(q0, settings));
+
+  // Off along the joints that carry the arm's weight (shoulder lift, elbow, wrist 1): the base
+  // and last joints turn freely (neutral directions), and Newton leaves those alone.
+  Eigen::VectorXd off = Eigen::VectorXd::Zero(model.nv);
+  off.segment(1, 3).setConstant(0.05);
+  const Eigen::VectorXd near = pinocchio::integrate(model, rest.q, off);
+  const std::optional<pinsettle::Solver::NewtonRest> took = solver.settleByNewton(near, settings);
+  BOOST_REQUIRE(took);
+  BOOST_CHECK_GE(took->iterations, 1);
+  BOOST_CHECK_GT(took->residual_from, 1.);
+  pinocchio::Data data(model);
+  const double g_near =
+    pinocchio::computeGeneralizedGravity(model, data, near).lpNorm<Eigen::Infinity>();
+  const double g_took =
+    pinocchio::computeGeneralizedGravity(model, data, took->q).lpNorm<Eigen::Infinity>();
+  BOOST_CHECK_CLOSE(took->residual_from, g_near, 1e-9);
+  BOOST_CHECK_EQUAL(took->residual, g_took);
+  BOOST_CHECK_LT(g_took, 1e-12);
+  BOOST_CHECK(took->stability == rest.stability);
+  BOOST_CHECK_LT(pinocchio::difference(model, rest.q, took->q).lpNorm<Eigen::Infinity>(), 1e-9);
+
+  // The polish of a rest to 1e-4 rad: closer to exact, the same rest.
+  const Eigen::VectorXd rough = pinocchio::integrate(model, rest.q, 2e-3 * off);
+  const pinsettle::Solver::NewtonRest polished = solver.polishRest(rough);
+  BOOST_CHECK_GE(polished.iterations, 1);
+  BOOST_CHECK_LT(polished.residual, 1e-12);
+  BOOST_CHECK_LT(
+    pinocchio::computeGeneralizedGravity(model, data, polished.q).lpNorm<Eigen::Infinity>(), 1e-12);
+  BOOST_CHECK_LT(pinocchio::difference(model, rest.q, polished.q).lpNorm<Eigen::Infinity>(), 1e-9);
+
+  // A bad q is named; a solver with constraints refuses (their state belongs to a run).
+  BOOST_CHECK_THROW(
+    solver.settleByNewton(Eigen::VectorXd::Zero(2), settings), std::invalid_argument);
+  pinsettle::JointStops stops(model);
+  pinsettle::Solver stopped(model, nullptr, &stops);
+  BOOST_CHECK_THROW(stopped.polishRest(rest.q), std::logic_error);
 }
 
 BOOST_AUTO_TEST_CASE(joint_inertia_brings_each_joint_down_to_the_slowest_and_not_below_the_modes)

@@ -175,6 +175,46 @@ namespace pinsettle
       return model_;
     }
 
+    /// \brief A rest Newton's method found (settleByNewton, polishRest).
+    struct NewtonRest
+    {
+      Eigen::VectorXd q;                        ///< The rest (dim model.nq).
+      double residual = 0.;                     ///< Its residual (N m or N, as Result::residual).
+      double residual_from = 0.;                ///< The residual where Newton started.
+      int iterations = 0;                       ///< Newton iterations taken (0: q kept as it was).
+      Stability stability = Stability::Unknown; ///< The verdict at q.
+    };
+
+    ///
+    /// \brief Newton's guarded takeover, as a run tries it at a damping event
+    /// (Settings::newton_takeover), from where another method's run stands: a viscous or FIRE
+    /// relaxation, or a user's own integrator, finishing with the same Newton as ours. Newton
+    /// starts at q; its answer is taken only if it reaches round-off within its reach (0.1 rad
+    /// or m, and ten times the residual over the softest stiffness), the rest is of the same
+    /// kind as at q, which must not be unstable, and no force is left along a neutral direction
+    /// (restEnergyLimit). The velocity is not looked at: a state far from rest just fails.
+    ///
+    /// \param[in] q Where the method stands (dim model.nq, normalised).
+    /// \param[in] settings The solve's settings (max_e sets the neutral directions' limit).
+    /// \param[in] forces Applied efforts, or nullptr for gravity alone.
+    /// \return The rest, or std::nullopt where the method must go on.
+    /// \throws std::invalid_argument on a bad q; std::logic_error on a solver with constraints
+    ///         (their state belongs to a run).
+    ///
+    std::optional<NewtonRest> settleByNewton(
+      const Eigen::VectorXd & q, const Settings & settings, const ForceModel * forces = nullptr);
+
+    ///
+    /// \brief Newton's polish of a rest another method converged to (Settings::polish): Newton
+    /// steps from q, kept only if they stay within the reach of the rest (ten times the residual
+    /// over its softest stiffness) and the rest stays of the same kind; else q is returned.
+    ///
+    /// \param[in] q The rest (dim model.nq, normalised).
+    /// \param[in] forces Applied efforts, or nullptr for gravity alone.
+    /// \throws As settleByNewton.
+    ///
+    NewtonRest polishRest(const Eigen::VectorXd & q, const ForceModel * forces = nullptr);
+
     /// Scratch of the last solve: kinematics of the last ABA call.
     pinocchio::Data data;
 
@@ -285,6 +325,19 @@ namespace pinsettle
     // after the last try): Newton from q, kept and the run ended only if it gets to round-off
     // within the reach and the rest stays of the same kind.
     bool isSettledByNewton(Result & result);
+    // The takeover from q (settleByNewton's rule): the Newton run, the rest's report and the
+    // residual at q; std::nullopt where it is refused.
+    struct Takeover
+    {
+      NewtonRun run;
+      StabilityReport report;
+      double residual_from;
+      double energy; // computeRestEnergy of the rest
+    };
+    std::optional<Takeover> takeOver(
+      const Eigen::VectorXd & q, const Settings & settings, const ForceModel * forces);
+    // Public entries' checks: no constraints, a valid q.
+    void checkNewtonEntry(const Eigen::VectorXd & q, const char * who) const;
     // The farthest (|dq|_inf, rad or m: a radian the length scale, as the step estimates' far
     // move) Newton may take a takeover from where the mechanism stands.
     static constexpr double kTakeoverReach = 0.1;

@@ -29,6 +29,26 @@
 //            alpha_start 0.25, dt_min = 0.02 dt0, at P <= 0 half a step back (q -= dt v / 2)
 //            before the velocity is zeroed, and a stop after 2,000 uphill steps in a row.
 //
+//   newton   Newton's method from the start, globalised by a trust region on the potential
+//            energy V (gravity's, less the work of the springs and loads from the start: its
+//            gradient is tau_static, its Hessian the stiffness K of
+//            pinsettle::computeStiffnessMatrix). Each iteration minimises the quadratic model
+//            g.p + p^T K p / 2 within |p|_2 <= radius (rad and m alike) exactly, from the
+//            eigenvectors of K's symmetric part (More and Sorensen, 1983): the Newton step where
+//            K is positive definite and the step fits, else the boundary step of the shifted
+//            system K + sigma I, the hard case included, so that negative curvature leads
+//            downhill instead of to the nearest saddle. The step is taken where V fell by at
+//            least 1e-4 of the predicted fall (where the fall is below V's round-off: where
+//            the residual fell); the radius is quartered below a ratio of 1/4 and doubled
+//            (at most kMaxRadius) above 3/4 on the boundary. Set-up: none.
+//
+// With `newton 1` a damped baseline finishes as the solver's default does: at a residual check
+// at least max(check_every, nv^2 / 4) steps after its last try (the solver's spacing of its
+// takeover tries), Newton's guarded takeover (pinsettle::Solver::settleByNewton) is tried from
+// where the run stands and ends it when it gets to round-off; a run that reaches its target
+// first is polished (pinsettle::Solver::polishRest). The solver is made before the timed
+// set-up, as kd_profile's is before its timed solve.
+//
 // FIRE's velocity mixing, v <- (1 - alpha) v + alpha |v| F / |F|, is taken in joint coordinates
 // (metric euclid: N m mixed with N, rad/s with m/s) or in the mass-matrix metric (metric mass:
 // v <- (1 - alpha) v + alpha |v|_M d / |d|_M with d = M^-1 F, one more ABA at zero velocity, and
@@ -69,6 +89,8 @@
 #include <algorithm>
 #include <chrono>
 #include <iostream>
+#include <memory>
+#include <optional>
 
 namespace
 {
@@ -87,7 +109,10 @@ namespace
     long steps = 0;
     double residual = 0., seconds = 0., setup_seconds = 0.;
     double dt = 0., dt_max = 0., dt_end = 0., damping = 0., omega_rule = 0., limit = 0.;
-    long resets = 0;
+    long resets = 0;            // FIRE's velocity resets; Newton's rejected steps
+    long newton_tries = 0;      // `newton 1`: takeovers tried
+    long newton_iterations = 0; // ... and the Newton iterations of the one kept or the polish
+    bool by_newton = false;     // ... whether the takeover ended the run
     Eigen::VectorXd q;
   };
 
@@ -235,7 +260,6 @@ namespace
       w_.v.setZero();
       const Clock::time_point setup_start = Clock::now();
       setUp(model, elements, spec, scale, w_, out_);
-      out_.setup_seconds = since(setup_start);
       dt_ = out_.dt;
       alpha_ = fire2_ ? kFire2AlphaStart : kFireAlphaStart;
       dt_min_ = kFire2DtMinFactor * out_.dt;
@@ -243,6 +267,12 @@ namespace
       progress_ = start_residual_;
       if (viscous_) // the dampers taken implicitly: M + dt c I in ABA
         damped_.armature.array() += dt_ * out_.damping;
+      out_.setup_seconds = since(setup_start);
+      // Made once, outside the timed set-up, as the solver that kd_profile times is.
+      if (spec.newton)
+        solver_ = std::make_unique<pinsettle::Solver>(model);
+      newton_spacing_ = std::max<long>(
+        spec.check_every, static_cast<long>(model.nv) * static_cast<long>(model.nv) / 4);
     }
 
     Outcome run(Recorder & recorder)
@@ -252,7 +282,7 @@ namespace
       for (; step < spec_.max_steps; ++step)
       {
         recorder.record(step, w_.q);
-        if (checksResidual(step) && residualEnds(step))
+        if (checksResidual(step) && (residualEnds(step) || isSettledByNewton(step)))
           break;
         if ((fire_ || fire2_) && powerEnds(step))
           break;
@@ -318,7 +348,10 @@ namespace
       if (!(residual <= kBlowUp * start_residual_)) // also catches NaN
         return end("diverged");
       if (residual <= spec_.target)
+      {
+        polish();
         return end("converged");
+      }
       if (residual <= 0.1 * progress_)
       {
         progress_ = residual;
@@ -327,6 +360,35 @@ namespace
       if (step % 1024 == 0 && since(start_) > spec_.max_time)
         return end("time_limit");
       return false;
+    }
+
+    // `newton 1`: the solver's takeover, tried every newton_spacing_ steps at a residual check;
+    // true when it ended the run at a rest.
+    bool isSettledByNewton(long step)
+    {
+      if (!solver_ || step - newton_tried_at_ < newton_spacing_)
+        return false;
+      newton_tried_at_ = step;
+      ++out_.newton_tries;
+      const std::optional<pinsettle::Solver::NewtonRest> rest =
+        solver_->settleByNewton(w_.q, settings_, elements_);
+      if (!rest)
+        return false;
+      w_.q = rest->q;
+      w_.v.setZero();
+      out_.newton_iterations = rest->iterations;
+      out_.by_newton = true;
+      return end("converged");
+    }
+
+    // `newton 1`: the solver's polish of the rest the run converged to.
+    void polish()
+    {
+      if (!solver_)
+        return;
+      const pinsettle::Solver::NewtonRest rest = solver_->polishRest(w_.q, elements_);
+      w_.q = rest.q;
+      out_.newton_iterations = rest.iterations;
     }
 
     // FIRE's power test: true when it ends the run (stalled).
@@ -432,6 +494,196 @@ namespace
     double start_residual_ = 0.;
     double progress_ = 0.; // FIRE's stall test: resets since a tenfold fall
     Clock::time_point start_;
+    std::unique_ptr<pinsettle::Solver> solver_; // `newton 1`
+    const pinsettle::Settings settings_;        // the solver's defaults
+    long newton_spacing_ = 0, newton_tried_at_ = 0;
+  };
+
+  // The trust region's largest radius (rad or m) and the ratios of its rule.
+  constexpr double kMaxRadius = 10., kAcceptRatio = 1e-4, kShrinkRatio = 0.25, kGrowRatio = 0.75;
+  // A predicted fall of V below this many ulps of V's terms is round-off: the residual decides.
+  constexpr double kPotentialRoundOff = 1e3 * std::numeric_limits<double>::epsilon();
+
+  // The trust-region step: argmin g.p + p^T K p / 2 subject to |p|_2 <= radius, from the
+  // eigen-decomposition of K (ascending eigenvalues lambda, eigenvectors U); the predicted
+  // change of V in `predicted`.
+  Eigen::VectorXd trustRegionStep(
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> & eig,
+    const Eigen::VectorXd & g,
+    double radius,
+    double & predicted)
+  {
+    const Eigen::VectorXd & lambda = eig.eigenvalues();
+    const Eigen::MatrixXd & U = eig.eigenvectors();
+    const Eigen::VectorXd gt = U.transpose() * g;
+    // |p(sigma)|, p(sigma) = -(K + sigma I)^-1 g, leaving out the directions of the smallest
+    // eigenvalue when `hard` (the hard case, where g has no part along them).
+    const double lowest = lambda[0];
+    const double g_norm = gt.norm();
+    auto coefficients = [&](double sigma, bool hard) {
+      Eigen::VectorXd c(gt.size());
+      for (Eigen::Index k = 0; k < gt.size(); ++k)
+        c[k] = hard && lambda[k] - lowest <= 1e-12 * std::abs(lowest) + 1e-300
+                 ? 0.
+                 : -gt[k] / (lambda[k] + sigma);
+      return c;
+    };
+    Eigen::VectorXd c;
+    if (lowest > 0. && (c = coefficients(0., false)).norm() <= radius)
+    {
+    }
+    else
+    {
+      const double floor = std::max(0., -lowest);
+      // The hard case: g (almost) orthogonal to the lowest eigenvectors, and the step of the
+      // shifted system with sigma = -lowest inside the region: move along them to its edge.
+      double along = 0.;
+      for (Eigen::Index k = 0; k < gt.size(); ++k)
+        if (lambda[k] - lowest <= 1e-12 * std::abs(lowest) + 1e-300)
+          along += gt[k] * gt[k];
+      const Eigen::VectorXd inner = coefficients(floor, true);
+      if (std::sqrt(along) <= 1e-12 * g_norm && inner.norm() <= radius && lowest <= 0.)
+      {
+        c = inner;
+        c[0] += std::sqrt(std::max(radius * radius - inner.squaredNorm(), 0.));
+      }
+      else
+      {
+        // |p(sigma)| falls from infinity at sigma = floor to g_norm / (lowest + sigma): bisect
+        // on 1 / |p| (nearly linear in sigma) between floor and floor + g_norm / radius.
+        double lo = floor, hi = floor + g_norm / radius + std::abs(lowest);
+        for (int k = 0; k < 200 && hi - lo > 1e-15 * std::max(1., hi); ++k)
+        {
+          const double mid = 0.5 * (lo + hi);
+          (coefficients(mid, false).norm() > radius ? lo : hi) = mid;
+        }
+        c = coefficients(hi, false);
+      }
+    }
+    predicted = gt.dot(c) + 0.5 * c.dot(lambda.cwiseProduct(c));
+    return U * c;
+  }
+
+  // Newton's method from the start with a trust region on the potential energy (see the top
+  // of the file); one step is one iteration.
+  class TrustRegionNewton
+  {
+  public:
+    TrustRegionNewton(
+      const pinocchio::Model & model,
+      const pinsettle::ForceElements * elements,
+      const Spec & spec,
+      double scale)
+    : model_(model)
+    , elements_(elements)
+    , spec_(spec)
+    , w_(model)
+    , motion_(Eigen::VectorXd::Zero(model.nv))
+    , trial_motion_(model.nv)
+    {
+      w_.q = spec.q0;
+      radius_ = scale * spec.radius;
+      out_.dt = radius_;
+    }
+
+    Outcome run(Recorder & recorder)
+    {
+      start_ = Clock::now();
+      double residual = this->residual();
+      const double start_residual = residual;
+      double potential = this->potential(w_.q, motion_);
+      long step = 0;
+      for (; step < spec_.max_steps; ++step)
+      {
+        recorder.record(step, w_.q);
+        if (!(residual <= kBlowUp * start_residual))
+          return finish("diverged", step);
+        if (residual <= spec_.target)
+          return finish("converged", step);
+        if (since(start_) > spec_.max_time)
+          return finish("time_limit", step);
+        if (radius_ < 1e-15 * std::max(1., w_.q.lpNorm<Eigen::Infinity>()))
+          return finish("stalled", step);
+        const Eigen::VectorXd g = w_.force;
+        Eigen::MatrixXd K = pinsettle::computeStiffnessMatrix(model_, w_.data, w_.q, elements_);
+        K = 0.5 * (K + K.transpose()).eval();
+        const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(K);
+        double predicted = 0.;
+        const Eigen::VectorXd p = trustRegionStep(eig, g, radius_, predicted);
+        pinocchio::integrate(model_, w_.q, p, w_.q_next);
+        trial_motion_ = motion_ + p;
+        const double trial_potential = this->potential(w_.q_next, trial_motion_);
+        w_.q.swap(w_.q_next);
+        const double trial_residual = this->residual();
+        const double ratio =
+          this->ratio(trial_potential - potential, predicted, trial_residual < residual);
+        const double length = p.norm();
+        if (ratio < kShrinkRatio)
+          radius_ = kShrinkRatio * length;
+        else if (ratio > kGrowRatio && length >= 0.99 * radius_)
+          radius_ = std::min(2. * radius_, kMaxRadius);
+        if (ratio > kAcceptRatio && w_.q.allFinite())
+        {
+          motion_.swap(trial_motion_);
+          potential = trial_potential;
+          residual = trial_residual;
+        }
+        else
+        {
+          w_.q.swap(w_.q_next); // rejected: back to where it stood
+          ++out_.resets;
+          this->residual();
+        }
+      }
+      return finish("max_steps", step);
+    }
+
+  private:
+    // max |tau_static(q)| at w_.q, leaving tau_static (V's gradient) in w_.force.
+    double residual()
+    {
+      bench::staticForce(model_, elements_, w_);
+      return w_.force.lpNorm<Eigen::Infinity>();
+    }
+
+    // V at q, reached from the start by the net motion (J); its terms' size in scale_.
+    double potential(const Eigen::VectorXd & q, const Eigen::VectorXd & motion)
+    {
+      const double gravity = pinsettle::computeGravityPotentialEnergy(model_, w_.data, q);
+      const double work =
+        elements_ ? elements_->computeWork(model_, w_.data, spec_.q0, q, motion) : 0.;
+      scale_ = std::abs(gravity) + std::abs(work);
+      return gravity - work; // NaN where the work is unknown (a point torque): residual decides
+    }
+
+    // Actual over predicted fall; where that is round-off (or V unknown), 1 if the residual
+    // fell and 0 if not.
+    double ratio(double actual, double predicted, bool residual_fell) const
+    {
+      if (!(predicted < -kPotentialRoundOff * scale_) || std::isnan(actual))
+        return residual_fell ? 1. : 0.;
+      return actual / predicted;
+    }
+
+    Outcome finish(const char * status, long step)
+    {
+      out_.status = status;
+      out_.seconds = since(start_);
+      out_.steps = step;
+      out_.dt_end = radius_;
+      out_.q = w_.q;
+      out_.residual = residual();
+      return out_;
+    }
+
+    const pinocchio::Model & model_;
+    const pinsettle::ForceElements * elements_;
+    const Spec & spec_;
+    Workspace w_;
+    Outcome out_;
+    Eigen::VectorXd motion_, trial_motion_; // net tangent motion from the start (computeWork)
+    double radius_ = 0., scale_ = 0.;
+    Clock::time_point start_;
   };
 
   Outcome run(
@@ -441,15 +693,20 @@ namespace
     double scale,
     Recorder & recorder)
   {
+    if (spec.method == "newton")
+      return TrustRegionNewton(model, elements, spec, scale).run(recorder);
     return BaselineRun(model, elements, spec, scale).run(recorder);
   }
 
   void checkMethod(const Spec & spec)
   {
-    const char * const methods[] = {"viscous", "mass_damping", "adr", "fire", "fire2"};
+    const char * const methods[] = {"viscous", "mass_damping", "adr", "fire", "fire2", "newton"};
     if (std::find(std::begin(methods), std::end(methods), spec.method) == std::end(methods))
       throw std::runtime_error(
-        "method must be viscous, mass_damping, adr, fire or fire2, got '" + spec.method + "'");
+        "method must be viscous, mass_damping, adr, fire, fire2 or newton, got '" + spec.method
+        + "'");
+    if (spec.newton && spec.method == "newton")
+      throw std::runtime_error("newton 1 finishes a damped method; the method newton is Newton");
   }
 
   bool blewUpOrStalled(const Outcome & out)
@@ -539,6 +796,9 @@ namespace
               << ", \"limit\": " << bench::number(out.limit)
               << ", \"damping\": " << bench::number(out.damping)
               << ", \"omega_rule\": " << bench::number(out.omega_rule)
+              << ", \"newton_tries\": " << out.newton_tries
+              << ", \"newton_iterations\": " << out.newton_iterations
+              << ", \"by_newton\": " << (out.by_newton ? "true" : "false")
               << ", \"halvings\": " << timed.halvings << ", \"retries\": [";
     for (std::size_t k = 0; k < timed.reasons.size(); ++k)
       std::cout << (k ? ", " : "") << "\"" << timed.reasons[k] << "\"";

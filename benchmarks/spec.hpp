@@ -6,7 +6,8 @@
 // SPEC is a text file, one "key values..." per line:
 //   model PATH           the (reduced) pinocchio::Model, saved by Python with saveToBinary
 //   q0 nq x...           start configuration (at rest)
-//   method NAME          baselines: viscous, mass_damping, adr, fire or fire2; kd_profile: kd
+//   method NAME          baselines: viscous, mass_damping, adr, fire, fire2 or newton;
+//                        kd_profile: kd
 //   metric euclid|mass   FIRE's velocity mixing: Euclidean in joint coordinates, or in the
 //                        mass-matrix metric (|v|_M, direction M^-1 F)
 //   dt_safety X          viscous: the step as a fraction of the stability limit at the start
@@ -24,6 +25,8 @@
 //                        [step, q_0 .. q_nq-1], at most max_samples rows plus the final state
 //   max_samples N
 //   polish 0|1           kd_profile: also time the solve with polish = true
+//   newton 0|1           baselines: finish with the solver's Newton (takeover and polish)
+//   radius X             newton: the trust region's first radius (rad or m)
 //   joint_spring JOINT K REST D
 //   point_spring FRAME_A AX AY AZ FRAME_B BX BY BZ K REST_LENGTH D
 //   joint_load JOINT N E_1 .. E_N
@@ -55,10 +58,10 @@ namespace bench
     std::string model_path, method, metric = "euclid", samples_path;
     Eigen::VectorXd q0;
     double dt_safety = 0.2, dt_max = 2., damping_factor = 1., target = 0., max_time = 60.,
-           repeat_budget = 2.;
+           repeat_budget = 2., radius = 0.1;
     long check_every = 64, max_steps = 1000000, max_samples = 4000;
     int repeats = 1;
-    bool polish = false;
+    bool polish = false, newton = false;
     std::vector<std::string> elements; // element lines, applied once the model is loaded
   };
 
@@ -111,6 +114,8 @@ namespace bench
       {"max_samples", readValue<long, &Spec::max_samples>},
       {"repeats", readValue<int, &Spec::repeats>},
       {"polish", readValue<bool, &Spec::polish>},
+      {"newton", readValue<bool, &Spec::newton>},
+      {"radius", readValue<double, &Spec::radius>},
       {"joint_spring", keepElement},
       {"point_spring", keepElement},
       {"joint_load", keepElement},

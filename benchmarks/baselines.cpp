@@ -283,7 +283,12 @@ namespace
       {
         recorder.record(step, w_.q);
         if (checksResidual(step) && (residualEnds(step) || isSettledByNewton(step)))
+        {
+          // Newton's finish (takeover or polish) counts as one more step: its rest is the
+          // curve's last sample.
+          step += out_.by_newton || out_.newton_iterations > 0;
           break;
+        }
         if ((fire_ || fire2_) && powerEnds(step))
           break;
         if (!advance())

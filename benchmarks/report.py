@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import math
 import os
@@ -101,6 +102,7 @@ from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants a
     REPEAT_BUDGET,
     RESIDUAL_LEVELS,
     SECTIONS,
+    SWEEP_GROWTH,
     SWEEP_MAX_TIME,
     BenchScene,
     Config,
@@ -112,6 +114,7 @@ from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants a
     Run,
     SceneData,
     SweepPoint,
+    baseline_method,
     setting_label,
 )
 from scene_statics import Statics  # noqa: E402  (benchmarks/scene_statics.py)
@@ -513,11 +516,23 @@ def run_program(program: Path, spec: Path) -> Record:
 
 
 def _settings_lines(family: str, settings: Record) -> list[str]:
-    return [f"method {family}", *(f"{key} {value}" for key, value in settings.items())]
+    method, newton = baseline_method(family)
+    return [
+        f"method {method}",
+        *(["newton 1"] if newton else []),
+        *(f"{key} {value}" for key, value in settings.items()),
+    ]
 
 
 def _tag(family: str, settings: Record) -> str:
     return family + "".join(f".{k}{v}" for k, v in settings.items())
+
+
+#: What a baseline's run keeps of its program's record (benchmarks/baselines.cpp).
+RUN_EXTRA = (
+    *("dt", "dt_max", "dt_end", "limit", "damping", "omega_rule", "resets", "halvings"),
+    *("retries", "newton_tries", "newton_iterations", "by_newton"),
+)
 
 
 def run_baseline(
@@ -571,11 +586,7 @@ def run_baseline(
         land.stability,
         land,
         curve=curve_of(statics, target, data[:, 0], rows),
-        extra={
-            key: out[key]
-            for key in ("dt", "dt_max", "dt_end", "limit", "damping", "omega_rule", "resets")
-        }
-        | {"halvings": out["halvings"], "retries": out["retries"]},
+        extra={key: out[key] for key in RUN_EXTRA},
         setup=setup,
     )
 
@@ -775,6 +786,9 @@ QUICK = Config(
     safeties=(DT_SAFETY, 0.8),
     damping_factors=(1.0,),
     fire_dt_maxes=(1.0, 2.0),
+    newton_radii=(0.1, 1.0),
+    interleave_rounds=2,
+    sweep_extensions=1,
     step_cost_steps=2000,
     step_cost_repeats=3,
     cost_models=("ur5", "pendulum"),
@@ -859,13 +873,15 @@ def scene_baseline(job: SceneJob, name: str, family: str) -> None:
     d.runs[f"{family}_rule"] = run_baseline(
         baselines, s, ref, family, rule, reps, work, f"{label}, rule"
     )
-    points = [
-        sweep_point(baselines, s, family, settings, work, job.config.sweep_repeats)
-        for settings in job.config.sweep(family)
-    ]
+    points = sweep_inside(
+        lambda settings: sweep_point(
+            baselines, s, family, settings, work, job.config.sweep_repeats
+        ),
+        job.config.sweep(family),
+        job.config.sweep_extensions,
+    )
     d.baseline_sweep[family] = points
-    done = [p for p in points if p.time_to is not None]
-    best = min(done, key=lambda p: p.seconds, default=None)
+    best = fastest(points)
     if best is None or best.settings == rule:
         d.runs[f"{family}_best"] = d.runs[f"{family}_rule"]
         return
@@ -879,6 +895,121 @@ def scene_baseline(job: SceneJob, name: str, family: str) -> None:
         work,
         f"{label}, best ({setting_label(family, best.settings)})",
     )
+
+
+def fastest(points: Sequence[SweepPoint]) -> SweepPoint | None:
+    done = [p for p in points if p.time_to is not None]
+    return min(done, key=lambda p: p.seconds, default=None)
+
+
+def _beyond(points: Sequence[SweepPoint], best: SweepPoint, key: str) -> list[float]:
+    """The next values of a numeric setting past the edge of what was tried where the best
+    sits (none where it is inside)."""
+    values = sorted({p.settings[key] for p in points})
+    up, down = SWEEP_GROWTH[key]
+    value = best.settings[key]
+    if len(values) < 2 or value not in (values[0], values[-1]):
+        return []
+    return [value * up] if value == values[-1] else [value * down]
+
+
+def _grown(points: Sequence[SweepPoint], best: SweepPoint, key: str) -> list[Record]:
+    """The next value of ``key`` past the edge where the best sits (none where it is inside)
+    with every value tried of the other settings (the grid stays a product), in the settings'
+    order, less what was tried."""
+    beyond = _beyond(points, best, key)
+    values = {
+        k: beyond if k == key else list(dict.fromkeys(p.settings[k] for p in points))
+        for k in best.settings
+    }
+    tried = [p.settings for p in points]
+    grid = [dict(zip(values, combo, strict=True)) for combo in itertools.product(*values.values())]
+    return [g for g in grid if beyond and g not in tried]
+
+
+def sweep_inside(
+    run: Callable[[Record], SweepPoint], grid: Sequence[Record], extensions: int
+) -> list[SweepPoint]:
+    """A sweep on ``grid``, grown past an edge while the best sits on it: the next value of
+    that setting (SWEEP_GROWTH) with each value of the others tried, at most ``extensions``
+    times per setting. It ends with the best inside, or on an edge past which every run failed
+    or the extensions ran out (the report flags that edge)."""
+    points = [run(settings) for settings in grid]
+    grown = dict.fromkeys(SWEEP_GROWTH, 0)
+    while (best := fastest(points)) is not None:
+        # One setting at a time, so that the next grows with the values this one added.
+        key = next(
+            (
+                k
+                for k in best.settings
+                if k in SWEEP_GROWTH and grown[k] < extensions and _grown(points, best, k)
+            ),
+            None,
+        )
+        if key is None:
+            break
+        grown[key] += 1
+        points += [run(settings) for settings in _grown(points, best, key)]
+    return points
+
+
+#: Timed solves per method and round of the interleaved timing (fewer once they took half a
+#: second).
+INTERLEAVE_REPEATS = 7
+
+
+def _interleaved_baseline(program: Path, spec: Path) -> float:
+    out = run_program(program, spec)
+    if out["status"] != "converged":
+        return math.nan
+    return float(
+        statistics.median(
+            s + loop for s, loop in zip(out["setup_times"], out["wall_times"], strict=True)
+        )
+    )
+
+
+def _interleaved_kd(program: Path, statics: Statics, work: Path) -> float:
+    profile = run_kd_profile(program, statics, work, INTERLEAVE_REPEATS, True)
+    return float(profile["median"]["polish_wall"])
+
+
+def scene_interleaved(job: SceneJob, name: str) -> None:
+    """The default solve and every baseline at its best, each run to the residual LEVEL
+    (baselines) or to its end (the default solve: its polish and takeover take it to round-off,
+    so its time to the LEVEL is at most that), timed again in ``interleave_rounds`` rounds, each
+    round in another order (rotated), INTERLEAVE_REPEATS solves a method and round: each
+    round's median, in ``d.interleaved``."""
+    d = job.results.scenes[name]
+    s, work = d.statics, job.work
+    runs: dict[str, Callable[[], float]] = {
+        "kd_default": partial(_interleaved_kd, job.programs / "kd_profile", s, work)
+    }
+    for family in BASELINES:
+        best = fastest(d.baseline_sweep.get(family, []))
+        if best is None:
+            continue
+        spec = write_spec(
+            s,
+            work,
+            "interleaved." + _tag(family, best.settings),
+            [
+                *_settings_lines(family, best.settings),
+                f"target {LEVEL * s.force_scale!r}",
+                "check_every 16",
+                f"max_steps {BASELINE_MAX_STEPS}",
+                f"max_time {SWEEP_MAX_TIME}",
+                f"repeats {INTERLEAVE_REPEATS}",
+                "repeat_budget 0.5",
+            ],
+        )
+        runs[family] = partial(_interleaved_baseline, job.programs / "baselines", spec)
+    keys = list(runs)
+    d.interleaved = {key: [] for key in keys}
+    for r in range(job.config.interleave_rounds):
+        shift = r % len(keys)
+        for key in keys[shift:] + keys[:shift]:
+            d.interleaved[key].append(runs[key]())
 
 
 def scene_kt_sweep(job: SceneJob, name: str) -> None:
@@ -969,6 +1100,12 @@ def scene_tasks(config: Config, results: Results, programs: Path, work: Path) ->
                 )
                 for family in BASELINES
             ]
+            tasks.append(
+                (
+                    f"{name}: every method's best, interleaved timing",
+                    partial(scene_interleaved, job, name),
+                )
+            )
         tasks += [
             (f"{name}: kt sweep", partial(scene_kt_sweep, job, name)),
             (f"{name}: err, ds and max_e sweeps", partial(scene_stop_sweeps, job, name)),

@@ -70,31 +70,71 @@ DT_SAFETY = pinsettle.Settings().effective_dt_safety
 
 # --- the baselines: their rules and the sweeps of their own parameters ----------------------
 
-#: The five baselines, by the key of their runs.
-BASELINE_LABELS = {
+#: The damped baselines, by the key of their runs; each also runs as "<key>_n", finished by the
+#: solver's own Newton (its guarded takeover and polish, as the default solve), and "newton_tr" is
+#: Newton's method from the start with a trust region on the potential energy.
+DAMPED_LABELS = {
     "viscous": "viscous (joint dampers)",
     "mass_damping": "viscous (mass-proportional)",
     "adr": "adaptive DR",
     "fire": "FIRE",
     "fire2": "FIRE 2.0",
 }
+NEWTON_SUFFIX = "_n"
+NEWTON_TR = "newton_tr"
+BASELINE_LABELS = {
+    **DAMPED_LABELS,
+    **{f"{k}{NEWTON_SUFFIX}": f"{v} + Newton" for k, v in DAMPED_LABELS.items()},
+    NEWTON_TR: "Newton, trust region",
+}
 BASELINES = tuple(BASELINE_LABELS)
+
+
+def baseline_method(family: str) -> tuple[str, bool]:
+    """The C++ method of a baseline family (benchmarks/baselines.cpp) and whether the solver's
+    Newton finishes it."""
+    if family == NEWTON_TR:
+        return "newton", False
+    if family.endswith(NEWTON_SUFFIX):
+        return family[: -len(NEWTON_SUFFIX)], True
+    return family, False
+
+
 #: Each baseline's rule setting: the viscous ones at KD's own step safety and the c that damps
 #: the softest mode at the start critically; FIRE and FIRE 2.0 with dt_max twice the stability
-#: limit (dt0 = dt_max / 10, the classic ratio), mixing in joint coordinates.
-BASELINE_RULES: dict[str, Record] = {
+#: limit (dt0 = dt_max / 10, the classic ratio), mixing in joint coordinates; Newton from a
+#: first radius of 0.1 rad (the solver's takeover reach).
+_DAMPED_RULES: dict[str, Record] = {
     "viscous": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
     "mass_damping": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
     "adr": {"dt_safety": DT_SAFETY, "damping_factor": 1.0},
     "fire": {"dt_max": 2.0, "metric": "euclid"},
     "fire2": {"dt_max": 2.0, "metric": "euclid"},
 }
-#: The sweeps: step safety and c (as a multiple of the rule's) of the viscous baselines; FIRE's
-#: dt_max (a multiple of the stability limit) and the metric of its velocity mixing.
+BASELINE_RULES: dict[str, Record] = {
+    family: dict(_DAMPED_RULES[baseline_method(family)[0]])
+    if family != NEWTON_TR
+    else {"radius": 0.1}
+    for family in BASELINES
+}
+#: The sweeps' first grids: step safety and c (as a multiple of the rule's) of the viscous
+#: baselines; FIRE's dt_max (a multiple of the stability limit) and the metric of its velocity
+#: mixing; Newton's first radius (rad or m). A best on an edge of what was tried extends the grid
+#: past it (SWEEP_EXTENSIONS), until the best lies inside or the runs past it fail.
 VISCOUS_SAFETIES = tuple(sorted({0.2, DT_SAFETY, 0.5, 0.8, 0.9}))  # the rule among them
 DAMPING_FACTORS = (0.0625, 0.25, 1.0, 4.0)
 FIRE_DT_MAXES = (0.5, 1.0, 1.5, 2.0)
 FIRE_METRICS = ("euclid", "mass")
+NEWTON_RADII = (0.01, 0.1, 1.0)
+#: How a grid grows past an edge: the next value above the largest (x up) or below the smallest
+#: (x down), per numeric setting; at most this many extensions per setting.
+SWEEP_GROWTH = {
+    "dt_safety": (1.25, 0.5),
+    "damping_factor": (4.0, 0.25),
+    "dt_max": (2.0, 0.5),
+    "radius": (10.0, 0.1),
+}
+SWEEP_EXTENSIONS = 4
 #: Budget of one sweep run (s); it stops at the residual LEVEL.
 SWEEP_MAX_TIME = 2.0
 #: Scenes reported apart from the baselines' comparison: a test of KD's stiff-mode scaling,
@@ -250,7 +290,9 @@ class SweepPoint:
 
 
 def setting_label(family: str, settings: Record) -> str:
-    if family in ("fire", "fire2"):
+    if family == NEWTON_TR:
+        return f"radius {settings['radius']:g}"
+    if baseline_method(family)[0] in ("fire", "fire2"):
         return f"dt_max {settings['dt_max']:g} x limit, {settings['metric']}"
     return f"safety {settings['dt_safety']:g}, {settings['damping_factor']:g} c"
 
@@ -269,6 +311,11 @@ class Config:
     damping_factors: Sequence[float] = DAMPING_FACTORS
     fire_dt_maxes: Sequence[float] = FIRE_DT_MAXES
     fire_metrics: Sequence[str] = FIRE_METRICS
+    newton_radii: Sequence[float] = NEWTON_RADII
+    #: Rounds of the interleaved timing of every method's best (spread over the rounds).
+    interleave_rounds: int = 3
+    #: Extensions of a sweep's grid past an edge, per setting and direction.
+    sweep_extensions: int = SWEEP_EXTENSIONS
     step_cost_steps: int = 20000
     step_cost_repeats: int = 11
     #: Models of the step cost (robots of example-robot-data or robots/*.urdf by name).
@@ -285,8 +332,10 @@ class Config:
     contact_quick: bool = False
 
     def sweep(self, family: str) -> list[Record]:
-        """The settings a baseline is run with besides its rule (the rule included)."""
-        if family in ("fire", "fire2"):
+        """The first grid a baseline is swept on (the rule included)."""
+        if family == NEWTON_TR:
+            return [{"radius": r} for r in self.newton_radii]
+        if baseline_method(family)[0] in ("fire", "fire2"):
             return [
                 {"dt_max": m, "metric": g} for g in self.fire_metrics for m in self.fire_dt_maxes
             ]
@@ -310,6 +359,9 @@ class SceneData:
     runs: dict[str, Run] = field(default_factory=dict)  # main runs by key
     # The baselines' sweeps of their own parameters: family -> runs to the residual LEVEL.
     baseline_sweep: dict[str, list[SweepPoint]] = field(default_factory=dict)
+    # Every method's best timed again in interleaved rounds: key (kd_default or a baseline
+    # family) -> each round's median time (s; NaN where it did not converge).
+    interleaved: dict[str, list[float]] = field(default_factory=dict)
     sweeps: dict[str, list[Run]] = field(default_factory=dict)
     # benchmarks/kd_profile on the scene (trees): the solver's set-up and overheads.
     profile: Record | None = None

@@ -14,6 +14,7 @@ from report_measures import LEVEL, measured_chains, solve_steps, solve_time, tim
 FLOOR = 1e-17
 
 
+STYLE_COLOR = {"viscous": "C1", "mass_damping": "C2", "adr": "C7", "fire": "C3", "fire2": "C6"}
 STYLE: dict[str, dict[str, Any]] = {
     "kd_exact": dict(color="C0", ls="-", lw=2, label="KD, exact energy"),
     "kd_simplified": dict(color="C0", ls="--", label="KD, simplified energy"),
@@ -27,6 +28,27 @@ STYLE: dict[str, dict[str, Any]] = {
     "fire_best": dict(color="C3", ls="--", label="FIRE (best)"),
     "fire2_rule": dict(color="C6", ls="-", label="FIRE 2.0 (rule)"),
     "fire2_best": dict(color="C6", ls="--", label="FIRE 2.0 (best)"),
+    **{
+        f"{family}{D.NEWTON_SUFFIX}_{kind}": dict(
+            color=STYLE_COLOR[family],
+            ls=":" if kind == "rule" else "-.",
+            label=f"{label} + Newton ({kind})",
+        )
+        for family, label in (
+            ("viscous", "viscous, joint dampers"),
+            ("mass_damping", "viscous, mass-proportional"),
+            ("adr", "adaptive DR"),
+            ("fire", "FIRE"),
+            ("fire2", "FIRE 2.0"),
+        )
+        for kind in ("rule", "best")
+    },
+    "newton_tr_rule": dict(
+        color="C8", ls="-", marker="^", ms=3, label="Newton, trust region (rule)"
+    ),
+    "newton_tr_best": dict(
+        color="C8", ls="--", marker="^", ms=3, label="Newton, trust region (best)"
+    ),
     "newton": dict(color="C4", ls=":", marker="o", ms=3, label="Newton (Python)"),
     "newton_ls": dict(color="C5", ls=":", marker="s", ms=3, label="Newton + line search (Python)"),
 }

@@ -290,6 +290,20 @@ def mujoco_saddle_stops(gallery: list[D.Record], both: dict[str, float]) -> list
     ]
 
 
+def fastest_interleaved(d: D.SceneData) -> tuple[str, float] | None:
+    """The fastest peer in the interleaved timing and its median over KD's."""
+    kd = d.interleaved.get("kd_default", [])
+    medians = {
+        f: statistics.median(ts)
+        for f, ts in d.interleaved.items()
+        if f != "kd_default" and ts and all(math.isfinite(t) for t in ts)
+    }
+    if not kd or not medians:
+        return None
+    f = min(medians, key=lambda k: medians[k])
+    return f, medians[f] / statistics.median(kd)
+
+
 def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None, int] | None:
     """A baseline at its best: the shortest time to LEVEL (s) among its rule run, the run at the
     sweep's best setting and the sweep's own runs (each timed in its own repeats; a full run may

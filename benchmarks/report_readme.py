@@ -15,6 +15,7 @@ from report_measures import (
     LEVEL,
     ChainGrowth,
     best_kt,
+    compared,
     cost_median,
     cost_ratio,
     energy_tally,
@@ -23,7 +24,7 @@ from report_measures import (
     mujoco_both,
     stops_ratio,
 )
-from report_writer import baseline_bullets, trees_only
+from report_writer import trees_only
 
 README_BEGIN = "<!-- bench:summary (written by benchmarks/report.py) -->"
 
@@ -77,8 +78,57 @@ def kt_line(results: D.Results) -> list[str]:
     ]
 
 
+#: The peers in the README, by group: the damped baselines plain, the same finished by the
+#: solver's Newton, and Newton with a trust region.
+PEER_GROUPS = {
+    "the damped baselines plain (viscous, mass-proportional, adaptive DR, FIRE, FIRE 2.0)": tuple(
+        D.DAMPED_LABELS
+    ),
+    "the same finished by pinsettle's own Newton": tuple(
+        f"{f}{D.NEWTON_SUFFIX}" for f in D.DAMPED_LABELS
+    ),
+    "Newton's method from the start with a trust region": (D.NEWTON_TR,),
+}
+
+
+def group_ratios(results: D.Results, families: tuple[str, ...]) -> dict[str, float]:
+    """Per tree scene, the group's fastest in the interleaved timing over KD's defaults."""
+    out = {}
+    for name in compared(results):
+        d = results.scenes[name]
+        kd = d.interleaved.get("kd_default")
+        times = [
+            statistics.median(ts)
+            for f in families
+            if (ts := d.interleaved.get(f)) and all(math.isfinite(t) for t in ts)
+        ]
+        if kd and times:
+            out[name] = min(times) / statistics.median(kd)
+    return out
+
+
 def readme_baseline_lines(results: D.Results) -> list[str]:
-    lines = baseline_bullets(results, over_kd="KD's defaults")
+    parts = []
+    for label, families in PEER_GROUPS.items():
+        ratios = group_ratios(results, families)
+        if not ratios:
+            continue
+        faster = [n for n, r in ratios.items() if r < 1]
+        parts.append(
+            f"{label}, {min(ratios.values()):.2g} to {max(ratios.values()):.2g} times KD's time "
+            f"(median {statistics.median(ratios.values()):.2g}; faster than KD on "
+            f"{len(faster)} of {len(ratios)}" + (f": {', '.join(faster)}" if faster else "") + ")"
+        )
+    if not parts:
+        return []
+    lines = [
+        f"- **Peers at their best** (the same dynamics in C++, each swept over its own "
+        f"parameters, then every method's best timed again in "
+        f"{results.config.interleave_rounds} interleaved rounds; time to a residual of "
+        f"{LEVEL:g}, the fastest of each group per tree scene, over KD's defaults): "
+        + "; ".join(parts)
+        + "."
+    ]
     if loop_scenes(results):
         lines.append(f"- The {trees_only(results)}.")
     return lines

@@ -59,6 +59,7 @@ from report_measures import (
     cost_median,
     cost_ratio,
     energy_tally,
+    fastest_interleaved,
     kd_key,
     kd_time,
     kt_scores,
@@ -1329,12 +1330,21 @@ def baseline_cell(d: D.SceneData, key: str) -> str:
     return f"not reached ({run.status})" if t is None else f"({fmt_time(t)})"
 
 
-def comparison_row(d: D.SceneData, name: str) -> list[str]:
-    tk = kd_time(d)
-    cells = [f"`{name}`", fmt_time(tk) if tk is not None else outcome_time(d.runs[kd_key()])]
+def comparison_rows(results: D.Results, names: list[str]) -> list[list[str]]:
+    """KD's time to the level, then each baseline at its rule and at its best, per scene."""
+    scenes = [results.scenes[n] for n in names]
+    rows = [
+        [f"KD (defaults): time to {LEVEL:g}"]
+        + [
+            fmt_time(t) if (t := kd_time(d)) is not None else outcome_time(d.runs[kd_key()])
+            for d in scenes
+        ]
+    ]
     for family in BASELINES:
-        cells += [baseline_cell(d, f"{family}_{kind}") for kind in ("rule", "best")]
-    return cells
+        for kind in ("rule", "best"):
+            label = f"{D.BASELINE_LABELS[family]}: {kind}"
+            rows.append([label] + [baseline_cell(d, f"{family}_{kind}") for d in scenes])
+    return rows
 
 
 def comparison_bullet(results: D.Results, names: list[str], family: str) -> str:
@@ -1358,10 +1368,8 @@ def comparison_section(results: D.Results) -> str:
     names = compared(results)
     if not names:
         return ""
-    head = ["scene", f"KD (defaults): time to {LEVEL:g}"]
-    for family in BASELINES:
-        head += [f"{D.BASELINE_LABELS[family]}: rule", "best"]
-    rows = [comparison_row(results.scenes[name], name) for name in names]
+    head = ["method", *(f"`{n}`" for n in names)]
+    rows = comparison_rows(results, names)
     apart = apart_scenes(results)
     return (
         "### Baselines at their rule and at their best\n\n"
@@ -1369,67 +1377,167 @@ def comparison_section(results: D.Results) -> str:
         "(KD: the curve of the run that goes on to round-off, or the whole default run when it "
         "ends below the level, its polish included, whichever is sooner), per scene (in bold; "
         "below 1: the baseline is faster; its time in brackets), at its rule "
-        "setting and at its best over its sweep (settings in the next table). Tree scenes"
+        "setting and at its best over its sweep (settings in the next table). Each damped "
+        "baseline runs twice: plain, and finished by the solver's own Newton as the default "
+        "solve is (`+ Newton`: its guarded takeover tried at a residual check at least "
+        "max(16, nv^2 / 4) steps after the last try, and its polish at the end; "
+        "`pinsettle::Solver::settleByNewton` and `polishRest`). `Newton, trust region` is "
+        "Newton's method from the start, globalised by a trust region on the potential energy "
+        "(negative curvature included; `benchmarks/baselines.cpp`). These times come from each "
+        "method's own runs, one after another; the interleaved timing below times every "
+        "method's best again, in rounds. Tree scenes"
         + (f", `{'`, `'.join(apart)}` apart (below)" if apart else "")
         + ".\n\n"
         + table(head, rows, right=tuple(range(1, len(head))))
         + "\n"
         + "\n".join(comparison_bullet(results, names, family) for family in BASELINES)
         + "\n\n"
+        + interleaved_section(results, names)
         + settings_table(results)
         + sweep_tables(results)
         + apart_section(results)
     )
 
 
-def settings_table(results: D.Results) -> str:
-    rows = []
-    for name, d in results.scenes.items():
-        if not d.baseline_sweep:
+def interleaved_row(d: D.SceneData, name: str) -> list[str]:
+    """A scene's interleaved timing: KD's median over the rounds and each method's over KD's
+    (its spread over the rounds in brackets)."""
+    kd = d.interleaved.get("kd_default", [])
+    tk = statistics.median(kd) if kd else math.nan
+    cells = [f"`{name}`", f"{fmt_time(tk)} ({spread(kd)})" if kd else "-"]
+    for family in BASELINES:
+        times = [t for t in d.interleaved.get(family, []) if math.isfinite(t)]
+        if not times:
+            cells.append("-")
             continue
-        for family in BASELINES:
-            rule, best = d.runs[f"{family}_rule"], d.runs[f"{family}_best"]
-            e = rule.extra
-            fire = family in ("fire", "fire2")
-            coeffs = (
-                f"dt0 {e['dt']:.3g}, dt_max {e['dt_max']:.3g}"
-                if fire
-                else f"dt {e['dt']:.3g}, c {e['damping']:.3g} (omega {e['omega_rule']:.3g})"
-            )
-            retried = f"{e['halvings']} ({', '.join(e['retries'])})" if e["halvings"] else "0"
-            best_label = (
-                "the rule"
-                if best is rule
-                else D.setting_label(family, best.settings)
-                if time_to(best) is not None or best.status == "converged"
-                else "-"
-            )
-            edges = grid_edges(results.config.sweep(family), best.settings)
-            if best_label != "-" and edges:
-                best_label += f" (**on the grid's edge**: {', '.join(edges)})"
-            rows.append(
-                [
-                    f"`{name}`" if family == BASELINES[0] else "",
-                    D.BASELINE_LABELS[family],
-                    f"{e['limit']:.3g}",
-                    coeffs,
-                    f"{e['resets']:,}" if fire else "-",
-                    retried,
-                    best_label,
-                ]
-            )
+        cells.append(f"**{statistics.median(times) / tk:.2g}** ({spread(times)})")
+    return cells
+
+
+def spread(times: Sequence[float]) -> str:
+    """The spread of a method's round medians: (max - min) over their median."""
+    m = statistics.median(times)
+    return f"±{(max(times) - min(times)) / m / 2:.0%}" if m > 0 else "-"
+
+
+def interleaved_section(results: D.Results, names: list[str]) -> str:
+    timed = [n for n in names if results.scenes[n].interleaved]
+    if not timed:
+        return ""
+    rounds = results.config.interleave_rounds
+    head = ["scene", "KD (defaults)", *(D.BASELINE_LABELS[f] for f in BASELINES)]
+    rows = [interleaved_row(results.scenes[n], n) for n in timed]
+    lines = []
+    for n in timed:
+        found = fastest_interleaved(results.scenes[n])
+        if found is not None:
+            f, r = found
+            lines.append(f"`{n}` {D.BASELINE_LABELS[f]} {r:.2g}")
+    ends = [
+        f"`{n}` {run.stability}, {fmt_e(run.distance)} from KD's"
+        for n in timed
+        if (run := results.scenes[n].runs.get(f"{D.NEWTON_TR}_best")) is not None
+    ]
+    return (
+        "**Interleaved timing.** The default solve (C++, `benchmarks/kd_profile.cpp`, to its "
+        f"end) and every baseline at its best setting (to a residual of {LEVEL:g}) timed again "
+        f"in {rounds} rounds, each round in another order (rotated), each method a median of "
+        "up to 7 solves per round (fresh process, model loaded, then timed). KD's median over "
+        "the rounds, each method's over KD's in bold (below 1: faster than KD); in brackets "
+        "half the spread of the rounds' medians over their median; `-`: not converged.\n\n"
+        + table(head, rows, right=tuple(range(1, len(head))))
+        + "\n"
+        + ("Fastest peer per scene, over KD: " + "; ".join(lines) + ".\n\n" if lines else "")
+        + (
+            "Where Newton with a trust region ends (at its best setting): its verdict and its "
+            "distance to the rest KD's own run reached (the scene's reference): "
+            + "; ".join(ends)
+            + ". It descends the potential energy to a minimum; the mechanism, released, "
+            "follows its dynamics, and where there are several minima the two need not be "
+            "the same.\n\n"
+            if ends
+            else ""
+        )
+    )
+
+
+def settings_row(name: str, d: D.SceneData, family: str) -> list[str]:
+    """A baseline's rule run on a scene: its limit, steps and coefficients, resets, Newton
+    finish, retries and best setting (flagged on the edge of what its sweep tried)."""
+    rule, best = d.runs[f"{family}_rule"], d.runs[f"{family}_best"]
+    e = rule.extra
+    fire = D.baseline_method(family)[0] in ("fire", "fire2")
+    coeffs = (
+        f"radius {e['dt']:.3g}, at the end {e['dt_end']:.3g}"
+        if family == D.NEWTON_TR
+        else f"dt0 {e['dt']:.3g}, dt_max {e['dt_max']:.3g}"
+        if fire
+        else f"dt {e['dt']:.3g}, c {e['damping']:.3g} (omega {e['omega_rule']:.3g})"
+    )
+    retried = f"{e['halvings']} ({', '.join(e['retries'])})" if e["halvings"] else "0"
+    best_label = (
+        "the rule"
+        if best is rule
+        else D.setting_label(family, best.settings)
+        if time_to(best) is not None or best.status == "converged"
+        else "-"
+    )
+    edges = grid_edges([p.settings for p in d.baseline_sweep.get(family, [])], best.settings)
+    if best_label != "-" and edges:
+        best_label += f" (**on the grid's edge**: {', '.join(edges)})"
+    return [
+        f"`{name}`" if family == BASELINES[0] else "",
+        D.BASELINE_LABELS[family],
+        f"{e['limit']:.3g}",
+        coeffs,
+        f"{e['resets']:,}" if fire or family == D.NEWTON_TR else "-",
+        newton_cell(family, e),
+        retried,
+        best_label,
+    ]
+
+
+def settings_table(results: D.Results) -> str:
+    rows = [
+        settings_row(name, d, family)
+        for name, d in results.scenes.items()
+        if d.baseline_sweep
+        for family in BASELINES
+    ]
     return (
         "The rule runs: the explicit stability limit at the start (s), their steps and "
-        "coefficients (s; N m s/rad or 1/s; omega of the softest mode at the start, rad/s), "
-        "FIRE's velocity resets, the retries with the steps halved (and why), and the setting "
-        "that was best on the scene:\n\n"
+        "coefficients (s; N m s/rad or 1/s; omega of the softest mode at the start, rad/s; "
+        "Newton: its trust radius, rad or m), FIRE's velocity resets (Newton: its rejected "
+        "steps), the Newton takeovers tried and what ended the run, the retries with the steps "
+        "halved (and why), and the setting that was best on the scene; a best on the edge of "
+        "what its sweep tried is flagged (the sweep grows past an edge while its best sits "
+        "there, up to "
+        f"{results.config.sweep_extensions} times a setting, so a flag means the "
+        "extensions ran out):\n\n"
         + table(
-            ["scene", "baseline", "limit", "rule: steps and c", "resets", "retries", "best"],
+            [
+                "scene",
+                "baseline",
+                "limit",
+                "rule: steps and c",
+                "resets",
+                "Newton",
+                "retries",
+                "best",
+            ],
             rows,
-            right=(2, 4, 5),
+            right=(2, 4, 6),
         )
         + "\n"
     )
+
+
+def newton_cell(family: str, e: D.Record) -> str:
+    """A rule run's Newton finish: the takeovers tried and whether one ended the run."""
+    if not D.baseline_method(family)[1]:
+        return "-"
+    ended = "the takeover" if e.get("by_newton") else "its target, then the polish"
+    return f"{e.get('newton_tries', 0)} tried; ended by {ended}"
 
 
 def grid_edges(grid: Sequence[D.Record], settings: D.Record) -> list[str]:
@@ -1452,21 +1560,13 @@ def sweep_tables(results: D.Results) -> str:
         "`h` counts the retries with every step halved; the rule's cell in bold.\n\n"
     )
     for family in BASELINES:
-        settings = results.config.sweep(family)
+        settings = tried_settings(results, family)
         rows = []
         for name, d in results.scenes.items():
             points = d.baseline_sweep.get(family)
             if not points:
                 continue
-            cells = [f"`{name}`"]
-            for p in points:
-                cell = fmt_time(p.time_to) if p.time_to is not None else p.status
-                if p.halvings:
-                    cell += f", {p.halvings} h"
-                if p.settings == D.BASELINE_RULES[family]:
-                    cell = f"**{cell}**"
-                cells.append(cell)
-            rows.append(cells)
+            rows.append([f"`{name}`", *(sweep_cell(family, points, s) for s in settings)])
         text += (
             f"**{D.BASELINE_LABELS[family]}**\n\n"
             + table(
@@ -1477,6 +1577,29 @@ def sweep_tables(results: D.Results) -> str:
             + "\n"
         )
     return text
+
+
+def tried_settings(results: D.Results, family: str) -> list[D.Record]:
+    """Every setting a baseline's sweep tried on some scene (its grid and the extensions past
+    its edges), sorted."""
+    seen: list[D.Record] = []
+    for d in results.scenes.values():
+        seen += [p.settings for p in d.baseline_sweep.get(family, []) if p.settings not in seen]
+    return sorted(
+        seen,
+        key=lambda s: tuple(str(v) if isinstance(v, str) else f"{v:020.9f}" for v in s.values()),
+    )
+
+
+def sweep_cell(family: str, points: Sequence[D.SweepPoint], settings: D.Record) -> str:
+    """A sweep point's time to the level or why not; '' where the scene did not try it."""
+    p = next((p for p in points if p.settings == settings), None)
+    if p is None:
+        return ""
+    cell = fmt_time(p.time_to) if p.time_to is not None else p.status
+    if p.halvings:
+        cell += f", {p.halvings} h"
+    return f"**{cell}**" if p.settings == D.BASELINE_RULES[family] else cell
 
 
 def apart_section(results: D.Results) -> str:

@@ -77,6 +77,71 @@ def test_a_best_on_the_edge_of_its_sweep_grid_is_named():
     assert report_writer.grid_edges(fire, {"dt_max": 1.0, "metric": "mass"}) == []
 
 
+def _point(settings, seconds):
+    status = "converged" if seconds is not None else "diverged"
+    time = 1.0 if seconds is None else seconds
+    return report_data.SweepPoint(dict(settings), status, 1, time, 0.0, 0, [], 0, 0.0)
+
+
+def test_a_sweep_grows_past_the_edge_its_best_sits_on():
+    # A time with its minimum at dt_safety 1.25 and damping_factor 1 / 16: the grid
+    # (0.5, 0.8) x (0.25, 1) has its best in a corner, and the sweep grows past both edges
+    # (x 1.25, x 1 / 4) until the best is inside; runs past dt_safety 1.3 fail.
+    def run(settings):
+        s, f = settings["dt_safety"], settings["damping_factor"]
+        if s > 1.3:
+            return _point(settings, None)
+        return _point(settings, abs(math.log(s / 1.25)) + abs(math.log(f * 16)))
+
+    grid = [{"dt_safety": s, "damping_factor": f} for f in (0.25, 1.0) for s in (0.5, 0.8)]
+    points = report.sweep_inside(run, grid, extensions=4)
+    assert [p.settings for p in points][:4] == grid
+    best = report.fastest(points)
+    assert best.settings == {"dt_safety": 1.25, "damping_factor": 1 / 16}
+    tried = [p.settings for p in points]
+    assert {t["dt_safety"] for t in tried} == {0.5, 0.8, 1.0, 1.25, 1.5625}
+    assert {t["damping_factor"] for t in tried} == {1 / 64, 1 / 16, 0.25, 1.0}
+    assert report_writer.grid_edges(tried, best.settings) == []
+    assert len(tried) == len({tuple(sorted(t.items())) for t in tried})  # none twice
+    # With no extension left, the best stays on the edge, and the report names it.
+    points = report.sweep_inside(run, grid, extensions=0)
+    assert [p.settings for p in points] == grid
+    assert report_writer.grid_edges(grid, report.fastest(points).settings)
+
+
+def test_the_baselines_finish_with_the_solvers_newton_and_newton_is_a_peer(quick):
+    results, _, _ = quick
+    d = results.scenes["pendulum"]
+    for family in report_data.BASELINES:
+        method, newton = report_data.baseline_method(family)
+        run = d.runs[f"{family}_rule"]
+        if newton:
+            # The takeover was tried and ended the run at round-off (its rest the curve's last
+            # sample, one step after the last damped one).
+            assert run.extra["newton_tries"] >= 1 and run.extra["by_newton"], family
+            assert run.residual <= 1e-14, family
+            assert run.curve.residual[-1] <= 1e-14 and run.curve.steps[-1] == run.steps
+            plain = d.runs[f"{method}_rule"]
+            assert run.steps < plain.steps, family
+        else:
+            assert run.extra["newton_tries"] == 0 and not run.extra["by_newton"], family
+    tr = d.runs[f"{report_data.NEWTON_TR}_best"]
+    assert tr.status == "converged" and tr.stability == "stable"
+    assert tr.residual <= 1e-10
+
+
+def test_every_methods_best_is_timed_in_interleaved_rounds(quick):
+    results, _, _ = quick
+    d = results.scenes["pendulum"]
+    assert list(d.interleaved) == ["kd_default", *report_data.BASELINES]
+    for key, times in d.interleaved.items():
+        assert len(times) == results.config.interleave_rounds, key
+        assert all(0 < t < 1 for t in times), key
+    found = report_measures.fastest_interleaved(d)
+    assert found is not None and found[0] in report_data.BASELINES
+    assert not results.scenes["fourbar"].interleaved  # no baselines on a closed loop
+
+
 def test_the_report_and_its_figures_are_written(quick):
     results, output, _ = quick
     text = (output / "benchmarks.md").read_text()
@@ -397,17 +462,23 @@ def test_the_baselines_take_the_start_only_and_are_swept(quick):
     for family in report_data.BASELINES:
         rule = d.runs[f"{family}_rule"]
         assert rule.settings == report_data.BASELINE_RULES[family]
-        assert rule.extra["limit"] == pytest.approx(limit, rel=1e-9), family
-        assert 0 < rule.setup < rule.time, family
-        if family in ("fire", "fire2"):
+        method, newton = report_data.baseline_method(family)
+        if method == "newton":  # Newton from the start: no set-up, its first radius
+            assert rule.setup == 0 and rule.extra["dt"] == rule.settings["radius"]
+        else:
+            assert rule.extra["limit"] == pytest.approx(limit, rel=1e-9), family
+            assert 0 < rule.setup < rule.time, family
+        if method in ("fire", "fire2"):
             assert rule.extra["dt_max"] == pytest.approx(2.0 * limit, rel=1e-12)
             assert rule.extra["dt"] == pytest.approx(0.2 * limit, rel=1e-12)
         if family == "viscous":  # dampers taken implicitly: the undamped limit bounds the step
             safety = report_data.BASELINE_RULES[family]["dt_safety"]
             assert rule.extra["dt"] == pytest.approx(safety * limit, rel=1e-12)
-        # The sweep covers its settings, the rule among them; the best is its fastest.
+        # The sweep covers its grid, the rule among them, and what it grew past an edge; the
+        # best is its fastest.
         points = d.baseline_sweep[family]
-        assert [p.settings for p in points] == config.sweep(family)
+        grid = config.sweep(family)
+        assert [p.settings for p in points][: len(grid)] == grid
         assert report_data.BASELINE_RULES[family] in [p.settings for p in points]
         done = [p for p in points if p.time_to is not None]
         assert done, family
@@ -415,7 +486,7 @@ def test_the_baselines_take_the_start_only_and_are_swept(quick):
         best = d.runs[f"{family}_best"]
         assert best.settings == fastest.settings, family
         for p in points:
-            assert p.setup > 0 and p.seconds >= p.setup, family
+            assert (p.setup > 0 or method == "newton") and p.seconds >= p.setup, family
     # The loop scene has no baselines, said so.
     assert not results.scenes["fourbar"].baseline_sweep
 

@@ -777,13 +777,19 @@ namespace
   {
     Recorder recorder;
     recorder.every = std::max<long>(1, (timed.out.steps + spec.max_samples - 1) / spec.max_samples);
-    const Outcome recorded = run(model, forces, spec, timed.scale, recorder);
+    // The same steps without the clock: recording makes the run slower, and a timed run that
+    // ended just inside max_time would otherwise be replayed into its time limit.
+    Spec replay = spec;
+    replay.max_time = std::numeric_limits<double>::infinity();
+    replay.max_steps = timed.out.steps;
+    const Outcome recorded = run(model, forces, replay, timed.scale, recorder);
     recordFinalState(recorder, recorded);
     std::ofstream file(spec.samples_path, std::ios::binary);
     file.write(
       reinterpret_cast<const char *>(recorder.rows.data()),
       static_cast<std::streamsize>(recorder.rows.size() * sizeof(double)));
-    if (recorded.steps != timed.out.steps && timed.out.status != "time_limit")
+    const bool same_end = !timed.out.q.allFinite() || recorded.q == timed.out.q;
+    if (recorded.steps != timed.out.steps || !same_end)
       throw std::runtime_error("the recorded run took another path than the timed runs");
   }
 

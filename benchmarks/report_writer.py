@@ -1340,6 +1340,10 @@ def comparison_rows(results: D.Results, names: list[str]) -> list[list[str]]:
             for d in scenes
         ]
     ]
+    rows.append(
+        ["KD, its damping alone (takeover off, run to round-off)"]
+        + [baseline_cell(d, kd_key()) for d in scenes]
+    )
     for family in BASELINES:
         for kind in ("rule", "best"):
             label = f"{D.BASELINE_LABELS[family]}: {kind}"

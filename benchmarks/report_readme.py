@@ -107,6 +107,19 @@ def group_ratios(results: D.Results, families: tuple[str, ...]) -> dict[str, flo
     return out
 
 
+def same_rest(results: D.Results) -> str:
+    """On how many tree scenes Newton from the start ended at KD's rest (within 1e-8)."""
+    ends = [
+        run.distance
+        for name in compared(results)
+        if (run := results.scenes[name].runs.get(f"{D.NEWTON_TR}_best")) is not None
+    ]
+    same = sum(1 for x in ends if x <= 1e-8)
+    if same == len(ends):
+        return f"the same rest, to 1e-8, on all {len(ends)} scenes here"
+    return f"the same rest, to 1e-8, on {same} of the {len(ends)} scenes here"
+
+
 def readme_baseline_lines(results: D.Results) -> list[str]:
     parts = []
     for label, families in PEER_GROUPS.items():
@@ -122,12 +135,14 @@ def readme_baseline_lines(results: D.Results) -> list[str]:
     if not parts:
         return []
     lines = [
-        f"- **Peers at their best** (the same dynamics in C++, each swept over its own "
+        f"- **Peers at their best** (C++ on the same Pinocchio model, each swept over its own "
         f"parameters, then every method's best timed again in "
         f"{results.config.interleave_rounds} interleaved rounds; time to a residual of "
         f"{LEVEL:g}, the fastest of each group per tree scene, over KD's defaults): "
         + "; ".join(parts)
-        + "."
+        + ". Newton from the start solves the statics directly and finds a minimum of the "
+        "potential energy near the start; pinsettle finds the rest the released mechanism comes "
+        f"to ({same_rest(results)})."
     ]
     if loop_scenes(results):
         lines.append(f"- The {trees_only(results)}.")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import report_data as D
 from report_format import geomean
-from report_goals import gallery_tally, goal4_rows, saddle_note, unfinished_chains
+from report_goals import gallery_tally, goal4_rows, unfinished_chains
 from report_measures import (
     LEVEL,
     ChainGrowth,
@@ -21,7 +21,6 @@ from report_measures import (
     energy_tally,
     kt_scores,
     loop_scenes,
-    mujoco_both,
     stops_ratio,
 )
 from report_writer import trees_only
@@ -149,20 +148,6 @@ def readme_baseline_lines(results: D.Results) -> list[str]:
     return lines
 
 
-def mujoco_line(results: D.Results) -> list[str]:
-    both = mujoco_both(results)
-    if not both:
-        return []
-    values = sorted(both.values())
-    return [
-        "- **MuJoCo at one setting** (the gallery's: a 1 ms step, damping 1 on every joint, "
-        "Euler; not MuJoCo at its best, which follows): its damped settle of the same URDF took "
-        f"{statistics.median(values):.0f} times pinsettle's time (median over the "
-        f"{len(values)} robots both settle; "
-        f"{values[0]:.1f} to {values[-1]:.0f})." + saddle_note(results, both)
-    ]
-
-
 def gallery_line(results: D.Results) -> list[str]:
     if not results.gallery:
         return []
@@ -199,7 +184,6 @@ README_LINES = (
     energy_line,
     kt_line,
     readme_baseline_lines,
-    mujoco_line,
     gallery_line,
     overhead_line,
     chains_line,

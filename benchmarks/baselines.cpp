@@ -310,8 +310,7 @@ namespace
     // max |tau_static(q)|, leaving tau_static in w_.force.
     double residual()
     {
-      bench::staticForce(model_, elements_, w_);
-      return w_.force.lpNorm<Eigen::Infinity>();
+      return bench::staticResidual(model_, elements_, w_);
     }
 
     // FIRE and ADR need the static force at every step; viscous damping checks every
@@ -525,46 +524,47 @@ namespace
     // eigenvalue when `hard` (the hard case, where g has no part along them).
     const double lowest = lambda[0];
     const double g_norm = gt.norm();
+    auto isLowest = [&](Eigen::Index k) {
+      return lambda[k] - lowest <= 1e-12 * std::abs(lowest) + 1e-300;
+    };
     auto coefficients = [&](double sigma, bool hard) {
       Eigen::VectorXd c(gt.size());
       for (Eigen::Index k = 0; k < gt.size(); ++k)
-        c[k] = hard && lambda[k] - lowest <= 1e-12 * std::abs(lowest) + 1e-300
-                 ? 0.
-                 : -gt[k] / (lambda[k] + sigma);
+        c[k] = hard && isLowest(k) ? 0. : -gt[k] / (lambda[k] + sigma);
       return c;
     };
-    Eigen::VectorXd c;
-    if (lowest > 0. && (c = coefficients(0., false)).norm() <= radius)
-    {
-    }
-    else
-    {
+    // The coefficients of the step in U's basis.
+    auto step = [&]() -> Eigen::VectorXd {
+      if (lowest > 0.)
+      {
+        Eigen::VectorXd newton = coefficients(0., false);
+        if (newton.norm() <= radius)
+          return newton;
+      }
       const double floor = std::max(0., -lowest);
       // The hard case: g (almost) orthogonal to the lowest eigenvectors, and the step of the
       // shifted system with sigma = -lowest inside the region: move along them to its edge.
       double along = 0.;
       for (Eigen::Index k = 0; k < gt.size(); ++k)
-        if (lambda[k] - lowest <= 1e-12 * std::abs(lowest) + 1e-300)
+        if (isLowest(k))
           along += gt[k] * gt[k];
-      const Eigen::VectorXd inner = coefficients(floor, true);
+      Eigen::VectorXd inner = coefficients(floor, true);
       if (std::sqrt(along) <= 1e-12 * g_norm && inner.norm() <= radius && lowest <= 0.)
       {
-        c = inner;
-        c[0] += std::sqrt(std::max(radius * radius - inner.squaredNorm(), 0.));
+        inner[0] += std::sqrt(std::max(radius * radius - inner.squaredNorm(), 0.));
+        return inner;
       }
-      else
+      // |p(sigma)| falls from infinity at sigma = floor to g_norm / (lowest + sigma): bisect
+      // on 1 / |p| (nearly linear in sigma) between floor and floor + g_norm / radius.
+      double lo = floor, hi = floor + g_norm / radius + std::abs(lowest);
+      for (int k = 0; k < 200 && hi - lo > 1e-15 * std::max(1., hi); ++k)
       {
-        // |p(sigma)| falls from infinity at sigma = floor to g_norm / (lowest + sigma): bisect
-        // on 1 / |p| (nearly linear in sigma) between floor and floor + g_norm / radius.
-        double lo = floor, hi = floor + g_norm / radius + std::abs(lowest);
-        for (int k = 0; k < 200 && hi - lo > 1e-15 * std::max(1., hi); ++k)
-        {
-          const double mid = 0.5 * (lo + hi);
-          (coefficients(mid, false).norm() > radius ? lo : hi) = mid;
-        }
-        c = coefficients(hi, false);
+        const double mid = 0.5 * (lo + hi);
+        (coefficients(mid, false).norm() > radius ? lo : hi) = mid;
       }
-    }
+      return coefficients(hi, false);
+    };
+    const Eigen::VectorXd c = step();
     predicted = gt.dot(c) + 0.5 * c.dot(lambda.cwiseProduct(c));
     return U * c;
   }
@@ -635,9 +635,9 @@ namespace
         }
         else
         {
-          w_.q.swap(w_.q_next); // rejected: back to where it stood
+          w_.q.swap(w_.q_next); // rejected: back to where it stood, and to its force
+          w_.force = g;
           ++out_.resets;
-          this->residual();
         }
       }
       return finish("max_steps", step);
@@ -647,8 +647,7 @@ namespace
     // max |tau_static(q)| at w_.q, leaving tau_static (V's gradient) in w_.force.
     double residual()
     {
-      bench::staticForce(model_, elements_, w_);
-      return w_.force.lpNorm<Eigen::Infinity>();
+      return bench::staticResidual(model_, elements_, w_);
     }
 
     // V at q, reached from the start by the net motion (J); its terms' size in scale_.

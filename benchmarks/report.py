@@ -98,6 +98,7 @@ from report_data import (  # noqa: E402  (benchmarks/report_data.py: constants a
     DEEP_MAX_E,
     DT_SAFETY,
     DT_SWEEP_SECONDS,
+    INTERLEAVE_REPEATS,
     MAX_STEPS,
     REPEAT_BUDGET,
     RESIDUAL_LEVELS,
@@ -580,7 +581,7 @@ def run_baseline(
         dict(settings),
         out["status"],
         int(out["steps"]),
-        [s + loop for s, loop in zip(out["setup_times"], out["wall_times"], strict=True)],
+        _totals(out),
         statics.residual(q_final),
         statics.distance(target, q_final),
         land.stability,
@@ -591,11 +592,22 @@ def run_baseline(
     )
 
 
+def _totals(out: Record) -> list[float]:
+    """Each timed run's set-up and loop (s), from a baselines record."""
+    return [s + loop for s, loop in zip(out["setup_times"], out["wall_times"], strict=True)]
+
+
 def sweep_point(
-    program: Path, statics: Statics, family: str, settings: Record, work: Path, repeats: int
+    program: Path,
+    statics: Statics,
+    family: str,
+    settings: Record,
+    work: Path,
+    repeats: int,
+    repeat_budget: float = REPEAT_BUDGET / 2,
 ) -> SweepPoint:
     """A baseline with the given settings, stopped at the residual LEVEL (time to it: its
-    set-up and loop, median of the repeats)."""
+    set-up and loop, median of the repeats, no more once they took ``repeat_budget`` s)."""
     spec = write_spec(
         statics,
         work,
@@ -607,16 +619,15 @@ def sweep_point(
             f"max_steps {BASELINE_MAX_STEPS}",
             f"max_time {SWEEP_MAX_TIME}",
             f"repeats {repeats}",
-            f"repeat_budget {REPEAT_BUDGET / 2}",
+            f"repeat_budget {repeat_budget}",
         ],
     )
     out = run_program(program, spec)
-    totals = [s + loop for s, loop in zip(out["setup_times"], out["wall_times"], strict=True)]
     return SweepPoint(
         dict(settings),
         out["status"],
         int(out["steps"]),
-        statistics.median(totals),
+        statistics.median(_totals(out)),
         statistics.median(out["setup_times"]),
         out["halvings"],
         out["retries"],
@@ -938,35 +949,18 @@ def sweep_inside(
     grown = dict.fromkeys(SWEEP_GROWTH, 0)
     while (best := fastest(points)) is not None:
         # One setting at a time, so that the next grows with the values this one added.
-        key = next(
-            (
-                k
-                for k in best.settings
-                if k in SWEEP_GROWTH and grown[k] < extensions and _grown(points, best, k)
-            ),
-            None,
-        )
+        growable = (k for k in best.settings if k in SWEEP_GROWTH and grown[k] < extensions)
+        key, more = next(((k, m) for k in growable if (m := _grown(points, best, k))), (None, []))
         if key is None:
             break
         grown[key] += 1
-        points += [run(settings) for settings in _grown(points, best, key)]
+        points += [run(settings) for settings in more]
     return points
 
 
-#: Timed solves per method and round of the interleaved timing (fewer once they took half a
-#: second).
-INTERLEAVE_REPEATS = 7
-
-
-def _interleaved_baseline(program: Path, spec: Path) -> float:
-    out = run_program(program, spec)
-    if out["status"] != "converged":
-        return math.nan
-    return float(
-        statistics.median(
-            s + loop for s, loop in zip(out["setup_times"], out["wall_times"], strict=True)
-        )
-    )
+def _interleaved_baseline(run: Callable[[], SweepPoint]) -> float:
+    t = run().time_to
+    return math.nan if t is None else t
 
 
 def _interleaved_kd(program: Path, statics: Statics, work: Path) -> float:
@@ -989,21 +983,11 @@ def scene_interleaved(job: SceneJob, name: str) -> None:
         best = fastest(d.baseline_sweep.get(family, []))
         if best is None:
             continue
-        spec = write_spec(
-            s,
-            work,
-            "interleaved." + _tag(family, best.settings),
-            [
-                *_settings_lines(family, best.settings),
-                f"target {LEVEL * s.force_scale!r}",
-                "check_every 16",
-                f"max_steps {BASELINE_MAX_STEPS}",
-                f"max_time {SWEEP_MAX_TIME}",
-                f"repeats {INTERLEAVE_REPEATS}",
-                "repeat_budget 0.5",
-            ],
+        program = job.programs / "baselines"
+        runs[family] = partial(
+            _interleaved_baseline,
+            partial(sweep_point, program, s, family, best.settings, work, INTERLEAVE_REPEATS, 0.5),
         )
-        runs[family] = partial(_interleaved_baseline, job.programs / "baselines", spec)
     keys = list(runs)
     d.interleaved = {key: [] for key in keys}
     for r in range(job.config.interleave_rounds):

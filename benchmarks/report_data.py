@@ -63,6 +63,9 @@ BASELINE_MAX_TIME = 5.0
 BASELINE_SIDE_TIME = 2.0
 #: Timed repeats stop once they took this long in all (s): long runs are timed fewer times.
 REPEAT_BUDGET = 2.0
+#: Timed solves per method and round of the interleaved timing (fewer once they took half a
+#: second).
+INTERLEAVE_REPEATS = 7
 # pinsettle's solves of a gallery robot take well under a millisecond to a few: a median of 3,
 # timed from Python, was moved 2-3x by one slow call (ur3 160 us in one run, 438 in the next).
 GALLERY_KD_REPEATS = 21

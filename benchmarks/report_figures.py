@@ -14,10 +14,8 @@ from report_measures import LEVEL, measured_chains, solve_steps, solve_time, tim
 FLOOR = 1e-17
 
 
-STYLE_COLOR = {"viscous": "C1", "mass_damping": "C2", "adr": "C7", "fire": "C3", "fire2": "C6"}
-STYLE: dict[str, dict[str, Any]] = {
-    "kd_exact": dict(color="C0", ls="-", lw=2, label="KD, exact energy"),
-    "kd_simplified": dict(color="C0", ls="--", label="KD, simplified energy"),
+#: The damped baselines' plain runs, by run key.
+_DAMPED_STYLE: dict[str, dict[str, Any]] = {
     "viscous_rule": dict(color="C1", ls="-", label="viscous, joint dampers (rule)"),
     "viscous_best": dict(color="C1", ls="--", label="viscous, joint dampers (best)"),
     "mass_damping_rule": dict(color="C2", ls="-", label="viscous, mass-proportional (rule)"),
@@ -28,19 +26,21 @@ STYLE: dict[str, dict[str, Any]] = {
     "fire_best": dict(color="C3", ls="--", label="FIRE (best)"),
     "fire2_rule": dict(color="C6", ls="-", label="FIRE 2.0 (rule)"),
     "fire2_best": dict(color="C6", ls="--", label="FIRE 2.0 (best)"),
+}
+STYLE: dict[str, dict[str, Any]] = {
+    "kd_exact": dict(color="C0", ls="-", lw=2, label="KD, exact energy"),
+    "kd_simplified": dict(color="C0", ls="--", label="KD, simplified energy"),
+    **_DAMPED_STYLE,
+    # The same finished by the solver's Newton: their colour, dotted.
     **{
         f"{family}{D.NEWTON_SUFFIX}_{kind}": dict(
-            color=STYLE_COLOR[family],
+            _DAMPED_STYLE[f"{family}_{kind}"],
             ls=":" if kind == "rule" else "-.",
-            label=f"{label} + Newton ({kind})",
+            label=_DAMPED_STYLE[f"{family}_{kind}"]["label"].replace(
+                f" ({kind})", f" + Newton ({kind})"
+            ),
         )
-        for family, label in (
-            ("viscous", "viscous, joint dampers"),
-            ("mass_damping", "viscous, mass-proportional"),
-            ("adr", "adaptive DR"),
-            ("fire", "FIRE"),
-            ("fire2", "FIRE 2.0"),
-        )
+        for family in D.DAMPED_LABELS
         for kind in ("rule", "best")
     },
     "newton_tr_rule": dict(

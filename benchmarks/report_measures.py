@@ -290,18 +290,25 @@ def mujoco_saddle_stops(gallery: list[D.Record], both: dict[str, float]) -> list
     ]
 
 
-def fastest_interleaved(d: D.SceneData) -> tuple[str, float] | None:
-    """The fastest peer in the interleaved timing and its median over KD's."""
+def interleaved_ratios(d: D.SceneData) -> dict[str, float]:
+    """Each peer's median over KD's in the interleaved timing, where every round converged."""
     kd = d.interleaved.get("kd_default", [])
-    medians = {
-        f: statistics.median(ts)
+    if not kd:
+        return {}
+    return {
+        f: statistics.median(ts) / statistics.median(kd)
         for f, ts in d.interleaved.items()
         if f != "kd_default" and ts and all(math.isfinite(t) for t in ts)
     }
-    if not kd or not medians:
+
+
+def fastest_interleaved(d: D.SceneData) -> tuple[str, float] | None:
+    """The fastest peer in the interleaved timing and its median over KD's."""
+    ratios = interleaved_ratios(d)
+    if not ratios:
         return None
-    f = min(medians, key=lambda k: medians[k])
-    return f, medians[f] / statistics.median(kd)
+    f = min(ratios, key=lambda k: ratios[k])
+    return f, ratios[f]
 
 
 def fastest_baseline(d: D.SceneData, family: str) -> tuple[float, int | None, int] | None:

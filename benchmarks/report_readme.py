@@ -19,6 +19,7 @@ from report_measures import (
     cost_median,
     cost_ratio,
     energy_tally,
+    interleaved_ratios,
     kt_scores,
     loop_scenes,
     stops_ratio,
@@ -94,15 +95,9 @@ def group_ratios(results: D.Results, families: tuple[str, ...]) -> dict[str, flo
     """Per tree scene, the group's fastest in the interleaved timing over KD's defaults."""
     out = {}
     for name in compared(results):
-        d = results.scenes[name]
-        kd = d.interleaved.get("kd_default")
-        times = [
-            statistics.median(ts)
-            for f in families
-            if (ts := d.interleaved.get(f)) and all(math.isfinite(t) for t in ts)
-        ]
-        if kd and times:
-            out[name] = min(times) / statistics.median(kd)
+        ratios = interleaved_ratios(results.scenes[name])
+        if group := [ratios[f] for f in families if f in ratios]:
+            out[name] = min(group)
     return out
 
 

@@ -1446,7 +1446,8 @@ def interleaved_section(results: D.Results, names: list[str]) -> str:
         "**Interleaved timing.** The default solve (C++, `benchmarks/kd_profile.cpp`, to its "
         f"end) and every baseline at its best setting (to a residual of {LEVEL:g}) timed again "
         f"in {rounds} rounds, each round in another order (rotated), each method a median of "
-        "up to 7 solves per round (fresh process, model loaded, then timed). KD's median over "
+        f"up to {D.INTERLEAVE_REPEATS} solves per round (fresh process, model loaded, then "
+        "timed). KD's median over "
         "the rounds, each method's over KD's in bold (below 1: faster than KD); in brackets "
         "half the spread of the rounds' medians over their median; `-`: not converged.\n\n"
         + table(head, rows, right=tuple(range(1, len(head))))

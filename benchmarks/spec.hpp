@@ -264,6 +264,14 @@ namespace bench
     w.force -= w.tau;
   }
 
+  // max |tau_static(q)| at w.q (N m or N), leaving tau_static in w.force.
+  inline double staticResidual(
+    const pinocchio::Model & model, const pinsettle::ForceElements * elements, Workspace & w)
+  {
+    staticForce(model, elements, w);
+    return w.force.lpNorm<Eigen::Infinity>();
+  }
+
   // Forward dynamics at (q, v) with the applied efforts in w.tau (and w.fext): w.data.ddq. In
   // the world convention, as the solver's step: the faster one, for every method alike.
   inline void forwardDynamics(

@@ -828,6 +828,40 @@ def test_the_contact_part_says_when_mujoco_is_missing(monkeypatch):
     assert "| not installed | - |" in text and "\n\n\n" not in text
 
 
+@pytest.mark.parametrize("integrator", ["Euler", "implicitfast", "implicit"])
+def test_mujocos_damped_step_is_the_momentum_descent_the_report_says(integrator):
+    # The MuJoCo section explains its best settings by the step it takes with joint damping D:
+    # v+ = (M + hD)^-1 (M v + h f), q+ = q + h v+, D taken implicitly by all three integrators.
+    # From rest (no Coriolis force, f = gravity's) one step of MuJoCo itself must match it.
+    pytest.importorskip("mujoco")
+    import gallery
+    import mujoco
+    import mujoco_best
+
+    m, why, _ = gallery.load_mujoco(pinsettle.robot_urdf("ur5"))
+    assert m is not None, why
+    diag = mujoco_best.mass_diagonal(m)
+    setting = mujoco_best.Setting(0.3, integrator, "mass", 2.0)
+    mujoco_best.configure(m, setting, diag)
+    d = mujoco.MjData(m)
+    d.qpos[:] = [0.3, -1.0, 0.8, 0.2, -0.5, 0.1]  # inside the limits: no constraint force
+    mujoco.mj_forward(m, d)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, mass)
+    h, damping = setting.timestep, np.diag(setting.value * diag)
+    expected_v = np.linalg.solve(mass + h * damping, -h * d.qfrc_bias)
+    q = d.qpos.copy()
+    mujoco.mj_step(m, d)
+    assert np.allclose(d.qvel, expected_v, rtol=1e-9, atol=1e-12)
+    assert np.allclose(d.qpos, q + h * expected_v, rtol=1e-12, atol=1e-12)
+    # The momentum the section quotes for this setting, h a = 0.6: about 1 / (1 + h a).
+    assert mujoco_best.damping_per_step(setting, diag) == pytest.approx(0.6)
+    uniform = setting._replace(kind="uniform", value=0.5)
+    assert mujoco_best.damping_per_step(uniform, diag) == pytest.approx(
+        np.median(0.3 * 0.5 / diag)
+    )
+
+
 def test_mujocos_stopping_rule_is_the_static_residual_pinocchio_gives():
     # benchmarks/mujoco_best.py stops MuJoCo at the same static residual as pinsettle: M qacc
     # at zero velocity. Off the limits that is gravity's generalized force, recomputed here by

@@ -258,18 +258,13 @@ def pair_slope(a: D.Record, b: D.Record) -> float:
     return slope([a["n"], b["n"]], [solve_time(a), solve_time(b)])
 
 
-def mujoco_ratio(row: D.Record) -> float | None:
-    """MuJoCo's wall time over KD's on a robot both settle; None otherwise."""
-    mj = row["mujoco"]
-    if mj.get("status") != "settled" or row["status"] != "converged":
-        return None
-    return float(statistics.median(mj["seconds"]) / statistics.median(row["seconds"]))
-
-
-def mujoco_both(results: D.Results) -> dict[str, float]:
-    """MuJoCo's time over pinsettle's, on the robots both settle."""
-    ratios = {r["name"]: mujoco_ratio(r) for r in results.gallery}
-    return {n: x for n, x in ratios.items() if x is not None}
+def mujoco_settled(results: D.Results) -> list[str]:
+    """The robots both pinsettle and MuJoCo's damped settle at the gallery's setting settle."""
+    return [
+        r["name"]
+        for r in results.gallery
+        if r["mujoco"].get("status") == "settled" and r["status"] == "converged"
+    ]
 
 
 def settled_inside(results: D.Results) -> list[str]:
@@ -281,7 +276,7 @@ def settled_inside(results: D.Results) -> list[str]:
     ]
 
 
-def mujoco_saddle_stops(gallery: list[D.Record], both: dict[str, float]) -> list[str]:
+def mujoco_saddle_stops(gallery: list[D.Record], both: list[str]) -> list[str]:
     """The robots both settle (``both``) where MuJoCo's settle ended on an unstable rest."""
     return [
         r["name"]

@@ -41,7 +41,6 @@ from report_format import (
     table,
 )
 from report_goals import (
-    goal3_paragraph,
     goal4_verdict,
     goals_section,
     saddle_note,
@@ -65,8 +64,6 @@ from report_measures import (
     kt_scores,
     loop_cost_ratio,
     loop_scenes,
-    mujoco_both,
-    mujoco_ratio,
     overhead_rows,
     pair_slope,
     ratio_to_kd,
@@ -1773,7 +1770,6 @@ def mujoco_cells(mj: D.Record, scale: float) -> list[str]:
 def gallery_row(r: D.Record) -> list[str]:
     scale = r["force_scale"]
     rel = r["residual"] / scale if scale > 0 else math.nan
-    ratio = mujoco_ratio(r)
     return [
         f"`{r['name']}`",
         str(r["nv"]),
@@ -1785,7 +1781,6 @@ def gallery_row(r: D.Record) -> list[str]:
         fmt_e(rel if scale > 0 else r["residual"]),
         "yes" if r["outside"] <= 0 else f"**no** ({r['outside']:.1e})",
         *mujoco_cells(r["mujoco"], scale),
-        f"**{ratio:.0f}**" if ratio is not None else "-",
     ]
 
 
@@ -1806,7 +1801,6 @@ GALLERY_COLUMNS = (
     "past a limit",
     "MuJoCo rests",
     "distance",
-    "MuJoCo / KD",
 )
 
 
@@ -1827,7 +1821,9 @@ def gallery_intro(results: D.Results) -> str:
         "freely, as `pinocchio.buildModelFromUrdf` does by default: the Panda's and Baxter's "
         "fingers, Talos' grippers), sets joint damping "
         f"{D.MUJOCO_DAMPING:g} on every degree of freedom and a "
-        f"{D.MUJOCO_TIMESTEP * 1e3:g} ms step as its users do, keeps its URDF limits (MuJoCo "
+        f"{D.MUJOCO_TIMESTEP * 1e3:g} ms step (one setting for every robot, to compare where "
+        "the two come to rest; MuJoCo's speed is compared at its best, per robot, in its own "
+        "part below: at this setting its time says nothing of it), keeps its URDF limits (MuJoCo "
         "honours them; equal limits are none, as in pinsettle) and steps from qpos = 0 "
         "(pinsettle's neutral; MuJoCo's soft limits push a start outside them back). "
         f"**Settled**: max |qvel| <= {D.MUJOCO_QVEL:g} (rad/s or m/s) and max |qacc| <= "
@@ -1841,8 +1837,7 @@ def gallery_intro(results: D.Results) -> str:
         "independent stiffness restricted to the joints off their stops: MuJoCo's criterion "
         "also accepts a balance on a saddle) and its distance from pinsettle's rest (max |dq|, "
         "rad or m: near 0 for the same rest; a robot with neutral directions, such as a base "
-        "turning freely, may come to another rest of the same family). Last column: MuJoCo's "
-        "time over pinsettle's.\n\n"
+        "turning freely, may come to another rest of the same family).\n\n"
     )
 
 
@@ -1876,17 +1871,16 @@ def gallery_section(results: D.Results, figures: str) -> str:
         for r in results.gallery
         if r["mujoco"].get("status") == "cannot load"
     ]
-    both = mujoco_both(results)
     text = (
         gallery_intro(results)
-        + table(GALLERY_COLUMNS, rows, right=(1, 3, 4, 7, 10, 11, 12, 13, 15, 16))
+        + table(GALLERY_COLUMNS, rows, right=(1, 3, 4, 7, 10, 11, 12, 13, 15))
         + "\n"
         f"pinsettle converged inside the limits (independent check) and not on an unstable rest "
         f"on {len(settled_inside(results))} of {len(results.gallery)} robots."
     )
     if failed:
         text += " MuJoCo cannot load " + "; ".join(failed) + "."
-    text += saddle_note(results, both) + goal3_paragraph(both)
+    text += saddle_note(results)
     return text + f"\n\n![gallery]({figures}/gallery.png)\n\n" + floating_table(results)
 
 

@@ -638,7 +638,11 @@ def test_the_gallery_checks_every_robot_independently(quick):
         assert mj["steps"] > 0 and statistics.median(mj["seconds"]) > 0, name
         assert mj["residual"] <= 1e-2 * max(rows[name]["force_scale"], 1.0), name
         assert mj["outside"] <= 1e-2, name
-    assert "**Goal 3 of issue 20**" in text
+    # MuJoCo runs at one setting here: the answers are compared, its time is no speed claim
+    # (no ratio, no goal on it; that is MuJoCo at its best, benchmarks/mujoco_best.py).
+    gallery = text.split("<!-- report:gallery", 1)[1].split("<!-- /report:gallery -->", 1)[0]
+    assert "MuJoCo / KD" not in gallery and "times pinsettle's" not in gallery
+    assert "as its users do" not in gallery and "its time says nothing of it" in gallery
 
 
 def test_the_loop_scene_is_measured_on_the_closed_mechanism(quick):
@@ -857,9 +861,7 @@ def test_mujocos_damped_step_is_the_momentum_descent_the_report_says(integrator)
     # The momentum the section quotes for this setting, h a = 0.6: about 1 / (1 + h a).
     assert mujoco_best.damping_per_step(setting, diag) == pytest.approx(0.6)
     uniform = setting._replace(kind="uniform", value=0.5)
-    assert mujoco_best.damping_per_step(uniform, diag) == pytest.approx(
-        np.median(0.3 * 0.5 / diag)
-    )
+    assert mujoco_best.damping_per_step(uniform, diag) == pytest.approx(np.median(0.3 * 0.5 / diag))
 
 
 def test_mujocos_stopping_rule_is_the_static_residual_pinocchio_gives():

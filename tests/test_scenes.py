@@ -151,7 +151,7 @@ EXPECTED = {
     ),
     "xarm7": Expected(
         {
-            "joint1": "-0.007095",
+            "joint1": "-0.003254",
             "joint2": "2.0944",
             "joint3": "0.045640",
             "joint4": "1.802980",
@@ -171,12 +171,12 @@ EXPECTED = {
     "slider_spring": Expected({"slider": "-0.03924"}, ("500",)),
     "ur5": Expected(
         {
-            "shoulder_pan_joint": "-0.1381",
+            "shoulder_pan_joint": "-0.1385",
             "shoulder_lift_joint": "1.570796",
             "elbow_joint": "0",
             "wrist_1_joint": "-1.570796",
-            "wrist_2_joint": "-0.1381",
-            "wrist_3_joint": "-0.0012",
+            "wrist_2_joint": "-0.1385",
+            "wrist_3_joint": "0.0409",
         },
         ("0", "0", "0", "0.1725", "10.69", "64.51"),
         neutral=("shoulder_pan_joint", "wrist_2_joint", "wrist_3_joint"),
@@ -499,8 +499,10 @@ def test_energy_the_step_made_is_no_runaway(name, overrides, solved):
     # `no_equilibrium`. But gravity and the springs did a tiny fraction of that work on the
     # way: such a runaway is rolled back with the step halved, and the mechanism settles at the
     # rest the default settings find (checked by the reference physics).
+    # Newton's takeover off: the guard is the damping's (with it, ur5_tool_spring is taken to
+    # its rest at step 13, before its step makes any energy).
     scene, default, ref = solved(name)
-    result = pinsettle.solve(scene, **overrides)
+    result = pinsettle.solve(scene, newton_takeover=False, **overrides)
     assert result.status == "converged", result.reason
     assert result.dt_reductions >= 1
     assert ref.rest_residual(result.q) < MAX_RESIDUAL

@@ -781,6 +781,22 @@ namespace pinsettle
     return true;
   }
 
+  bool Solver::isStalledAtRoundOff(
+    const NewtonRun & run,
+    const Eigen::VectorXd & dq,
+    double last_step,
+    const Eigen::VectorXd & tau0) const
+  {
+    // A step that no longer lowers a residual at the round-off of the forces, and at the rate of
+    // the last one below the round-off of q: Newton has converged (a quadratic stride can land
+    // there before iterateNewton's own test sees a small step). A stall short of it (a reaction
+    // Newton cannot balance: a car on its tyres at 1e-4 N) is no rest.
+    const double forces_scale =
+      std::max(tau0.lpNorm<Eigen::Infinity>(), computeGravityScale(model_));
+    return isAtRoundOff(dq.lpNorm<Eigen::Infinity>(), last_step, run.q)
+           && run.residual <= kHeldResidual * forces_scale;
+  }
+
   Solver::NewtonRun Solver::iterateNewton(
     const Eigen::VectorXd & q0,
     const Eigen::VectorXd & tau0,
@@ -814,7 +830,10 @@ namespace pinsettle
       }
       const Eigen::VectorXd dq = newtonStep(here, report, run.tau);
       if (!takeNewtonStep(run, dq, forces, q_next))
+      {
+        run.at_round_off = isStalledAtRoundOff(run, dq, last_step, tau0);
         break;
+      }
       if (
         max_move < std::numeric_limits<double>::infinity()
         && pinocchio::difference(model_, q0, run.q).lpNorm<Eigen::Infinity>() > max_move)

@@ -921,6 +921,20 @@ BOOST_AUTO_TEST_CASE(newton_from_another_methods_state_takes_over_near_a_rest_on
   BOOST_CHECK(took->stability == rest.stability);
   BOOST_CHECK_LT(pinocchio::difference(model, rest.q, took->q).lpNorm<Eigen::Infinity>(), 1e-9);
 
+  // So close that Newton's first stride lands at round-off, and the next step, already at the
+  // round-off of q, no longer lowers the residual: converged, taken (it was once counted a
+  // stall, and the run damped on for twice the steps).
+  for (const double c : {0.005, 0.02})
+  {
+    const Eigen::VectorXd closer = pinocchio::integrate(model, rest.q, c / 0.05 * off);
+    const std::optional<pinsettle::Solver::NewtonRest> at = solver.settleByNewton(closer, settings);
+    BOOST_REQUIRE_MESSAGE(at, "not taken " << c << " rad off");
+    BOOST_CHECK_GE(at->iterations, 1);
+    BOOST_CHECK_LT(
+      pinocchio::computeGeneralizedGravity(model, data, at->q).lpNorm<Eigen::Infinity>(), 1e-12);
+    BOOST_CHECK_LT(pinocchio::difference(model, rest.q, at->q).lpNorm<Eigen::Infinity>(), 1e-9);
+  }
+
   // The polish of a rest to 1e-4 rad: closer to exact, the same rest.
   const Eigen::VectorXd rough = pinocchio::integrate(model, rest.q, 2e-3 * off);
   const pinsettle::Solver::NewtonRest polished = solver.polishRest(rough);

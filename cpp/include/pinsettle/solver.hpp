@@ -294,6 +294,14 @@ namespace pinsettle
       int iterations;
       bool at_round_off; // ended at round-off (or a zero residual), not by a stall or the count
     };
+    // Whether a Newton step dq that did not lower run's residual ends the run at round-off: the
+    // step small at the rate of the last (isAtRoundOff), the residual at most kHeldResidual of
+    // the forces' scale (the static force tau0 where the run began, the weight's moment).
+    bool isStalledAtRoundOff(
+      const NewtonRun & run,
+      const Eigen::VectorXd & dq,
+      double last_step,
+      const Eigen::VectorXd & tau0) const;
     // Newton's step on the motions here's basis spans (every motion without constraints):
     // K ds = -B^T tau, dq = B ds, by least squares with report's rank cut.
     Eigen::VectorXd newtonStep(

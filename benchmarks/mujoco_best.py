@@ -55,8 +55,8 @@ AFTER = "<!-- /report:gallery -->"
 
 TIMESTEPS = (1e-3, 2e-3, 5e-3, 10e-3, 20e-3, 50e-3, 100e-3, 200e-3, 500e-3, 1.0, 2.0, 5.0)
 INTEGRATOR_NAMES = ("Euler", "implicitfast", "implicit")
-UNIFORM = (0.03, 0.1, 0.3, 1.0, 3.0, 10.0)
-MASS = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)
+UNIFORM = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0)
+MASS = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)
 GRIDS = {"uniform": UNIFORM, "mass": MASS}
 LEVELS = (1e-6, 1e-8, 1e-10)
 CHUNK = 10
@@ -89,8 +89,8 @@ class Setting(NamedTuple):
     value: float
 
     def label(self) -> str:
-        damping = f"c = {self.value:g}" if self.kind == "uniform" else f"a = {self.value:g}/s"
-        return f"{self.timestep * 1e3:g} ms, {self.integrator}, {damping}"
+        damping = f"c = {self.value:.10g}" if self.kind == "uniform" else f"a = {self.value:.10g}/s"
+        return f"{self.timestep * 1e3:.10g} ms, {self.integrator}, {damping}"
 
 
 def sweep_settings() -> list[Setting]:
@@ -211,9 +211,21 @@ def sweep(m: Any) -> tuple[list[tuple[Setting, dict[str, Any]]], float]:
 
 
 #: The local search after the grid: factors on the timestep and the damping (log steps),
-#: largest first; at most REFINE_EVALS runs a robot.
+#: largest first; at most REFINE_EVALS runs from each integrator's best.
 REFINE_FACTORS = (2.0**0.5, 2.0**0.25, 2.0**0.125)
 REFINE_EVALS = 40
+WEIGHT_STEPS = 500  # steps timed for each integrator's cost of a step
+
+
+def step_costs(m: Any, diag: np.ndarray) -> dict[str, float]:
+    """Each integrator's cost of a step relative to Euler's on this robot (WEIGHT_STEPS steps
+    from the start at 10 ms, mass-proportional damping 1/s; medians of TIME_REPEATS): an
+    implicit step can cost twice an Euler step, so the fewest steps need not be the fastest."""
+    costs = {}
+    for name in INTEGRATOR_NAMES:
+        configure(m, Setting(10e-3, name, "mass", 1.0), diag)
+        costs[name] = statistics.median(time_steps(m, WEIGHT_STEPS, TIME_REPEATS)[0])
+    return {name: costs[name] / costs["Euler"] for name in INTEGRATOR_NAMES}
 
 
 def refine(
@@ -222,17 +234,20 @@ def refine(
     check: Checker,
     valid: Callable[[np.ndarray], bool],
 ) -> list[tuple[Setting, dict[str, Any]]]:
-    """A pattern search from the grid's fewest steps to LEVELS[-1] at a valid rest: the
-    timestep and the damping each multiplied and divided by a factor, moving to the best
-    neighbour while one takes fewer steps, then a smaller factor (the integrator and the kind
-    of damping kept; a step costs the same whatever its length and damping, so fewer steps is
-    faster). The grid's spacing (2 to 2.5 times in the step, about 3 in the damping) could
-    otherwise leave a best between its points. Returns the runs it made."""
+    """A pattern search from each integrator's fastest grid point to LEVELS[-1] at a valid
+    rest: the timestep and the damping each multiplied and divided by a factor, or the
+    integrator swapped, moving to the best neighbour while one is faster, then a smaller factor
+    (the kind of damping kept). Faster: fewer steps times the integrator's cost of a step
+    (step_costs; a step costs the same whatever its length and damping). The grid's spacing
+    (2 to 2.5 times in the step, about 3 in the damping) could otherwise leave a best between
+    its points.
+    Returns the runs it made."""
     diag, level = mass_diagonal(m), LEVELS[-1]
+    weight = step_costs(m, diag)
     made: list[tuple[Setting, dict[str, Any]]] = []
     seen = {setting: r for setting, r in runs}
 
-    def steps(setting: Setting) -> float:
+    def cost(setting: Setting) -> float:
         if setting not in seen:
             configure(m, setting, diag)
             seen[setting] = run(m, check)
@@ -241,38 +256,72 @@ def refine(
         if level not in r["first"]:
             return math.inf
         configure(m, setting, diag)
-        return r["first"][level] if valid(time_steps(m, r["first"][level], 1)[1]) else math.inf
+        if not valid(time_steps(m, r["first"][level], 1)[1]):
+            return math.inf
+        return float(r["first"][level] * weight[setting.integrator])
 
-    reached = sorted((r["first"][level], s) for s, r in runs if level in r["first"])
-    start = next((s for _, s in reached if steps(s) < math.inf), None)
-    if start is None:
-        return made
-    here, best = start, steps(start)
-    for factor in REFINE_FACTORS:
-        while len(made) < REFINE_EVALS:
-            around = [here._replace(timestep=here.timestep * f) for f in (factor, 1 / factor)] + [
-                here._replace(value=here.value * f) for f in (factor, 1 / factor)
-            ]
-            scored = min(((steps(s), s) for s in around), key=lambda x: x[0])
-            if not scored[0] < best:
-                break
-            best, here = scored
+    for name in INTEGRATOR_NAMES:
+        reached = sorted(
+            (r["first"][level], s) for s, r in runs if level in r["first"] and s.integrator == name
+        )
+        start = next((s for _, s in reached if cost(s) < math.inf), None)
+        if start is not None:
+            descend(start, cost, len(made) + REFINE_EVALS, lambda: len(made))
     return made
 
 
+def descend(
+    start: Setting, cost: Callable[[Setting], float], until: int, made: Callable[[], int]
+) -> None:
+    """The pattern search's moves from ``start`` while the runs made stay below ``until``."""
+    here, best = start, cost(start)
+    for factor in REFINE_FACTORS:
+        while made() < until:
+            around = [here._replace(timestep=here.timestep * f) for f in (factor, 1 / factor)]
+            around += [here._replace(value=here.value * f) for f in (factor, 1 / factor)]
+            # The same step and damping with another integrator: often as many steps, and an
+            # Euler step is the cheapest.
+            around += [
+                here._replace(integrator=n) for n in INTEGRATOR_NAMES if n != here.integrator
+            ]
+            scored = min(((cost(s), s) for s in around), key=lambda x: x[0])
+            if not scored[0] < best:
+                break
+            best, here = scored
+
+
+def exact_first(m: Any, check: Checker, steps: int, level: float) -> int:
+    """The first step at ``level`` of a run (``m`` configured) whose check every CHUNK steps
+    first found it at ``steps``: the last CHUNK steps again one at a time."""
+    d = mujoco.MjData(m)
+    before = max(steps - CHUNK, 0)
+    if before:
+        mujoco.mj_step(m, d, nstep=before)
+    for step in range(before + 1, steps):
+        mujoco.mj_step(m, d)
+        if check(d.qpos) <= level:
+            return step
+    return steps
+
+
 def best_run(
-    m: Any, runs: list[tuple[Setting, dict[str, Any]]], valid: Callable[[np.ndarray], bool]
+    m: Any,
+    runs: list[tuple[Setting, dict[str, Any]]],
+    valid: Callable[[np.ndarray], bool],
+    check: Checker,
 ) -> dict[str, Any] | None:
     """The fastest setting whose end is a valid rest (``valid``: inside the limits, not
-    unstable), at the tightest level such a setting reaches (None if none does)."""
+    unstable), at the tightest level such a setting reaches (None if none does); each run's
+    steps to it exact (exact_first), not a multiple of CHUNK."""
     diag = mass_diagonal(m)
     for level in reversed(LEVELS):
         once = []
         for setting, r in runs:
             if level in r["first"]:
                 configure(m, setting, diag)
-                seconds, qpos = time_steps(m, r["first"][level], 1)
-                once.append((seconds[0], setting, r["first"][level], qpos))
+                steps = exact_first(m, check, r["first"][level], level)
+                seconds, qpos = time_steps(m, steps, 1)
+                once.append((seconds[0], setting, steps, qpos))
         fine = [x for x in once if valid(x[3])]
         if fine:
             return timed_best(m, fine, diag) | {"level": level, "invalid": len(once) - len(fine)}
@@ -304,10 +353,10 @@ def timed_best(
 
 def edges(setting: Setting) -> list[str]:
     out = []
-    if setting.timestep in (TIMESTEPS[0], TIMESTEPS[-1]):
+    if not TIMESTEPS[0] < setting.timestep < TIMESTEPS[-1]:
         out.append(f"timestep {setting.timestep * 1e3:g} ms")
     grid = GRIDS[setting.kind]
-    if setting.value in (grid[0], grid[-1]):
+    if not grid[0] < setting.value < grid[-1]:
         out.append(f"{'c' if setting.kind == 'uniform' else 'a'} = {setting.value:g}")
     return out
 
@@ -385,8 +434,9 @@ def mujoco_side(urdf: Path, ref: CachedReference) -> dict[str, Any]:
 
     began = time.perf_counter()
     runs, scale = sweep(m)
-    refined = refine(m, runs, Checker(m, scale), valid)
-    best = best_run(m, runs + refined, valid)
+    check = Checker(m, scale)
+    refined = refine(m, runs, check, valid)
+    best = best_run(m, runs + refined, valid, check)
     return {
         "model": m,
         "scale": scale,
@@ -461,8 +511,8 @@ def _pct(fraction: float) -> str:
 
 def _damping(setting: Setting) -> str:
     if setting.kind == "uniform":
-        return f"c = {setting.value:g}"
-    return f"a = {setting.value:g}/s"
+        return f"c = {setting.value:.10g}"
+    return f"a = {setting.value:.10g}/s"
 
 
 def table_row(row: dict[str, Any]) -> str:
@@ -476,7 +526,7 @@ def table_row(row: dict[str, Any]) -> str:
         return f"| {row['name']} | {row['nv']} | {none} | {kd} | | | | |"
     s = best["setting"]
     return (
-        f"| {row['name']} | {row['nv']} | {s.timestep * 1e3:g} ms, {s.integrator}, "
+        f"| {row['name']} | {row['nv']} | {s.timestep * 1e3:.10g} ms, {s.integrator}, "
         f"{_damping(s)} | {best['level']:.0e} | {best['steps']} | {best['sim_time']:.3g} | "
         f"{_ms(best['seconds'])} ± {_pct(best['spread'])} | {counts} | {kd} | "
         f"{best['seconds'] / row['warm']:.2g} | {best['seconds'] / row['first']:.2g} | "
@@ -600,17 +650,22 @@ def prose() -> list[str]:
         f"in {{{steps}}} ms; integrator {', '.join(INTEGRATOR_NAMES)}; damping either the same "
         f"c in {{{', '.join(f'{c:g}' for c in UNIFORM)}}} on every degree of freedom or "
         f"c_i = a M_ii(q0) with a in {{{', '.join(f'{a:g}' for a in MASS)}}} 1/s (M_ii from "
-        "`mj_fullM` at the start). Then a local search from the grid's fewest steps to the "
-        "tightest level at a valid rest: the timestep and the damping each multiplied and "
-        f"divided by {', then '.join(f'{f:.3g}' for f in REFINE_FACTORS)}, moving while a "
-        f"neighbour takes fewer steps (at most {REFINE_EVALS} runs), so that no best lies "
-        "between the grid's points.",
+        "`mj_fullM` at the start). Then a local search from each integrator's fastest grid "
+        "point to the tightest level at a valid rest: the timestep and the damping each "
+        f"multiplied and divided by {', then '.join(f'{f:.3g}' for f in REFINE_FACTORS)}, or "
+        "the integrator swapped, moving while a neighbour is faster (its steps times the "
+        "integrator's cost of a step on "
+        f"that robot, timed over {WEIGHT_STEPS} steps: an implicit step can cost twice an Euler "
+        f"one), at most {REFINE_EVALS} runs from each, so that no best lies between the grid's "
+        "points.",
         "",
         f"Stopping rule, the same as pinsettle's: every {CHUNK} steps the configuration is "
         "copied to a scratch MjData with qvel = 0, `mj_forward` gives qacc, and the residual is "
         "max |M qacc| (`mj_mulM`), the net generalized force at rest there with the limits' "
         "constraint forces included, over the force scale max |qfrc_bias| at the start. A run "
-        f"records the first check at {', '.join(f'{x:g}' for x in LEVELS)} and ends at the "
+        f"records the first check at {', '.join(f'{x:g}' for x in LEVELS)} (for the best "
+        f"candidates then the exact step: the last {CHUNK} steps again, checked one at a time) "
+        "and ends at the "
         f"last, or at {MAX_STEPS} steps (to keep the run near a "
         f"quarter of an hour on one core) or {RUN_WALL:g} s of wall time, whichever "
         "comes first. The best setting is the fastest to the tightest level that a setting "

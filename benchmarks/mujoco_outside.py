@@ -195,7 +195,7 @@ def parse_section(text: str) -> list[Recorded]:
                 setting=parse_setting(cells[col["MuJoCo best setting"]]),
                 level=float(cells[col["level"]]),
                 steps=int(cells[col["steps"]]),
-                ms=float(cells[col["MuJoCo (ms)"]]),
+                ms=float(cells[col["MuJoCo (ms)"]].split("±")[0]),  # "0.364 ± 21%"
             )
         )
     return rows

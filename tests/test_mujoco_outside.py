@@ -101,7 +101,7 @@ SECTION = """\
 |---|---|---|---|---|---|---|---|
 | asr_twodof | 2 | 1 ms, Euler, c = 0.1 | 1e-10 | 10 | 0.01 | 0.0327 | x |
 | kinova | 6 | no valid rest reached 1e-06 | | | | | x |
-| xarm7 | 7 | 20 ms, Euler, a = 0.3/s | 1e-08 | 17020 | 340 | 95.9 | x |
+| xarm7 | 7 | 20 ms, Euler, a = 0.3/s | 1e-08 | 17020 | 340 | 95.9 ± 6% | x |
 
 Prose.
 <!-- /mujoco:best -->

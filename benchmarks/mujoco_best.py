@@ -47,6 +47,7 @@ import pinsettle
 from gallery import distance, load_mujoco, mujoco_q, rest_check
 from independent import CachedReference
 from python_overhead import fresh_process
+from report_format import half_spread
 from sweep_throughput import DOC, write
 
 BEGIN = "<!-- mujoco:best (written by benchmarks/mujoco_best.py) -->"
@@ -401,11 +402,6 @@ def interleaved(m: Any, steps: int | None, model: pinocchio.Model) -> dict[str, 
         "mujoco": statistics.median(mj) if mj else None,
         "mujoco_spread": half_spread(mj) if mj else None,
     }
-
-
-def half_spread(values: list[float]) -> float:
-    """Half the range of ``values`` over their median."""
-    return (max(values) - min(values)) / (2 * statistics.median(values))
 
 
 def pinsettle_first(name: str) -> float:

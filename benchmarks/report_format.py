@@ -19,6 +19,11 @@ def fmt_time(seconds: float | None) -> str:
     return f"{seconds * 1e6:.3g} us"
 
 
+def half_spread(values: Sequence[float]) -> float:
+    """Half the range of ``values`` over their median (of interleaved rounds' medians)."""
+    return (max(values) - min(values)) / (2 * statistics.median(values))
+
+
 def fmt_spread(values: Sequence[float], scale: float = 1.0) -> str:
     """Median (min-max) of values times scale, in a time unit."""
     vals = [v * scale for v in values]

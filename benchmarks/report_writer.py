@@ -35,6 +35,7 @@ from report_format import (
     fmt_steps,
     fmt_time,
     geomean,
+    half_spread,
     median_with_failures,
     plural,
     slope,
@@ -1417,8 +1418,7 @@ def interleaved_row(d: D.SceneData, name: str) -> list[str]:
 
 def spread(times: Sequence[float]) -> str:
     """The spread of a method's round medians: (max - min) over their median."""
-    m = statistics.median(times)
-    return f"±{(max(times) - min(times)) / m / 2:.0%}" if m > 0 else "-"
+    return f"±{half_spread(times):.0%}" if statistics.median(times) > 0 else "-"
 
 
 def interleaved_section(results: D.Results, names: list[str]) -> str:

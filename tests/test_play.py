@@ -251,34 +251,40 @@ def browser():
     return path
 
 
+def _run_chromium(browser: str, flags: list[str], url: str, tmp: Path) -> str | None:
+    """Headless Chromium on url with a profile of its own; its stdout, or None when it did not
+    finish within 90 s. Its whole process group is killed then: CI once saw a run on meshcat's
+    plain page hang for 120 s while the same page had loaded in the run before."""
+    profile = tmp / "chromium-profile"
+    shutil.rmtree(profile, ignore_errors=True)
+    args = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--use-gl=swiftshader"]
+    args += ["--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=800,600"]
+    args += [f"--user-data-dir={profile}", *flags, url]
+    proc = subprocess.Popen(
+        args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True
+    )
+    try:
+        out, _ = proc.communicate(timeout=90)
+        return out
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, 9)
+        proc.communicate()
+        return None
+
+
 def screenshot(browser: str, url: str, path: Path, budget_ms: int = 4000) -> np.ndarray:
-    """A screenshot of url (800x600) as an RGB array in [0, 1]; retried once (a cold
-    Chromium sometimes exits before writing)."""
+    """A screenshot of url (800x600) as an RGB array in [0, 1]; tried up to three times (a cold
+    Chromium sometimes exits before writing, or hangs)."""
     for _ in range(3):
         if path.exists():
             path.unlink()
-        subprocess.run(
-            [
-                browser,
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--use-gl=swiftshader",
-                "--enable-unsafe-swiftshader",
-                "--hide-scrollbars",
-                "--window-size=800,600",
-                f"--virtual-time-budget={budget_ms}",
-                f"--screenshot={path}",
-                url,
-            ],
-            capture_output=True,
-            timeout=120,
-        )
+        flags = [f"--virtual-time-budget={budget_ms}", f"--screenshot={path}"]
+        _run_chromium(browser, flags, url, path.parent)
         if path.exists():
             from matplotlib import image
 
             return image.imread(path)[:, :, :3]
-    pytest.fail(f"Chromium wrote no screenshot of {url}")
+    pytest.fail(f"Chromium wrote no screenshot of {url} in three tries")
 
 
 def drawn_fraction(pixels: np.ndarray) -> float:
@@ -327,18 +333,14 @@ def test_live_page_shows_the_robot(live, browser, tmp_path):
     assert drawn_fraction(pixels) > 0.002
 
 
-def page_dom(browser: str, url: str, budget_ms: int) -> str:
-    """The page's DOM after ``budget_ms`` of (virtual) time, as headless Chromium prints it."""
-    proc = subprocess.run(
-        [browser, "--headless", "--no-sandbox", "--disable-gpu", "--use-gl=swiftshader"]
-        + ["--enable-unsafe-swiftshader", "--window-size=800,600"]
-        + [f"--virtual-time-budget={budget_ms}", "--dump-dom", url],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert "<html" in proc.stdout, proc.stderr[-2000:]
-    return proc.stdout
+def page_dom(browser: str, url: str, budget_ms: int, tmp: Path) -> str:
+    """The page's DOM after ``budget_ms`` of (virtual) time, as headless Chromium prints it;
+    tried up to three times."""
+    for _ in range(3):
+        out = _run_chromium(browser, [f"--virtual-time-budget={budget_ms}", "--dump-dom"], url, tmp)
+        if out and "<html" in out:
+            return out
+    pytest.fail(f"Chromium printed no page for {url} in three tries")
 
 
 def _overlay_text(dom: str) -> str:
@@ -365,7 +367,7 @@ def test_live_page_has_the_overlay_of_the_static_page(live, browser, tmp_path):
     # has got to depends on how fast the scene came over the websocket: a loaded machine
     # once caught it before the end.)
     result, timeline = live.result, live.timeline
-    text = " ".join(_overlay_text(page_dom(browser, live.url, 8000)).split())
+    text = " ".join(_overlay_text(page_dom(browser, live.url, 8000, tmp_path)).split())
     assert text.startswith(f"ur5_tool_spring {result.status}: {result.steps} steps")
     label = re.escape(_play().speed_label(timeline.speed))
     clock = re.search(rf"t = (\d+\.\d{{3}}) s simulated, played {label}", text)
@@ -704,7 +706,9 @@ def test_the_time_slider_reads_simulated_time(name, exported, browser, tmp_path)
     assert sim_time == pytest.approx(result.sim_time, abs=1e-12)
     for at in (sim_time, 0.5 * sim_time):
         url = copy.as_uri() + ("#end" if at == sim_time else f"#t={at!r}")
-        found = re.search(r'<pre id="probe">(.*?)</pre>', page_dom(browser, url, 2000), re.S)
+        found = re.search(
+            r'<pre id="probe">(.*?)</pre>', page_dom(browser, url, 2000, tmp_path), re.S
+        )
         assert found and found.group(1), url
         read = json.loads(html_lib.unescape(found.group(1)))
         assert read["max"] == pytest.approx(sim_time, rel=1e-6)  # three.js keeps float32

@@ -1,9 +1,11 @@
 """Measure the safety factor c of the automatic time step (dt = c * critical step).
 
 For every scene of the library that has an equilibrium and every kt in {0, 0.5, 0.9}, solve
-with dt='auto' for a range of c and report how many runs converge to a stable or neutral rest
-and the steps they take. The default c is the one with every run converged and the fewest
-steps in total (docs/robustness.md quotes this table). Run: python benchmarks/dt_safety.py
+with dt='auto' for a range of c and report how many runs converge to a rest that is not
+unstable (stable, neutral, or marginal: a rest on contacts within 1 % of sliding, as go1 with
+its motors off may come to) and the steps they take. The default c is the one with every run
+converged and the fewest steps in total (docs/robustness.md quotes this table).
+Run: python benchmarks/dt_safety.py
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ def measure(factors: list[float], max_steps: int) -> list[dict[str, Any]]:
                 r = pinsettle.solve(
                     scene, dt="auto", dt_safety=c, kt=kt, max_steps=max_steps, max_time=60.0
                 )
-                ok = r.converged and r.stability in ("stable", "neutral")
+                ok = r.converged and r.stability in ("stable", "neutral", "marginal")
                 runs.append((name, kt, ok, r.steps, r.dt_reductions, r.residual))
         rows.append(
             {

@@ -72,6 +72,7 @@ GOAL_WARM, GOAL_FIRST = 100.0, 30.0  # times faster than MuJoCo at its best
 # A rest further than this beyond a limit (rad or m) is not the same answer: MuJoCo's limits are
 # soft, and at large steps they soften with the step (an ur5 at 1 ms rests 3e-3 inside).
 OUTSIDE_TOL = 1e-2
+CHECK_ITERATIONS = 100  # the check's constraint solve, to convergence (one Newton step at rest)
 
 _FIRST = """
 import json, sys, time
@@ -134,7 +135,12 @@ def configure(m: Any, setting: Setting, diag: np.ndarray) -> None:
 
 
 class Checker:
-    """The static residual of a configuration, relative to the force scale."""
+    """The static residual of a configuration, relative to the force scale, with the constraint
+    forces solved to convergence: at MuJoCo's default solver tolerance (1e-8) a rest on a limit
+    can read qacc = 0 exactly where the solver accepts its start (no iteration), between checks
+    of 5e-9 (talos_left_arm), which let a run stop at a lucky step. The solver's settings are
+    changed for the check only (the run steps at MuJoCo's defaults); the residual depends on
+    the configured timestep, through the softness of the limits."""
 
     def __init__(self, m: Any, scale: float) -> None:
         self.m, self.scale = m, scale
@@ -142,10 +148,15 @@ class Checker:
         self.force = np.zeros(m.nv)
 
     def __call__(self, qpos: np.ndarray) -> float:
-        s = self.scratch
+        s, opt = self.scratch, self.m.opt
         s.qpos[:] = qpos
         s.qvel[:] = 0.0
-        mujoco.mj_forward(self.m, s)
+        kept = opt.tolerance, opt.ls_tolerance, opt.iterations
+        opt.tolerance, opt.ls_tolerance, opt.iterations = 0.0, 1e-12, CHECK_ITERATIONS
+        try:
+            mujoco.mj_forward(self.m, s)
+        finally:
+            opt.tolerance, opt.ls_tolerance, opt.iterations = kept
         mujoco.mj_mulM(self.m, s, self.force, s.qacc)
         return float(np.max(np.abs(self.force), initial=0.0)) / self.scale
 
@@ -157,10 +168,9 @@ def bad_state(d: Any) -> bool:
     return not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel)))
 
 
-def run(m: Any, check: Checker) -> dict[str, Any]:
+def run(m: Any, check: Checker, max_steps: int = MAX_STEPS) -> dict[str, Any]:
     """One setting (already configured) from qpos = 0: the first step at each level."""
     d = mujoco.MjData(m)
-    max_steps = MAX_STEPS
     first: dict[float, int] = {}
     steps, status, residual = 0, "budget", float("inf")
     deadline = time.perf_counter() + RUN_WALL
@@ -212,9 +222,13 @@ def sweep(m: Any) -> tuple[list[tuple[Setting, dict[str, Any]]], float]:
 
 
 #: The local search after the grid: factors on the timestep and the damping (log steps),
-#: largest first; at most REFINE_EVALS runs from each integrator's best.
-REFINE_FACTORS = (2.0**0.5, 2.0**0.25, 2.0**0.125)
-REFINE_EVALS = 40
+#: largest first; at most REFINE_EVALS runs from each family's best (integrator and kind).
+REFINE_FACTORS = (2.0**0.5, 2.0**0.25, 2.0**0.125, 2.0**0.0625)
+REFINE_EVALS = 60
+#: Then SCATTER settings drawn around each of the SCATTER_CENTRES best, log-uniform within
+#: SCATTER_SPAN in the step and the damping, any integrator (seeded: the same draws each run).
+SCATTER, SCATTER_CENTRES, SCATTER_SPAN, SCATTER_SEED = 30, 3, 2.0**0.5, 20261128
+CUT = 5  # a local run stops at CUT times the fewest steps found so far
 WEIGHT_STEPS = 500  # steps timed for each integrator's cost of a step
 
 
@@ -229,66 +243,154 @@ def step_costs(m: Any, diag: np.ndarray) -> dict[str, float]:
     return {name: costs[name] / costs["Euler"] for name in INTEGRATOR_NAMES}
 
 
+class LocalRuns:
+    """The local search's runs on one robot: each setting run once (capped at CUT times the
+    fewest steps found), scored at ``level``: its exact steps times its integrator's cost of a
+    step if it reaches the level at a valid rest, else infinity."""
+
+    def __init__(
+        self,
+        m: Any,
+        runs: list[tuple[Setting, dict[str, Any]]],
+        check: Checker,
+        valid: Callable[[np.ndarray], bool],
+    ) -> None:
+        self.m, self.check, self.valid = m, check, valid
+        self.diag = mass_diagonal(m)
+        self.weight = step_costs(m, self.diag)
+        self.made: list[tuple[Setting, dict[str, Any]]] = []
+        self.seen = {setting: r for setting, r in runs}
+        self.scored: dict[Setting, float] = {}
+        self.fewest = MAX_STEPS
+        self.level = LEVELS[-1]
+
+    def cost(self, setting: Setting) -> float:
+        if setting in self.scored:
+            return self.scored[setting]
+        m, level = self.m, self.level
+        if setting not in self.seen:
+            configure(m, setting, self.diag)
+            self.seen[setting] = run(m, self.check, min(MAX_STEPS, CUT * self.fewest))
+            self.made.append((setting, self.seen[setting]))
+        r = self.seen[setting]
+        self.scored[setting] = math.inf
+        if level in r["first"]:
+            configure(m, setting, self.diag)
+            steps = exact_first(m, self.check, r["first"][level], level)
+            if self.valid(time_steps(m, steps, 1)[1]):
+                self.scored[setting] = float(steps * self.weight[setting.integrator])
+                self.fewest = min(self.fewest, steps)
+        return self.scored[setting]
+
+    def starts(self, runs: list[tuple[Setting, dict[str, Any]]]) -> list[Setting]:
+        """The fastest grid point of each family (integrator and kind of damping) at the
+        tightest level a grid point reaches at a valid rest (``level`` is left at it)."""
+        for self.level in reversed(LEVELS):
+            self.scored.clear()
+            found = []
+            for name in INTEGRATOR_NAMES:
+                for kind in GRIDS:
+                    family = [s for s, _ in runs if s.integrator == name and s.kind == kind]
+                    reached = sorted(
+                        (self.seen[s]["first"][self.level], s)
+                        for s in family
+                        if self.level in self.seen[s]["first"]
+                    )
+                    start = next((s for _, s in reached if self.cost(s) < math.inf), None)
+                    if start is not None:
+                        found.append(start)
+            if found:
+                return found
+        return []
+
+
 def refine(
     m: Any,
     runs: list[tuple[Setting, dict[str, Any]]],
     check: Checker,
     valid: Callable[[np.ndarray], bool],
 ) -> list[tuple[Setting, dict[str, Any]]]:
-    """A pattern search from each integrator's fastest grid point to LEVELS[-1] at a valid
-    rest: the timestep and the damping each multiplied and divided by a factor, or the
-    integrator swapped, moving to the best neighbour while one is faster, then a smaller factor
-    (the kind of damping kept). Faster: fewer steps times the integrator's cost of a step
-    (step_costs; a step costs the same whatever its length and damping). The grid's spacing
-    (2 to 2.5 times in the step, about 3 in the damping) could otherwise leave a best between
-    its points.
+    """A local search after the grid, to the tightest level a grid point reaches at a valid
+    rest: a pattern search from the fastest grid point of each family (integrator and kind of
+    damping), the timestep, the damping or both multiplied or divided by a factor, or the
+    integrator swapped, moving to the best neighbour while one is faster, then a smaller
+    factor; then settings scattered around the best found (scatter). Faster: the exact steps
+    (exact_first) times the integrator's cost of a step (step_costs; a step costs the same
+    whatever its length and damping). The steps to rest are a rugged function of the step and
+    the damping where a limit is touched (with the check at MuJoCo's default solver
+    tolerance, a panda settled in 1200 steps at one point, in 710 at 11% longer steps with 18%
+    less damping, and not within 20000 steps between them), so a pattern search alone stopped
+    at local minima up to twice as slow as a wider search found.
     Returns the runs it made."""
-    diag, level = mass_diagonal(m), LEVELS[-1]
-    weight = step_costs(m, diag)
-    made: list[tuple[Setting, dict[str, Any]]] = []
-    seen = {setting: r for setting, r in runs}
+    local = LocalRuns(m, runs, check, valid)
+    for start in sorted(local.starts(runs), key=local.cost):
+        descend(start, local.cost, len(local.made) + REFINE_EVALS, lambda: len(local.made))
+    scatter(local.scored, local.cost)
+    return local.made
 
-    def cost(setting: Setting) -> float:
-        if setting not in seen:
-            configure(m, setting, diag)
-            seen[setting] = run(m, check)
-            made.append((setting, seen[setting]))
-        r = seen[setting]
-        if level not in r["first"]:
-            return math.inf
-        configure(m, setting, diag)
-        if not valid(time_steps(m, r["first"][level], 1)[1]):
-            return math.inf
-        return float(r["first"][level] * weight[setting.integrator])
 
-    for name in INTEGRATOR_NAMES:
-        reached = sorted(
-            (r["first"][level], s) for s, r in runs if level in r["first"] and s.integrator == name
-        )
-        start = next((s for _, s in reached if cost(s) < math.inf), None)
-        if start is not None:
-            descend(start, cost, len(made) + REFINE_EVALS, lambda: len(made))
-    return made
+def scatter(scored: dict[Setting, float], cost: Callable[[Setting], float]) -> None:
+    """SCATTER settings drawn around each of the SCATTER_CENTRES best scored so far (distinct
+    in step and damping), then a pattern search from the best of all with the two smallest
+    factors."""
+    rng = np.random.default_rng(SCATTER_SEED)
+    ranked = sorted((c, s) for s, c in scored.items() if c < math.inf)
+    centres: list[Setting] = []
+    for _, s in ranked:
+        if all((s.timestep, s.value) != (c.timestep, c.value) for c in centres):
+            centres.append(s)
+        if len(centres) == SCATTER_CENTRES:
+            break
+    for centre in centres:
+        for _ in range(SCATTER):
+            fh, fc = SCATTER_SPAN ** rng.uniform(-1.0, 1.0, size=2)
+            name = INTEGRATOR_NAMES[int(rng.integers(len(INTEGRATOR_NAMES)))]
+            cost(Setting(centre.timestep * fh, name, centre.kind, centre.value * fc))
+    if centres:
+        best = min(scored, key=lambda s: scored[s])
+        count = [0]
+
+        def counted(setting: Setting) -> float:
+            count[0] += setting not in scored
+            return cost(setting)
+
+        for factor in REFINE_FACTORS[-2:]:
+            best = step_down(best, counted, factor, lambda: count[0] < REFINE_EVALS)
+
+
+def neighbours(here: Setting, factor: float) -> list[Setting]:
+    """The settings a factor away in the timestep, the damping or both (the best damping moves
+    with the step), and the same step and damping with another integrator (often as many
+    steps, and an Euler step is the cheapest)."""
+    out = []
+    for fh in (factor, 1.0, 1.0 / factor):
+        for fc in (factor, 1.0, 1.0 / factor):
+            if (fh, fc) != (1.0, 1.0):
+                out.append(here._replace(timestep=here.timestep * fh, value=here.value * fc))
+    out += [here._replace(integrator=n) for n in INTEGRATOR_NAMES if n != here.integrator]
+    return out
+
+
+def step_down(
+    here: Setting, cost: Callable[[Setting], float], factor: float, going: Callable[[], bool]
+) -> Setting:
+    """Moves to the best neighbour at ``factor`` while one is faster and ``going()``."""
+    best = cost(here)
+    while going():
+        scored = min(((cost(s), s) for s in neighbours(here, factor)), key=lambda x: x[0])
+        if not scored[0] < best:
+            break
+        best, here = scored
+    return here
 
 
 def descend(
     start: Setting, cost: Callable[[Setting], float], until: int, made: Callable[[], int]
 ) -> None:
     """The pattern search's moves from ``start`` while the runs made stay below ``until``."""
-    here, best = start, cost(start)
+    here = start
     for factor in REFINE_FACTORS:
-        while made() < until:
-            around = [here._replace(timestep=here.timestep * f) for f in (factor, 1 / factor)]
-            around += [here._replace(value=here.value * f) for f in (factor, 1 / factor)]
-            # The same step and damping with another integrator: often as many steps, and an
-            # Euler step is the cheapest.
-            around += [
-                here._replace(integrator=n) for n in INTEGRATOR_NAMES if n != here.integrator
-            ]
-            scored = min(((cost(s), s) for s in around), key=lambda x: x[0])
-            if not scored[0] < best:
-                break
-            best, here = scored
+        here = step_down(here, cost, factor, lambda: made() < until)
 
 
 def exact_first(m: Any, check: Checker, steps: int, level: float) -> int:
@@ -646,17 +748,28 @@ def prose() -> list[str]:
         f"in {{{steps}}} ms; integrator {', '.join(INTEGRATOR_NAMES)}; damping either the same "
         f"c in {{{', '.join(f'{c:g}' for c in UNIFORM)}}} on every degree of freedom or "
         f"c_i = a M_ii(q0) with a in {{{', '.join(f'{a:g}' for a in MASS)}}} 1/s (M_ii from "
-        "`mj_fullM` at the start). Then a local search from each integrator's fastest grid "
-        "point to the tightest level at a valid rest: the timestep and the damping each "
-        f"multiplied and divided by {', then '.join(f'{f:.3g}' for f in REFINE_FACTORS)}, or "
-        "the integrator swapped, moving while a neighbour is faster (its steps times the "
-        "integrator's cost of a step on "
-        f"that robot, timed over {WEIGHT_STEPS} steps: an implicit step can cost twice an Euler "
-        f"one), at most {REFINE_EVALS} runs from each, so that no best lies between the grid's "
-        "points.",
+        "`mj_fullM` at the start). Then a local search to the tightest level a grid point "
+        "reaches at a valid rest. First a pattern search from the fastest grid point of each "
+        "family (integrator and kind of damping): the timestep, the damping or both "
+        f"multiplied or divided by {', then '.join(f'{f:.3g}' for f in REFINE_FACTORS)}, or "
+        "the integrator swapped, moving while a neighbour is faster (its exact steps times "
+        f"the integrator's cost of a step on that robot, timed over {WEIGHT_STEPS} steps: an "
+        f"implicit step can cost twice an Euler one), at most {REFINE_EVALS} runs from each. "
+        f"Then {SCATTER} settings drawn around each of the {SCATTER_CENTRES} best found "
+        f"(log-uniform within {SCATTER_SPAN:.3g} times in the step and the damping, any "
+        "integrator, a fixed seed) and the pattern search again from the best with the two "
+        f"smallest factors. A local run stops at {CUT} times the fewest steps found. The "
+        "steps to rest are a rugged function of the setting where a limit is touched (a "
+        "panda's fewest, 710 steps with the check at MuJoCo's default solver tolerance, had "
+        "neighbours 9% away that took 1.4 to 1.6 times as many, ended outside a limit or "
+        "never settled), so the search samples around its best rather than trusting one "
+        "descent.",
         "",
         f"Stopping rule, the same as pinsettle's: every {CHUNK} steps the configuration is "
-        "copied to a scratch MjData with qvel = 0, `mj_forward` gives qacc, and the residual is "
+        "copied to a scratch MjData with qvel = 0, `mj_forward` gives qacc (its constraint "
+        "solve run to convergence for the check, solver tolerance 0: at MuJoCo's default, "
+        "1e-8, a rest on a limit can read qacc = 0 exactly where the solver accepts its "
+        "start, between checks of 5e-9), and the residual is "
         "max |M qacc| (`mj_mulM`), the net generalized force at rest there with the limits' "
         "constraint forces included, over the force scale max |qfrc_bias| at the start. A run "
         f"records the first check at {', '.join(f'{x:g}' for x in LEVELS)} (for the best "

@@ -893,6 +893,104 @@ def test_mujocos_best_counts_its_steps_exactly():
     assert mujoco_best.edges(low) == [f"a = {low.value:g}"]
 
 
+def test_mujocos_local_search_moves_downhill_and_samples_near_its_best():
+    # mujoco_best's search after its grid, on a synthetic cost: a smooth bowl in (log h, log c)
+    # plus a per-point ripple, as rugged as the steps to rest are near a limit.
+    pytest.importorskip("mujoco")
+    import mujoco_best as mb
+
+    def ripple(s):
+        return 0.3 * math.sin(37.0 * math.log(s.timestep)) * math.cos(23.0 * math.log(s.value))
+
+    def bowl(s):
+        return math.log(s.timestep / 0.05) ** 2 + math.log(s.value / 3.0) ** 2
+
+    calls: list = []
+
+    def cost(s):
+        calls.append(s)
+        return 100.0 * (1.5 + bowl(s) + ripple(s)) * (1.0 if s.integrator == "Euler" else 1.3)
+
+    here = mb.Setting(0.2, "implicit", "mass", 30.0)
+    around = mb.neighbours(here, 2.0)
+    assert len(set(around)) == 10 and all(s.kind == "mass" for s in around)
+    assert {(s.timestep, s.value) for s in around if s.integrator == here.integrator} == {
+        (here.timestep * a, here.value * b) for a in (2.0, 1.0, 0.5) for b in (2.0, 1.0, 0.5)
+    } - {(here.timestep, here.value)}
+    end = mb.step_down(here, cost, 2.0**0.25, lambda: True)
+    # Downhill to a point no neighbour improves on, with Euler's cheaper steps.
+    assert cost(end) < cost(here) and end.integrator == "Euler"
+    assert all(cost(s) >= cost(end) for s in mb.neighbours(end, 2.0**0.25))
+
+    # The scatter: SCATTER draws around each of the best (here two), within SCATTER_SPAN in
+    # the step and the damping, any integrator, the same draws each run; the search from the
+    # best of them ends where no neighbour at the smallest factor is faster.
+    def run_scatter():
+        book = {s: cost(s) for s in [here, end]}
+
+        def scored_cost(s):
+            book.setdefault(s, cost(s))
+            return book[s]
+
+        calls.clear()
+        mb.scatter(book, scored_cost)
+        return list(calls), book
+
+    made, book = run_scatter()
+    span = mb.SCATTER_SPAN * (1 + 1e-12)
+    for centre, drawn in ((end, made[: mb.SCATTER]), (here, made[mb.SCATTER : 2 * mb.SCATTER])):
+        assert all(s.kind == "mass" for s in drawn)
+        assert all(1 / span <= s.timestep / centre.timestep <= span for s in drawn)
+        assert all(1 / span <= s.value / centre.value <= span for s in drawn)
+        assert {s.integrator for s in drawn} == set(mb.INTEGRATOR_NAMES)
+    best = min(book, key=book.get)
+    assert book[best] <= min(book[s] for s in made[: 2 * mb.SCATTER])
+    assert all(cost(s) >= book[best] for s in mb.neighbours(best, mb.REFINE_FACTORS[-1]))
+    assert run_scatter()[0][: 2 * mb.SCATTER] == made[: 2 * mb.SCATTER]
+
+
+def test_mujocos_residual_on_a_limit_is_solved_to_convergence():
+    # talos_left_arm at a setting the sweep met, after 1860 steps, rests on a limit: MuJoCo's
+    # constraint solver at its default tolerance takes no iteration there and reads qacc = 0,
+    # a residual of 0 between checks of 5e-9. Both scripts' checks solve it to convergence and
+    # leave the model's solver settings as they were.
+    pytest.importorskip("mujoco")
+    import copy
+
+    import gallery
+    import mujoco
+    import mujoco_best
+    import mujoco_outside
+
+    m, why, _ = gallery.load_mujoco(pinsettle.robot_urdf("talos_left_arm"))
+    assert m is not None, why
+    setting = mujoco_best.Setting(0.2, "Euler", "mass", 0.03 * 2**0.5)
+    mujoco_best.configure(m, setting, mujoco_best.mass_diagonal(m))
+    d = mujoco.MjData(m)
+    mujoco.mj_step(m, d, nstep=1860)
+    scale = mujoco_best.force_scale(m)
+    fresh = mujoco.MjData(m)
+    fresh.qpos[:] = d.qpos
+    mujoco.mj_forward(m, fresh)
+    assert fresh.nefc > 0 and fresh.solver_niter[0] == 0 and not np.any(fresh.qacc)
+    kept = (m.opt.tolerance, m.opt.ls_tolerance, m.opt.iterations)
+    best = mujoco_best.Checker(m, scale)(d.qpos)
+    outside = mujoco_outside.static_residual(m, mujoco.MjData(m), d.qpos, scale)
+    assert (m.opt.tolerance, m.opt.ls_tolerance, m.opt.iterations) == kept
+    # The converged solve, from another model whose solver settings are tight for good.
+    tight = copy.copy(m)
+    tight.opt.tolerance, tight.opt.iterations = 1e-15, 1000
+    again = mujoco.MjData(tight)
+    again.qpos[:] = d.qpos
+    mujoco.mj_forward(tight, again)
+    force = np.zeros(m.nv)
+    mujoco.mj_mulM(tight, again, force, again.qacc)
+    expected = np.max(np.abs(force)) / scale
+    assert 1e-9 < expected < 1e-7
+    assert best == pytest.approx(expected, rel=1e-6)
+    assert outside == pytest.approx(expected, rel=1e-6)
+
+
 def test_mujocos_stopping_rule_is_the_static_residual_pinocchio_gives():
     # benchmarks/mujoco_best.py stops MuJoCo at the same static residual as pinsettle: M qacc
     # at zero velocity. Off the limits that is gravity's generalized force, recomputed here by

@@ -175,3 +175,34 @@ def test_put_block_inserts_then_replaces(tmp_path: Path) -> None:
     doc.write_text("# nothing to follow\n", encoding="utf-8")
     with pytest.raises(ValueError, match="no line"):
         mo.put_block(first, doc)
+
+
+def test_a_best_that_does_not_replay_is_no_agreement() -> None:
+    # Rows as compare() makes them: the section's best agrees only when, run again from the
+    # start, it reaches its level at a valid rest within its steps, and is within AGREE times
+    # of the outside best (or the outside found none).
+    setting = mo.Setting(0.5, "Euler", "mass", 2.0)
+
+    def row(robot: str, section_s: float, outside_s: float | None, first: int | None) -> dict:
+        made = {
+            "recorded": mo.Recorded(robot, setting, 1e-10, 60, 0.3),
+            "level": 1e-10,
+            "runs": 250,
+            "replayed": {"first": first, "valid": True},
+            "best": None if outside_s is None else (setting, 50),
+            "section_s": section_s,
+        }
+        return made if outside_s is None else made | {"outside_s": outside_s}
+
+    rows = [
+        row("fast", 1.0, 1.0, 55),
+        row("slow", 2.0, 1.0, 58),
+        row("lucky", 1.0, None, None),
+        row("alone", 1.0, None, 60),
+    ]
+    assert [mo.agrees(r) for r in rows] == [True, False, False, True]
+    text = "\n".join(mo.closing(rows))
+    assert "on 2 of 4 robots; not on slow (2.00); lucky (its setting does not replay)." in text
+    assert "The outside search reached no valid rest on: lucky, alone." in text
+    assert "does NOT reach its level at a valid rest within its steps on: lucky." in text
+    assert mo.table_row(rows[2]).endswith("| **no** |")

@@ -276,8 +276,8 @@ class LocalRuns:
         self.scored[setting] = math.inf
         if level in r["first"]:
             configure(m, setting, self.diag)
-            steps = exact_first(m, self.check, r["first"][level], level)
-            if self.valid(time_steps(m, steps, 1)[1]):
+            steps, qpos = exact_first(m, self.check, r["first"][level], level)
+            if self.valid(qpos):
                 self.scored[setting] = float(steps * self.weight[setting.integrator])
                 self.fewest = min(self.fewest, steps)
         return self.scored[setting]
@@ -393,18 +393,19 @@ def descend(
         here = step_down(here, cost, factor, lambda: made() < until)
 
 
-def exact_first(m: Any, check: Checker, steps: int, level: float) -> int:
+def exact_first(m: Any, check: Checker, steps: int, level: float) -> tuple[int, np.ndarray]:
     """The first step at ``level`` of a run (``m`` configured) whose check every CHUNK steps
-    first found it at ``steps``: the last CHUNK steps again one at a time."""
+    first found it at ``steps``, and the configuration there: the last CHUNK steps again one at
+    a time."""
     d = mujoco.MjData(m)
     before = max(steps - CHUNK, 0)
     if before:
         mujoco.mj_step(m, d, nstep=before)
-    for step in range(before + 1, steps):
+    for step in range(before + 1, steps + 1):
         mujoco.mj_step(m, d)
-        if check(d.qpos) <= level:
-            return step
-    return steps
+        if step == steps or check(d.qpos) <= level:
+            return step, d.qpos.copy()
+    return steps, d.qpos.copy()  # steps = 0: the start
 
 
 def best_run(
@@ -422,7 +423,7 @@ def best_run(
         for setting, r in runs:
             if level in r["first"]:
                 configure(m, setting, diag)
-                steps = exact_first(m, check, r["first"][level], level)
+                steps = exact_first(m, check, r["first"][level], level)[0]
                 seconds, qpos = time_steps(m, steps, 1)
                 once.append((seconds[0], setting, steps, qpos))
         fine = [x for x in once if valid(x[3])]

@@ -880,14 +880,18 @@ def test_mujocos_best_counts_its_steps_exactly():
     level = mujoco_best.LEVELS[-1]
     chunked = mujoco_best.run(m, check)["first"][level]
     assert chunked % mujoco_best.CHUNK == 0
-    exact = mujoco_best.exact_first(m, check, chunked, level)
+    exact, qpos = mujoco_best.exact_first(m, check, chunked, level)
     d = mujoco.MjData(m)
-    residuals = []
+    residuals, configurations = [], []
     for _ in range(chunked):
         mujoco.mj_step(m, d)
         residuals.append(check(d.qpos))
+        configurations.append(d.qpos.copy())
     first = next(k + 1 for k, r in enumerate(residuals) if r <= level)
     assert exact == first and chunked - mujoco_best.CHUNK < exact <= chunked
+    # ... with the configuration there, the same as the timed run's end after as many steps.
+    assert np.array_equal(qpos, configurations[exact - 1])
+    assert np.array_equal(qpos, mujoco_best.time_steps(m, exact, 1)[1])
     # A best the local search took past the grid is flagged as on its edge.
     low = mujoco_best.Setting(0.45, "Euler", "mass", mujoco_best.MASS[0] / 2)
     assert mujoco_best.edges(low) == [f"a = {low.value:g}"]

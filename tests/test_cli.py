@@ -90,6 +90,7 @@ def test_demo_flags_reach_the_solver():
         (["--no-polish"], {"polish": False}),
         (["--no-backtrack"], {"backtrack": False}),
         (["--scale-joint-inertia"], {"scale_joint_inertia": True}),
+        (["--no-scale-joint-inertia"], {"scale_joint_inertia": False}),
         (["--no-newton-takeover"], {"newton_takeover": False}),
     ],
 )

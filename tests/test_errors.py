@@ -123,6 +123,15 @@ def test_unknown_energy_measure(pendulum):
         pinsettle.Settings(energy="Exact")  # case matters
 
 
+def test_unknown_joint_inertia_choice(pendulum):
+    # True, False or 'auto': another string is refused when set, naming the field.
+    pattern = r"^scale_joint_inertia must be true, false or 'auto', got 'on'"
+    with pytest.raises(ValueError, match=pattern):
+        pinsettle.solve(pendulum, [1.0], scale_joint_inertia="on")
+    with pytest.raises(ValueError, match=r"^scale_joint_inertia must be .*got 'Auto'"):
+        pinsettle.Settings(scale_joint_inertia="Auto")  # case matters
+
+
 @pytest.mark.parametrize(
     "settings", [3, "kt=0.5", [("kt", 0.5)], pinocchio.Model()], ids=["int", "str", "list", "model"]
 )

@@ -51,8 +51,12 @@ def test_a_value_against_the_rule_is_refused_with_its_words(name):
         with pytest.raises(ValueError, match=f"^{name} must be"):
             setattr(settings, name, "neither")
         return
-    bad = -1 if field["kind"] == "integer" else -1.0
     expected = re.escape(field["expected"])
+    if field["kind"] == "auto_switch":  # True, False or 'auto': another word is refused as set
+        with pytest.raises(ValueError, match=f"^{name} must be {expected}, got 'neither'$"):
+            setattr(settings, name, "neither")
+        return
+    bad = -1 if field["kind"] == "integer" else -1.0
     if field["kind"] == "auto_number":  # refused as it is set: 0 would mean 'auto'
         with pytest.raises(ValueError, match=f"^{name} must be 'auto' or {expected}, got -1"):
             setattr(settings, name, bad)

@@ -62,6 +62,18 @@ namespace
     return x;
   }
 
+  // True, False or 'auto' as a Toggle; anything else is refused with a message naming the
+  // setting (a bool is checked first: py::bool_ is no str, and 1 is no bool).
+  Toggle parseToggle(const py::object & value, const std::string & name, const std::string & takes)
+  {
+    if (py::isinstance<py::bool_>(value))
+      return value.cast<bool>() ? Toggle::On : Toggle::Off;
+    if (py::isinstance<py::str>(value) && value.cast<std::string>() == "auto")
+      return Toggle::Auto;
+    throw std::invalid_argument(
+      name + " must be " + takes + ", got " + py::repr(value).cast<std::string>());
+  }
+
   // The pinocchio::Model a Python object holds, refused with a message (ValueError) where the
   // algorithms do not support it, so that it is never run.
   const pinocchio::Model & supportedModel(const py::handle & obj, const char * name = "model")
@@ -575,6 +587,8 @@ namespace
       return "switch";
     case SettingKind::AutoNumber:
       return "auto_number";
+    case SettingKind::AutoSwitch:
+      return "auto_switch";
     case SettingKind::Choice:
       return "choice";
     }
@@ -590,6 +604,9 @@ namespace
         using T = std::decay_t<decltype(value)>;
         if constexpr (std::is_same_v<T, EnergyMeasure>)
           return py::str(toString(value));
+        else if constexpr (std::is_same_v<T, Toggle>)
+          return value == Toggle::Auto ? py::object(py::str("auto"))
+                                       : py::object(py::bool_(value == Toggle::On));
         else if constexpr (std::is_same_v<T, double>)
           return field.kind == SettingKind::AutoNumber ? autoOrNumber(value)
                                                        : py::object(py::float_(value));
@@ -608,6 +625,8 @@ namespace
         using T = std::decay_t<decltype(s.*member)>;
         if constexpr (std::is_same_v<T, EnergyMeasure>)
           s.*member = energyMeasureFromString(value.cast<std::string>());
+        else if constexpr (std::is_same_v<T, Toggle>)
+          s.*member = parseToggle(value, field.name, field.expected);
         else if constexpr (std::is_same_v<T, double>)
           s.*member = field.kind == SettingKind::AutoNumber
                         ? parseAutoOrNumber(value, field.name, field.expected, field.accepts)
@@ -658,7 +677,8 @@ namespace
           return out;
         },
         "Every setting, declared once: name, kind ('number', 'integer', 'switch', "
-        "'auto_number', 'choice'), what a value must be, its help, its default and whether "
+        "'auto_number', 'auto_switch', 'choice'), what a value must be, its help, its default and "
+        "whether "
         "the command line has a flag for it.");
   }
 

@@ -31,6 +31,20 @@ namespace pinsettle
     throw std::invalid_argument("energy must be \"exact\" or \"simplified\", got \"" + name + "\"");
   }
 
+  const char * toString(Toggle toggle)
+  {
+    switch (toggle)
+    {
+    case Toggle::Off:
+      return "off";
+    case Toggle::On:
+      return "on";
+    case Toggle::Auto:
+      return "auto";
+    }
+    return "unknown";
+  }
+
   const char * toString(Status status)
   {
     switch (status)
@@ -131,6 +145,8 @@ namespace pinsettle
             return isKnownEnergyMeasure(value);
           else if constexpr (std::is_same_v<T, bool>)
             return true;
+          else if constexpr (std::is_same_v<T, Toggle>)
+            return value == Toggle::Off || value == Toggle::On || value == Toggle::Auto;
           else
           {
             const double x = static_cast<double>(value);
@@ -151,7 +167,8 @@ namespace pinsettle
       std::visit(
         [&](auto member) {
           const auto value = s.*member;
-          if constexpr (std::is_same_v<std::decay_t<decltype(value)>, EnergyMeasure>)
+          using T = std::decay_t<decltype(value)>;
+          if constexpr (std::is_same_v<T, EnergyMeasure> || std::is_same_v<T, Toggle>)
             given << static_cast<int>(value);
           else
             given << value;
@@ -204,9 +221,11 @@ namespace pinsettle
       {"scale_stiff_modes", K::Switch, &Settings::scale_stiff_modes, "true or false",
        "With dt='auto': slow down modes far stiffer than the rest (equilibria unchanged).", nullptr,
        true},
-      {"scale_joint_inertia", K::Switch, &Settings::scale_joint_inertia, "true or false",
+      {"scale_joint_inertia", K::AutoSwitch, &Settings::scale_joint_inertia,
+       "true, false or 'auto'",
        "With dt='auto', on a tree: a fictitious inertia per joint that brings every joint's "
-       "rate down towards the slowest one's (equilibria unchanged).",
+       "rate down towards the slowest one's (equilibria unchanged); 'auto' (the default): on "
+       "mechanisms of 20 degrees of freedom or more without ground contacts (measured).",
        nullptr, true},
       {"trace_every", K::Integer, &Settings::trace_every, "an integer >= 0 (0 disables the trace)",
        "Record a trace sample every N steps; 0: no trace.", atLeast0, false},

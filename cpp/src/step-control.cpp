@@ -68,8 +68,10 @@ namespace pinsettle
   void StepController::start(const Settings & settings, const ForceModel * forces)
   {
     // One joint has no other to be slowed to; the simplified energy does not see the added
-    // inertia, so its peaks would not be those of the scaled motion.
-    scale_joint_inertia_ = settings.scale_joint_inertia && loops_ == nullptr && settings.dt == 0.
+    // inertia, so its peaks would not be those of the scaled motion. Stiff-mode scaling is
+    // refused exactly where there are ground contacts.
+    scale_joint_inertia_ = effectiveJointInertia(settings, model_.nv, !stiff_modes_allowed_)
+                           && loops_ == nullptr && settings.dt == 0.
                            && settings.energy == EnergyMeasure::Exact && model_.nv > 1;
     inertia_active_ = false;
     scaled_model_current_ = false;

@@ -77,9 +77,10 @@ def setting_flags(fields: Iterable[Mapping[str, Any]]) -> tuple[Flag, ...]:
             continue
         name, text = "--" + field["name"].replace("_", "-"), str(field["help"])
         kind = field["kind"]
-        if kind == "switch":
-            default = "on" if field["default"] else "off"
-            out.append(switch(name, help=f"{text} (default: {default})"))
+        if kind in ("switch", "auto_switch"):
+            default = field["default"]
+            shown = default if isinstance(default, str) else "on" if default else "off"
+            out.append(switch(name, help=f"{text} (default: {shown})"))
         elif kind == "choice":
             out.append(flag(name, choices=re.findall(r'"(\w+)"', field["expected"]), help=text))
         else:

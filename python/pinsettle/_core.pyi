@@ -37,7 +37,7 @@ class Settings:
     polish: bool
     newton_takeover: bool
     scale_stiff_modes: bool
-    scale_joint_inertia: bool
+    scale_joint_inertia: bool | str
     trace_every: int
     trace_capacity: int
     trace_configurations: bool

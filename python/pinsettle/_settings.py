@@ -24,6 +24,7 @@ _KIND_TYPES = {
     "integer": ("int", "int"),
     "switch": ("bool", "bool"),
     "auto_number": ("float or 'auto'", "float | str"),
+    "auto_switch": ("bool or 'auto'", "bool | str"),
     "choice": ("str", "str"),
 }
 
@@ -99,30 +100,34 @@ class Settings(_core.Settings):
 Settings.__doc__ = f"{(Settings.__doc__ or '').rstrip()}\n\n    {_fields_doc()}\n"
 
 
+def _is_of_kind(kind: str, value: Any) -> bool:
+    """Whether value has the Python type a setting of ``kind`` (SETTING_TYPES) takes; the
+    range is the core's to check ('fast' for dt, 'on' for a bool or 'auto': its messages)."""
+    is_bool = isinstance(value, (bool, np.bool_))
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not is_bool
+    return {
+        "float": number,
+        "float or 'auto'": number or isinstance(value, str),
+        "int": isinstance(value, (int, np.integer)) and not is_bool,
+        "bool": is_bool,
+        "bool or 'auto'": is_bool or isinstance(value, str),
+    }.get(kind, isinstance(value, str))
+
+
 def set_setting(settings: _core.Settings, key: str, value: Any) -> None:
     """Set one field with a message that names it when the key or the type is wrong."""
     if key not in SETTING_TYPES:
         raise TypeError(unknown_key_message("setting", key, list(SETTING_TYPES)))
     kind = SETTING_TYPES[key]
-    is_bool = isinstance(value, (bool, np.bool_))
-    if is_bool != (kind == "bool"):
-        raise TypeError(f"setting '{key}' expects {kind}, got {type(value).__name__} {value!r}")
-    if kind == "int" and isinstance(value, (int, np.integer)) and not -(2**63) <= value < 2**63:
-        raise ValueError(f"setting '{key}' must fit in a 64-bit integer, got {value}")
     # The type by hand before the C++ property sees it: pybind11 raises RuntimeError, not
     # TypeError, for some values it cannot convert (None for dt).
-    number = isinstance(value, (int, float, np.integer, np.floating)) and not is_bool
-    expected = {
-        "float": number,
-        "float or 'auto'": number or isinstance(value, str),  # 'fast': the C++ range message
-        "int": isinstance(value, (int, np.integer)) and not is_bool,
-        "bool": is_bool,
-    }.get(kind, isinstance(value, str))
-    if not expected:
+    if not _is_of_kind(kind, value):
         raise TypeError(f"setting '{key}' expects {kind}, got {type(value).__name__} {value!r}")
+    if kind == "int" and not -(2**63) <= value < 2**63:
+        raise ValueError(f"setting '{key}' must fit in a 64-bit integer, got {value}")
     if kind.startswith("float") and isinstance(value, (int, np.integer)):
         value = float(value)
-    if is_bool:
+    if isinstance(value, np.bool_):
         value = bool(value)
     try:
         setattr(settings, key, value)

@@ -1019,7 +1019,7 @@ BOOST_AUTO_TEST_CASE(an_estimate_takes_no_energy_where_it_adds_inertia_and_count
   // runaway monitor sums what is taken as energy removed from the run.
   const pinocchio::Model model = chain(5);
   pinsettle::Settings settings;
-  settings.scale_joint_inertia = true;
+  settings.scale_joint_inertia = pinsettle::Toggle::On;
   pinsettle::StepController control(model, nullptr);
   control.start(settings, nullptr);
   pinocchio::Data data(model), scratch(model);
@@ -1057,6 +1057,39 @@ BOOST_AUTO_TEST_CASE(an_estimate_takes_no_energy_where_it_adds_inertia_and_count
   BOOST_CHECK_GT(taken, 0);
 }
 
+BOOST_AUTO_TEST_CASE(joint_inertia_by_default_from_twenty_degrees_of_freedom_without_contacts)
+{
+  // The rule of Toggle::Auto (the default), and On and Off forcing it either way.
+  pinsettle::Settings settings;
+  BOOST_CHECK(settings.scale_joint_inertia == pinsettle::Toggle::Auto);
+  BOOST_CHECK(
+    !pinsettle::effectiveJointInertia(settings, pinsettle::kJointInertiaMinDofs - 1, false));
+  BOOST_CHECK(pinsettle::effectiveJointInertia(settings, pinsettle::kJointInertiaMinDofs, false));
+  BOOST_CHECK(!pinsettle::effectiveJointInertia(settings, 100, true)); // ground contacts
+  settings.scale_joint_inertia = pinsettle::Toggle::On;
+  BOOST_CHECK(pinsettle::effectiveJointInertia(settings, 2, true));
+  settings.scale_joint_inertia = pinsettle::Toggle::Off;
+  BOOST_CHECK(!pinsettle::effectiveJointInertia(settings, 100, false));
+
+  // And the solver applies it: a chain of 20 links released horizontal gets it by default, one
+  // of 19 does not, both resting straight down (Pinocchio's gravity vanishes there).
+  for (const int links : {19, 20})
+  {
+    const pinocchio::Model model = chain(links);
+    Eigen::VectorXd q0 = Eigen::VectorXd::Zero(model.nq);
+    q0[0] = 0.5 * M_PI;
+    pinsettle::Solver solver(model);
+    const pinsettle::Result r = solver.solve(q0, pinsettle::Settings());
+    BOOST_REQUIRE(r.status == pinsettle::Status::Converged);
+    BOOST_CHECK_EQUAL(r.info.scaled_joints > 0, links >= pinsettle::kJointInertiaMinDofs);
+    pinocchio::Data data(model);
+    const double start_force =
+      pinocchio::computeGeneralizedGravity(model, data, q0).lpNorm<Eigen::Infinity>();
+    const Eigen::VectorXd g = pinocchio::computeGeneralizedGravity(model, data, r.q);
+    BOOST_CHECK_LT(g.lpNorm<Eigen::Infinity>(), 1e-12 * start_force);
+  }
+}
+
 BOOST_AUTO_TEST_CASE(joint_inertia_settles_a_chain_at_the_same_rest_in_fewer_steps)
 {
   // Released horizontal, the chain's run is set by its fast bottom links; with their inertia
@@ -1065,7 +1098,7 @@ BOOST_AUTO_TEST_CASE(joint_inertia_settles_a_chain_at_the_same_rest_in_fewer_ste
   Eigen::VectorXd q0 = Eigen::VectorXd::Zero(model.nq);
   q0[0] = 0.5 * M_PI;
   pinsettle::Settings plain, scaled;
-  scaled.scale_joint_inertia = true;
+  scaled.scale_joint_inertia = pinsettle::Toggle::On;
   const Eigen::VectorXd armature = model.armature;
   pinsettle::Solver solver(model);
   const pinsettle::Result a = solver.solve(q0, plain);

@@ -307,7 +307,7 @@ BOOST_AUTO_TEST_CASE(joint_inertia_keeps_the_rest_on_a_stop_run_after_run)
   pinsettle::JointStops stops(model, false);
   stops.setLimit(1, 0.6, 2.);
   pinsettle::Settings settings;
-  settings.scale_joint_inertia = true;
+  settings.scale_joint_inertia = pinsettle::Toggle::On;
   settings.polish = false;
   settings.max_e = 1e-16;
   Eigen::VectorXd q0(3);

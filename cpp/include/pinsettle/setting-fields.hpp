@@ -21,6 +21,7 @@ namespace pinsettle
     Integer,    ///< an integer
     Switch,     ///< on or off
     AutoNumber, ///< a real number, or 'auto' (stored as 0): the measured or estimated value
+    AutoSwitch, ///< on, off or 'auto' (Toggle): the measured rule
     Choice      ///< one of named values (the energy measure)
   };
 
@@ -35,6 +36,7 @@ namespace pinsettle
       double Settings::*,
       std::int64_t Settings::*,
       bool Settings::*,
+      Toggle Settings::*,
       EnergyMeasure Settings::*>;
 
     const char * name;

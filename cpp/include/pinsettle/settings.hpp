@@ -27,6 +27,18 @@ namespace pinsettle
   /// \brief Parse "exact" or "simplified"; throws std::invalid_argument otherwise.
   EnergyMeasure energyMeasureFromString(const std::string & name);
 
+  /// \brief A switch that may also be left to the solver's measured rule.
+  enum class Toggle : std::uint8_t
+  {
+    Off,
+    On,
+    /// The rule the setting documents (effectiveJointInertia for scale_joint_inertia).
+    Auto
+  };
+
+  /// \brief Name of a toggle: "off", "on" or "auto".
+  const char * toString(Toggle toggle);
+
   /// Safety factor of the automatic step with backtracking and the exact energy: the largest
   /// that kept every basin of the bistable pendulum's releases (0.4 lost 4 of 540), well below
   /// 0.7, the largest at which every run of the library's scenes converged (docs/method.md,
@@ -46,6 +58,13 @@ namespace pinsettle
   /// 1e-4 to 1e4 kg and 100 m to 1 mm links never settled from 2 up (at 1.5: 61,590 steps,
   /// fixed: 91,885).
   constexpr double kDtGrowthBacktrack = 2.5;
+  /// \brief With scale_joint_inertia = Auto, the fewest degrees of freedom of a mechanism given
+  /// the fictitious joint inertia. Measured (one run each, on over off; docs/method.md): chains
+  /// released horizontal gain from 5 links (0.64 of the time) to 200 (0.036), and the talos
+  /// (32) 0.84; below 20 the robots both gained (the Allegro hand 0.33, the SO-100 0.54) and lost
+  /// (baxter, 19: 1.23; the xArm7 1.35; the finger_edu 1.18), and without stops the Panda's
+  /// fingers slide off unseen by the runaway test (1e6 steps, against 51,201 without it).
+  constexpr long kJointInertiaMinDofs = 20;
 
   ///
   /// \brief Inputs of the kinetic-damping solver. The solver only reads them.
@@ -76,7 +95,9 @@ namespace pinsettle
     /// slowest joint's, re-chosen at each step estimate (computeJointInertia). The equilibria
     /// and their stability do not depend on the masses; the step follows the slow motion
     /// instead of the fastest joint's. Result::scaled_joints says how many were given one.
-    bool scale_joint_inertia = false;
+    /// Auto (the default): on mechanisms of kJointInertiaMinDofs degrees of freedom or more
+    /// without ground contacts (effectiveJointInertia).
+    Toggle scale_joint_inertia = Toggle::Auto;
     /// Velocity scale applied at each detected energy peak, in [0, 1). 0 (the default, the
     /// fewest steps measured: docs/benchmarks.md) stops the mechanism dead at each peak.
     double kt = 0.;
@@ -156,6 +177,21 @@ namespace pinsettle
     const bool measured =
       settings.backtrack && settings.energy == EnergyMeasure::Exact && settings.scale_stiff_modes;
     return measured ? kDtGrowthBacktrack : 1.;
+  }
+
+  ///
+  /// \brief Whether the fictitious joint inertia is asked for on a mechanism of nv degrees of
+  /// freedom (model.nv), with or without ground contacts: settings.scale_joint_inertia, or for
+  /// Auto nv >= kJointInertiaMinDofs without contacts. Contacts' impulses are solved in the mass
+  /// matrix the inertia changes, and their scenes lost with it (go1 standing 3.1 times the
+  /// time, the MJCF ant 4.2, the vehicle 2.8). StepController applies it where the rest of its
+  /// rule holds (the automatic step, the exact energy, no loops, more than one joint).
+  ///
+  inline bool effectiveJointInertia(const Settings & settings, long nv, bool contacts)
+  {
+    if (settings.scale_joint_inertia != Toggle::Auto)
+      return settings.scale_joint_inertia == Toggle::On;
+    return nv >= kJointInertiaMinDofs && !contacts;
   }
 
   ///

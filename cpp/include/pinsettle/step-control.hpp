@@ -94,6 +94,8 @@ namespace pinsettle
     ///            nullptr.
     /// \param[in] stiff_modes Whether the constraints let stiff modes be slowed (not with
     ///            ground contacts: their impulses use the mass matrix, not the slowed modes').
+    ///            Without it the joint inertia is not given by default either
+    ///            (effectiveJointInertia).
     StepController(
       const pinocchio::Model & model, const LoopConstraints * loops, bool stiff_modes = true);
 

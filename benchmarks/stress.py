@@ -626,6 +626,7 @@ def report(outcomes: list[Outcome], passed: int, dt_rows: list[dict[str, Any]] |
     machine = f"{_cpu()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     parts = [TEMPLATE_HEAD.format(date=date.today().isoformat(), machine=machine)]
     if dt_rows is not None:
+        parts.append(dt_text(dt_rows))
         parts.append(dt_table(dt_rows))
     parts.append(
         TEMPLATE_TABLE.format(
@@ -644,6 +645,19 @@ def _cpu() -> str:
     except OSError:
         pass
     return platform.machine()
+
+
+def dt_text(rows: list[dict[str, Any]]) -> str:
+    """The paragraph above the safety factor's table, its counts from the rows: the largest
+    factor up to which every run converged and the one with the fewest steps in total."""
+    every = [row for row in rows if row["converged"] == row["runs"]]
+    largest = max((row["c"] for row in every), default="none")
+    fewest = min(every, key=lambda row: row["total_steps"])["c"] if every else "none"
+    import dt_safety  # beside this file (main puts its folder on the path)
+
+    runs = rows[0]["runs"]
+    scenes = runs // len(dt_safety.KTS)
+    return TEMPLATE_DT.format(scenes=scenes, runs=runs, largest=largest, fewest=fewest)
 
 
 def dt_table(rows: list[dict[str, Any]]) -> str:
@@ -685,17 +699,22 @@ and their stability are those of the real one; only the stiff modes move more sl
 added inertia enters the exact kinetic energy used by the peak detector, the acceleration is
 solved exactly (Woodbury identity on ABA's answer), and a change of modes at a re-estimate never
 adds kinetic energy.
+"""
 
+TEMPLATE_DT = """\
 **The safety factor `dt_safety`.** Measured, not guessed: every scene of the library with an
-equilibrium, kt in {{0, 0.5, 0.9}}, each factor c (`python benchmarks/dt_safety.py` prints the
-same table), with the other settings at their defaults (backtracking on). Past the largest
-factor at which every run still converged, runs start to fail (the stable limit is that of the
-linearised mechanism, and large motions are more demanding), while below it the steps grow
-roughly as 1/c. The default, 0.3 with backtracking and the exact energy (0.2 otherwise), sits
-well below that: it is the largest factor that also kept every basin of 540 releases of the
-bistable pendulum (`python benchmarks/basins.py`; 0.4 lost 4), since a coarse step can carry a
-mechanism over a hump. Without backtracking every run converged only up to 0.3 (16 of 33 at
-0.5): a peak is seen one step late, and stopping dead there overshoots when the step is coarse.
+equilibrium ({scenes} of them, {runs} runs), kt in {{0, 0.5, 0.9}}, each factor c (`python
+benchmarks/dt_safety.py` prints the same table), with the other settings at their defaults
+(backtracking on); a run counts as converged at a rest that is not unstable (`marginal`
+included: go1 with its motors off may rest within 1 % of sliding). Past the largest factor at
+which every run still converged ({largest} here), runs start to fail (the stable limit is that of
+the linearised mechanism, and large motions are more demanding), while below it the steps grow
+roughly as 1/c (the fewest in total at {fewest}). The default, 0.3 with backtracking and the
+exact energy (0.2 otherwise), sits well below that: it is the largest factor that also kept
+every basin of 540 releases of the bistable pendulum (`python benchmarks/basins.py`; 0.4 lost
+4), since a coarse step can carry a mechanism over a hump. Without backtracking every run
+converged only up to 0.3 (16 of 33 at 0.5, measured on the 11 scenes the library had then): a
+peak is seen one step late, and stopping dead there overshoots when the step is coarse.
 
 """
 

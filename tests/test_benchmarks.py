@@ -310,17 +310,39 @@ def test_goal_5_says_why_from_the_measured_growth():
     )
 
 
-def test_goal_5_gives_the_growth_with_joint_inertia_only_where_every_chain_converged():
-    def row(n, status, steps, seconds):
-        ji = {"status": status, "steps": steps, "seconds": seconds}
-        return {"n": n, "joint_inertia": ji}
+def test_goal_4_says_why_a_short_run_passes_the_bound():
+    def row(name, fraction, setup):
+        parts = {"setup": setup, "estimates": 0.0, "assessments": 1e-3}
+        return {
+            "name": name,
+            "nv": 100,
+            "steps": 70,
+            "fraction": fraction,
+            "parts": parts,
+            "estimate_count": 0,
+            "assessment_count": 1,
+            "bare": 70 * 1e-5,  # 10 us a bare step
+        }
 
-    # Time as n^1.5 with the option: the line gives its fit and the steps' range.
-    rows = [row(k, "converged", 30 + k, 1e-6 * k**1.5) for k in (5, 20, 80)]
+    # 3 ms of set-up and 1 ms of verdicts are 400 bare steps of 10 us; a row within the bound
+    # gets no reason.
+    text = report_goals.fixed_cost_reasons([row("chain100", 0.5, 3e-3), row("ur5", 0.2, 1e-3)])
+    assert text.startswith(" Why, on chain100 (50.0%): its run is 70 steps")
+    assert "O(nv^3) with nv = 100" in text and "cost as much as 400 of its bare steps" in text
+    assert "ur5" not in text
+
+
+def test_goal_5_gives_the_growth_without_joint_inertia_only_where_every_chain_converged():
+    def row(n, status, steps, seconds):
+        off = {"status": status, "steps": steps, "seconds": seconds}
+        return {"n": n, "no_joint_inertia": off}
+
+    # Time as n^2.5 without the option: the line gives its fit and the steps' range.
+    rows = [row(k, "converged", 30 + k, 1e-6 * k**2.5) for k in (5, 20, 80)]
     text = report_goals.joint_inertia_growth(types.SimpleNamespace(scaling=rows))
-    assert "(5 to 80 links) take 35 to 110 steps" in text
-    assert "grows as n^1.50" in text and "not the default" in text
-    rows[1]["joint_inertia"]["status"] = "max_steps"
+    assert "`scale_joint_inertia = False` the same chains (5 to 80 links) take 35 to 110" in text
+    assert "grows as n^2.50" in text and "from 20 degrees of freedom" in text
+    rows[1]["no_joint_inertia"]["status"] = "max_steps"
     assert report_goals.joint_inertia_growth(types.SimpleNamespace(scaling=rows)) == ""
     assert report_goals.joint_inertia_growth(types.SimpleNamespace(scaling=rows[:1])) == ""
 

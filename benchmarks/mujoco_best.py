@@ -5,7 +5,20 @@ set against pinsettle's default solve of the same robot, warm and in a fresh pro
 
 - The sweep: timestep in TIMESTEPS; integrator in INTEGRATORS; damping either the same c on
   every degree of freedom (UNIFORM, N m s/rad or N s/m) or c_i = a M_ii(q0) (MASS, 1/s; M the
-  joint-space mass matrix at the start, from ``mj_fullM``).
+  joint-space mass matrix at the start, from ``mj_fullM``); MuJoCo's constraint solver
+  tolerance ``opt.tolerance`` at its default (1e-8) and, for the integrators in
+  TIGHT_INTEGRATORS, also at TIGHT (1e-10). Why: on a soft joint limit a step solves the
+  constraint forces only to the solver's tolerance, and at the default the static residual
+  wanders near 1e-10, so reaching it is a lucky dip (a panda, 29.5 ms Euler a = 0.771/s:
+  10990 steps at 1e-8, 7300 at 1e-9, 7290 at 1e-10, 7230 at 1e-12; talos_left_arm, 200 ms
+  Euler a = 0.0424/s: 10290, 2340, 2320, 2320; xarm7 and baxter alike at all four). So 1e-9 is
+  nearly tight enough and 1e-12 gains nothing: the grid takes the default and 1e-10. Only
+  Euler's grid is doubled (Euler was the best integrator on 10 of the 11 robots settled before
+  the tolerance was swept, and the outside check's on 8 of 10; the whole grid doubled would not
+  fit the run time): the local search swaps the tolerance as one of its moves, for every
+  integrator. A run that never has a constraint row
+  (``MjData.maxuse_efc`` = 0: no limit touched) is the same at any tolerance, step for step,
+  so its twin at the other tolerance is not run again but copied (and not counted twice).
 - The stopping rule: every CHUNK steps, qpos is copied to a scratch MjData with qvel = 0 and
   ``mj_forward`` gives qacc; r = max |M qacc| (``mj_mulM``) is the net generalized force at rest
   there, the limits' constraint forces included. Relative to the force scale at the start
@@ -54,6 +67,10 @@ BEGIN = "<!-- mujoco:best (written by benchmarks/mujoco_best.py) -->"
 END = "<!-- /mujoco:best -->"
 AFTER = "<!-- /report:gallery -->"
 
+DEFAULT_TOLERANCE = 1e-8  # MuJoCo's default opt.tolerance
+TIGHT = 1e-10  # the tight solver tolerance (1e-9 nearly as good, 1e-12 no better: measured)
+TOLERANCES = (DEFAULT_TOLERANCE, TIGHT)
+TIGHT_INTEGRATORS = ("Euler",)  # the integrators whose grid is swept at TIGHT too
 TIMESTEPS = (1e-3, 2e-3, 5e-3, 10e-3, 20e-3, 50e-3, 100e-3, 200e-3, 500e-3, 1.0, 2.0, 5.0)
 INTEGRATOR_NAMES = ("Euler", "implicitfast", "implicit")
 UNIFORM = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0)
@@ -89,20 +106,30 @@ class Setting(NamedTuple):
     integrator: str
     kind: str  # "uniform" or "mass"
     value: float
+    tolerance: float = DEFAULT_TOLERANCE  # the constraint solver's, m.opt.tolerance
 
     def label(self) -> str:
         damping = f"c = {self.value:.10g}" if self.kind == "uniform" else f"a = {self.value:.10g}/s"
-        return f"{self.timestep * 1e3:.10g} ms, {self.integrator}, {damping}"
+        return (
+            f"{self.timestep * 1e3:.10g} ms, {self.integrator}, {damping}, tol {self.tolerance:g}"
+        )
+
+    def twin(self) -> Setting:
+        """The same setting at the other tolerance of TOLERANCES."""
+        other = TIGHT if self.tolerance == DEFAULT_TOLERANCE else DEFAULT_TOLERANCE
+        return self._replace(tolerance=other)
 
 
 def sweep_settings() -> list[Setting]:
-    return [
+    """The grid: every setting at the default tolerance, then TIGHT_INTEGRATORS' at TIGHT."""
+    grid = [
         Setting(dt, integrator, kind, value)
         for dt in TIMESTEPS
         for integrator in INTEGRATOR_NAMES
-        for kind, grid in GRIDS.items()
-        for value in grid
+        for kind, values in GRIDS.items()
+        for value in values
     ]
+    return grid + [s.twin() for s in grid if s.integrator in TIGHT_INTEGRATORS]
 
 
 # --- MuJoCo -----------------------------------------------------------------------------------
@@ -128,6 +155,7 @@ def force_scale(m: Any) -> float:
 def configure(m: Any, setting: Setting, diag: np.ndarray) -> None:
     m.opt.timestep = setting.timestep
     m.opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{setting.integrator.upper()}")
+    m.opt.tolerance = setting.tolerance
     if setting.kind == "uniform":
         m.dof_damping[:] = setting.value
     else:
@@ -139,8 +167,9 @@ class Checker:
     forces solved to convergence: at MuJoCo's default solver tolerance (1e-8) a rest on a limit
     can read qacc = 0 exactly where the solver accepts its start (no iteration), between checks
     of 5e-9 (talos_left_arm), which let a run stop at a lucky step. The solver's settings are
-    changed for the check only (the run steps at MuJoCo's defaults); the residual depends on
-    the configured timestep, through the softness of the limits."""
+    changed for the check only (the run steps at the setting's tolerance, MuJoCo's other
+    defaults); the residual depends on the configured timestep, through the softness of the
+    limits."""
 
     def __init__(self, m: Any, scale: float) -> None:
         self.m, self.scale = m, scale
@@ -169,7 +198,9 @@ def bad_state(d: Any) -> bool:
 
 
 def run(m: Any, check: Checker, max_steps: int = MAX_STEPS) -> dict[str, Any]:
-    """One setting (already configured) from qpos = 0: the first step at each level."""
+    """One setting (already configured) from qpos = 0: the first step at each level, and
+    whether a constraint row was ever made (``maxuse_efc``: if not, the tolerance played no
+    part)."""
     d = mujoco.MjData(m)
     first: dict[float, int] = {}
     steps, status, residual = 0, "budget", float("inf")
@@ -190,7 +221,19 @@ def run(m: Any, check: Checker, max_steps: int = MAX_STEPS) -> dict[str, Any]:
         if time.perf_counter() > deadline:
             status = "wall"
             break
-    return {"status": status, "steps": steps, "first": first, "residual": residual}
+    return {
+        "status": status,
+        "steps": steps,
+        "first": first,
+        "residual": residual,
+        "constrained": d.maxuse_efc > 0,
+    }
+
+
+def copied(twin: Setting, r: dict[str, Any]) -> dict[str, Any] | None:
+    """A run of ``twin``'s twin at the other tolerance, if ``twin``'s run ``r`` never had a
+    constraint row (so the tolerance played no part): ``r``, marked as a copy of ``twin``."""
+    return None if r["constrained"] else r | {"twin": twin}
 
 
 def time_steps(m: Any, steps: int, repeats: int) -> tuple[list[float], np.ndarray]:
@@ -214,10 +257,15 @@ def sweep(m: Any) -> tuple[list[tuple[Setting, dict[str, Any]]], float]:
     """Every setting's run, and the force scale."""
     diag = mass_diagonal(m)
     check = Checker(m, force_scale(m))
-    runs = []
+    runs: list[tuple[Setting, dict[str, Any]]] = []
+    seen: dict[Setting, dict[str, Any]] = {}
     for setting in sweep_settings():
-        configure(m, setting, diag)
-        runs.append((setting, run(m, check)))
+        r = copied(setting.twin(), seen[setting.twin()]) if setting.twin() in seen else None
+        if r is None:
+            configure(m, setting, diag)
+            r = run(m, check)
+        seen[setting] = r
+        runs.append((setting, r))
     return runs, check.scale
 
 
@@ -226,7 +274,8 @@ def sweep(m: Any) -> tuple[list[tuple[Setting, dict[str, Any]]], float]:
 REFINE_FACTORS = (2.0**0.5, 2.0**0.25, 2.0**0.125, 2.0**0.0625)
 REFINE_EVALS = 60
 #: Then SCATTER settings drawn around each of the SCATTER_CENTRES best, log-uniform within
-#: SCATTER_SPAN in the step and the damping, any integrator (seeded: the same draws each run).
+#: SCATTER_SPAN in the step and the damping, any integrator and tolerance (seeded: the same draws
+#: each run).
 SCATTER, SCATTER_CENTRES, SCATTER_SPAN, SCATTER_SEED = 30, 3, 2.0**0.5, 20261128
 CUT = 5  # a local run stops at CUT times the fewest steps found so far
 WEIGHT_STEPS = 500  # steps timed for each integrator's cost of a step
@@ -235,7 +284,11 @@ WEIGHT_STEPS = 500  # steps timed for each integrator's cost of a step
 def step_costs(m: Any, diag: np.ndarray) -> dict[str, float]:
     """Each integrator's cost of a step relative to Euler's on this robot (WEIGHT_STEPS steps
     from the start at 10 ms, mass-proportional damping 1/s; medians of TIME_REPEATS): an
-    implicit step can cost twice an Euler step, so the fewest steps need not be the fastest."""
+    implicit step can cost twice an Euler step, so the fewest steps need not be the fastest.
+    At the default solver tolerance only: where a limit is active a step at TIGHT cost within
+    5% of one at the default (panda, talos_left_arm, xarm7, baxter at their best settings), less
+    than this weight's own spread, so the tolerance gets no weight of its own; the best is
+    chosen by wall time in the end (timed_best), the tighter solve's cost included."""
     costs = {}
     for name in INTEGRATOR_NAMES:
         configure(m, Setting(10e-3, name, "mass", 1.0), diag)
@@ -263,15 +316,23 @@ class LocalRuns:
         self.scored: dict[Setting, float] = {}
         self.fewest = MAX_STEPS
         self.level = LEVELS[-1]
+        self.runs_made = 0  # the runs made (copies not counted)
 
     def cost(self, setting: Setting) -> float:
         if setting in self.scored:
             return self.scored[setting]
         m, level = self.m, self.level
+        twin = setting.twin()
+        if setting not in self.seen and twin in self.seen:
+            copy = copied(twin, self.seen[twin])
+            if copy is not None:
+                self.seen[setting] = copy
+                self.made.append((setting, copy))  # not counted: no run made
         if setting not in self.seen:
             configure(m, setting, self.diag)
             self.seen[setting] = run(m, self.check, min(MAX_STEPS, CUT * self.fewest))
             self.made.append((setting, self.seen[setting]))
+            self.runs_made += 1
         r = self.seen[setting]
         self.scored[setting] = math.inf
         if level in r["first"]:
@@ -313,18 +374,18 @@ def refine(
     """A local search after the grid, to the tightest level a grid point reaches at a valid
     rest: a pattern search from the fastest grid point of each family (integrator and kind of
     damping), the timestep, the damping or both multiplied or divided by a factor, or the
-    integrator swapped, moving to the best neighbour while one is faster, then a smaller
-    factor; then settings scattered around the best found (scatter). Faster: the exact steps
-    (exact_first) times the integrator's cost of a step (step_costs; a step costs the same
-    whatever its length and damping). The steps to rest are a rugged function of the step and
-    the damping where a limit is touched (with the check at MuJoCo's default solver
-    tolerance, a panda settled in 1200 steps at one point, in 710 at 11% longer steps with 18%
-    less damping, and not within 20000 steps between them), so a pattern search alone stopped
-    at local minima up to twice as slow as a wider search found.
+    integrator or the solver tolerance swapped, moving to the best neighbour while one is
+    faster, then a smaller factor; then settings scattered around the best found (scatter).
+    Faster: the exact steps (exact_first) times the integrator's cost of a step (step_costs;
+    a step costs the same whatever its length, damping and tolerance). The steps to rest are
+    a rugged function of the step and the damping where a limit is touched (with the check at
+    MuJoCo's default solver tolerance, a panda settled in 1200 steps at one point, in 710 at
+    11% longer steps with 18% less damping, and not within 20000 steps between them), so a
+    pattern search alone stopped at local minima up to twice as slow as a wider search found.
     Returns the runs it made."""
     local = LocalRuns(m, runs, check, valid)
     for start in sorted(local.starts(runs), key=local.cost):
-        descend(start, local.cost, len(local.made) + REFINE_EVALS, lambda: len(local.made))
+        descend(start, local.cost, local.runs_made + REFINE_EVALS, lambda: local.runs_made)
     scatter(local.scored, local.cost)
     return local.made
 
@@ -345,7 +406,8 @@ def scatter(scored: dict[Setting, float], cost: Callable[[Setting], float]) -> N
         for _ in range(SCATTER):
             fh, fc = SCATTER_SPAN ** rng.uniform(-1.0, 1.0, size=2)
             name = INTEGRATOR_NAMES[int(rng.integers(len(INTEGRATOR_NAMES)))]
-            cost(Setting(centre.timestep * fh, name, centre.kind, centre.value * fc))
+            tol = TOLERANCES[int(rng.integers(len(TOLERANCES)))]
+            cost(Setting(centre.timestep * fh, name, centre.kind, centre.value * fc, tol))
     if centres:
         best = min(scored, key=lambda s: scored[s])
         count = [0]
@@ -361,14 +423,14 @@ def scatter(scored: dict[Setting, float], cost: Callable[[Setting], float]) -> N
 def neighbours(here: Setting, factor: float) -> list[Setting]:
     """The settings a factor away in the timestep, the damping or both (the best damping moves
     with the step), and the same step and damping with another integrator (often as many
-    steps, and an Euler step is the cheapest)."""
+    steps, and an Euler step is the cheapest), and at the other solver tolerance."""
     out = []
     for fh in (factor, 1.0, 1.0 / factor):
         for fc in (factor, 1.0, 1.0 / factor):
             if (fh, fc) != (1.0, 1.0):
                 out.append(here._replace(timestep=here.timestep * fh, value=here.value * fc))
     out += [here._replace(integrator=n) for n in INTEGRATOR_NAMES if n != here.integrator]
-    return out
+    return [*out, here.twin()]
 
 
 def step_down(
@@ -421,7 +483,7 @@ def best_run(
     for level in reversed(LEVELS):
         once = []
         for setting, r in runs:
-            if level in r["first"]:
+            if level in r["first"] and "twin" not in r:  # a copy is its twin's run
                 configure(m, setting, diag)
                 steps = exact_first(m, check, r["first"][level], level)[0]
                 seconds, qpos = time_steps(m, steps, 1)
@@ -608,12 +670,6 @@ def _pct(fraction: float) -> str:
     return f"{fraction * 100:.0f}%"
 
 
-def _damping(setting: Setting) -> str:
-    if setting.kind == "uniform":
-        return f"c = {setting.value:.10g}"
-    return f"a = {setting.value:.10g}/s"
-
-
 def table_row(row: dict[str, Any]) -> str:
     counts = "/".join(str(row["counts"][level]) for level in LEVELS)
     kd = f"{_ms(row['warm'])} ± {_pct(row['warm_spread'])} | {_ms(row['first'])} | "
@@ -625,8 +681,8 @@ def table_row(row: dict[str, Any]) -> str:
         return f"| {row['name']} | {row['nv']} | {none} | {kd} | | | | |"
     s = best["setting"]
     return (
-        f"| {row['name']} | {row['nv']} | {s.timestep * 1e3:.10g} ms, {s.integrator}, "
-        f"{_damping(s)} | {best['level']:.0e} | {best['steps']} | {best['sim_time']:.3g} | "
+        f"| {row['name']} | {row['nv']} | {s.label()} | {best['level']:.0e} | "
+        f"{best['steps']} | {best['sim_time']:.3g} | "
         f"{_ms(best['seconds'])} ± {_pct(best['spread'])} | {counts} | {kd} | "
         f"{best['seconds'] / row['warm']:.2g} | {best['seconds'] / row['first']:.2g} | "
         f"{best['relative']:.0e}, {best['verdict']}, {best['distance']:.1e}, "
@@ -741,6 +797,27 @@ def flags(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def tolerance_prose() -> str:
+    """The prose's sentences on the solver tolerance."""
+    tight = ", ".join(TIGHT_INTEGRATORS)
+    return (
+        f"MuJoCo's constraint solver tolerance (`opt.tolerance`, 'tol' in the table) at its "
+        f"default {DEFAULT_TOLERANCE:g}, and for {tight} also at {TIGHT:g}. On a soft joint "
+        "limit a step solves the constraint forces only to that tolerance, and at the default "
+        "the static residual wanders near 1e-10: reaching it is a lucky dip that does not "
+        "replay (a panda at 29.5 ms Euler a = 0.771/s took 10990 steps at 1e-8, 7300 at 1e-9, "
+        "7290 at 1e-10 and 7230 at 1e-12; talos_left_arm at 200 ms Euler a = 0.0424/s 10290, "
+        f"2340, 2320 and 2320), so the grid takes the default and {TIGHT:g}, and only {tight}'s "
+        "twice (the best integrator on 10 of the 11 robots settled before the tolerance was "
+        "swept; all of it twice would not fit the run time): the local search swaps the "
+        "tolerance as one of its moves. A run that never makes a constraint row (`maxuse_efc` "
+        "= 0, no limit touched) is the same at either tolerance, step for step, and is not run "
+        "twice. A step at the tight tolerance on a limit cost within 5% of one at the default "
+        "(measured on four robots), so the search weighs the steps by the integrator only; the "
+        "best is timed, the tighter solve included."
+    )
+
+
 def prose() -> list[str]:
     steps = ", ".join(f"{dt * 1e3:g}" for dt in TIMESTEPS)
     return [
@@ -749,16 +826,20 @@ def prose() -> list[str]:
         f"in {{{steps}}} ms; integrator {', '.join(INTEGRATOR_NAMES)}; damping either the same "
         f"c in {{{', '.join(f'{c:g}' for c in UNIFORM)}}} on every degree of freedom or "
         f"c_i = a M_ii(q0) with a in {{{', '.join(f'{a:g}' for a in MASS)}}} 1/s (M_ii from "
-        "`mj_fullM` at the start). Then a local search to the tightest level a grid point "
+        "`mj_fullM` at the start); "
+        + tolerance_prose()
+        + " Then a local search to the tightest level a grid point "
         "reaches at a valid rest. First a pattern search from the fastest grid point of each "
         "family (integrator and kind of damping): the timestep, the damping or both "
         f"multiplied or divided by {', then '.join(f'{f:.3g}' for f in REFINE_FACTORS)}, or "
-        "the integrator swapped, moving while a neighbour is faster (its exact steps times "
-        f"the integrator's cost of a step on that robot, timed over {WEIGHT_STEPS} steps: an "
-        f"implicit step can cost twice an Euler one), at most {REFINE_EVALS} runs from each. "
+        "the integrator or the solver tolerance swapped, moving while a neighbour is faster "
+        "(its exact steps times the integrator's cost of a step on that robot, timed over "
+        f"{WEIGHT_STEPS} steps: an implicit step can cost twice an Euler one), at most "
+        f"{REFINE_EVALS} runs from each. "
         f"Then {SCATTER} settings drawn around each of the {SCATTER_CENTRES} best found "
         f"(log-uniform within {SCATTER_SPAN:.3g} times in the step and the damping, any "
-        "integrator, a fixed seed) and the pattern search again from the best with the two "
+        "integrator and tolerance, a fixed seed) and the pattern search again from the best "
+        "with the two "
         f"smallest factors. A local run stops at {CUT} times the fewest steps found. The "
         "steps to rest are a rugged function of the setting where a limit is touched (a "
         "panda's fewest, 710 steps with the check at MuJoCo's default solver tolerance, had "
@@ -855,7 +936,8 @@ def readme_block(doc: Path = DOC) -> str:
     kept = [line for line in block.splitlines() if line.startswith(("Over the", "The goal"))]
     body = " ".join(kept).replace("(MuJoCo's best over", "(its best over")
     paragraph = (
-        "**MuJoCo at its best**, per robot (timestep, integrator and damping swept, stopped at "
+        "**MuJoCo at its best**, per robot (timestep, integrator, damping and constraint solver "
+        "tolerance swept, stopped at "
         "the same static residual as pinsettle, at a valid rest: [docs/benchmarks.md]"
         f"(docs/benchmarks.md#mujoco-at-its-best-per-robot)): {body}"
     )

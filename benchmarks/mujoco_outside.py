@@ -6,9 +6,10 @@ section's recorded best against its own, interleaved, in one process.
 - The robots: those whose row in the section has a best setting (not "no valid rest reached");
   the section's setting, level and step count are read from its table.
 - The model: the gallery's stripped URDF in MuJoCo (``gallery.load_mujoco``; root fixed, its
-  limits kept, from qpos = 0), its timestep, integrator and damping set by the setting: damping
-  either the same c on every degree of freedom (kind "uniform") or c_i = a M_ii(q0) (kind
-  "mass"; M from ``mj_fullM`` at the start).
+  limits kept, from qpos = 0), its timestep, integrator, damping and constraint solver
+  tolerance (``opt.tolerance``) set by the setting: damping either the same c on every degree of
+  freedom (kind "uniform") or c_i = a M_ii(q0) (kind "mass"; M from ``mj_fullM`` at the start).
+  A setting printed without a tolerance is at MuJoCo's default, 1e-8.
 - The residual (the same rule as the section's, written anew): qpos with qvel = 0,
   ``mj_forward`` (its constraint solve to convergence: solver tolerance 0), r = max |M qacc|
   (``mj_mulM``) over the force scale max |qfrc_bias| at qpos0 with qvel = 0 (1 if 0). It is
@@ -20,15 +21,20 @@ section's recorded best against its own, interleaved, in one process.
 - A valid rest: ``gallery.rest_check`` of the configuration where the level is reached: at most
   OUTSIDE_TOL beyond a limit and not unstable (the section's acceptance).
 - The search, per robot, BUDGET runs at most (``--budget``): the parameters are x = (log
-  timestep, log damping value) for each of the six families (integrator Euler, implicitfast,
-  implicit) x (kind uniform, mass), over the timestep range TIMESTEP_RANGE and the damping ranges
-  DAMPING_RANGES. A seeded scrambled Halton sample (SAMPLE_SHARE of the budget, spread evenly over
-  the families, each family its own sequence), then scipy's bounded Nelder-Mead from the best
+  timestep, log damping value, log solver tolerance) for each of the six families (integrator
+  Euler, implicitfast, implicit) x (kind uniform, mass), over the timestep range TIMESTEP_RANGE,
+  the damping ranges DAMPING_RANGES and the tolerance range TOLERANCE_RANGE (on a soft limit a
+  step solves the constraint forces only to the solver's tolerance, and at MuJoCo's default,
+  1e-8, the residual may never settle below 1e-10; where no limit is touched it plays no
+  part). A seeded scrambled Halton sample in three dimensions (SAMPLE_SHARE of the budget,
+  spread evenly over the families, each family its own sequence; the budget raised from 250 to
+  300 for the third dimension), then scipy's bounded Nelder-Mead from the best
   sample of each family, the best families first (the first STARTS share the rest of the
   budget); the TRANSFER best settings are then tried with the other integrators, and Nelder-Mead
   restarts from the best point found (the nearest miss if none is valid) with a halved simplex
   while the budget lasts and the restarts improve. Objective: the steps to the level at a valid
-  rest times the integrator's cost of a step relative to Euler's (timed once per robot); a run
+  rest times the integrator's cost of a step relative to Euler's (timed once per robot, at the
+  default tolerance: the tolerance's own cost shows in the finalists' timing); a run
   that does not reach it costs MAX_STEPS times 1 to 2 (more the further its last residual is from
   the level), one at an invalid rest 2 to 3 (more the further beyond a limit), one that diverges
   3 to 4 (more the sooner).
@@ -84,8 +90,10 @@ KINDS = ("uniform", "mass")
 Family = tuple[str, str]  # (integrator, kind)
 FAMILIES = tuple((integrator, kind) for integrator in INTEGRATORS for kind in KINDS)
 TIMESTEP_RANGE = (2e-4, 10.0)  # s
+TOLERANCE_RANGE = (1e-12, 1e-6)  # MuJoCo's constraint solver tolerance, opt.tolerance
+MUJOCO_TOLERANCE = 1e-8  # MuJoCo's default, for a setting printed without one
 DAMPING_RANGES = {"uniform": (1e-3, 1e3), "mass": (1e-2, 1e3)}  # N m s/rad (or N s/m); 1/s
-BUDGET = 250  # runs per robot
+BUDGET = 300  # runs per robot (250 before the tolerance became a third parameter)
 SAMPLE_SHARE = 0.4  # of the budget, for the quasi-random sample
 STARTS = 4  # Nelder-Mead starts sharing the rest of the budget
 SIMPLEX = math.log(2.0)  # the initial simplex's edge, in log units
@@ -106,7 +114,7 @@ BAD = ("mjWARN_BADQACC", "mjWARN_BADQVEL", "mjWARN_BADQPOS")
 NUMBER = r"[0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?"
 SETTING_FORM = re.compile(
     rf"^(?P<ms>{NUMBER}) ms, (?P<integrator>{'|'.join(INTEGRATORS)}), "
-    rf"(?:c = (?P<c>{NUMBER})|a = (?P<a>{NUMBER})/s)$"
+    rf"(?:c = (?P<c>{NUMBER})|a = (?P<a>{NUMBER})/s)(?:, tol (?P<tol>{NUMBER}))?$"
 )
 
 
@@ -115,10 +123,13 @@ class Setting(NamedTuple):
     integrator: str
     kind: str  # "uniform" or "mass"
     value: float  # c (uniform) or a (mass, 1/s)
+    tolerance: float = MUJOCO_TOLERANCE  # the constraint solver's, opt.tolerance
 
     def label(self) -> str:
         damping = f"c = {self.value:.6g}" if self.kind == "uniform" else f"a = {self.value:.6g}/s"
-        return f"{self.timestep * 1e3:.6g} ms, {self.integrator}, {damping}"
+        return (
+            f"{self.timestep * 1e3:.6g} ms, {self.integrator}, {damping}, tol {self.tolerance:.3g}"
+        )
 
 
 class Recorded(NamedTuple):
@@ -143,19 +154,22 @@ class Run(NamedTuple):
 
 
 def parse_setting(text: str) -> Setting:
-    """A setting as the section prints it: '458.502 ms, Euler, a = 2.12132/s' (mass kind) or
-    '1 ms, Euler, c = 0.1' (uniform kind)."""
+    """A setting as the section prints it: '458.502 ms, Euler, a = 2.12132/s, tol 1e-10' (mass
+    kind) or '1 ms, Euler, c = 0.1, tol 1e-08' (uniform kind); without ', tol ...' the solver
+    tolerance is MuJoCo's default (1e-8)."""
     match = SETTING_FORM.match(text.strip())
     if match is None:
         raise ValueError(
             f"not a MuJoCo setting: {text!r} (expected '<timestep> ms, <integrator>, c = <c>' "
-            f"or '... a = <a>/s', the integrator one of {', '.join(INTEGRATORS)})"
+            f"or '... a = <a>/s', then optionally ', tol <tolerance>', the integrator one of "
+            f"{', '.join(INTEGRATORS)})"
         )
     timestep = float(match["ms"]) * 1e-3
     kind, value = ("uniform", match["c"]) if match["c"] is not None else ("mass", match["a"])
+    tolerance = MUJOCO_TOLERANCE if match["tol"] is None else float(match["tol"])
     if timestep <= 0 or float(value) <= 0:
         raise ValueError(f"not a MuJoCo setting: {text!r} (timestep and damping must be > 0)")
-    return Setting(timestep, match["integrator"], kind, float(value))
+    return Setting(timestep, match["integrator"], kind, float(value), tolerance)
 
 
 def _cells(line: str) -> list[str]:
@@ -269,6 +283,7 @@ class Bench:
         m = self.model
         m.opt.timestep = setting.timestep
         m.opt.integrator = integrator_of(setting.integrator)
+        m.opt.tolerance = setting.tolerance
         m.dof_damping[:] = setting.value if setting.kind == "uniform" else setting.value * self.diag
 
     def residual(self, qpos: np.ndarray) -> float:
@@ -366,14 +381,17 @@ def bounds(kind: str) -> list[tuple[float, float]]:
     return [
         (math.log(TIMESTEP_RANGE[0]), math.log(TIMESTEP_RANGE[1])),
         (math.log(low), math.log(high)),
+        (math.log(TOLERANCE_RANGE[0]), math.log(TOLERANCE_RANGE[1])),
     ]
 
 
 def setting_at(family: Family, x: np.ndarray) -> Setting:
-    (t_low, t_high), (d_low, d_high) = bounds(family[1])
-    timestep = math.exp(min(max(float(x[0]), t_low), t_high))
-    value = math.exp(min(max(float(x[1]), d_low), d_high))
-    return Setting(timestep, family[0], family[1], value)
+    """The setting at x = (log timestep, log damping, log tolerance), clipped to the bounds."""
+    timestep, value, tolerance = (
+        math.exp(min(max(float(v), low), high))
+        for v, (low, high) in zip(x, bounds(family[1]), strict=True)
+    )
+    return Setting(timestep, family[0], family[1], value, tolerance)
 
 
 def cost(run: Run, level: float) -> float:
@@ -437,16 +455,14 @@ def sample(search: Search, per_family: int, seed: int) -> dict[Family, tuple[flo
     """A scrambled Halton sample of the parameters (log-uniform over the ranges) for every
     family, each its own (seeded in turn), the families taken in turn; the best of each."""
     units = [
-        qmc.Halton(d=2, scramble=True, seed=seed + 7919 * k).random(per_family)
+        qmc.Halton(d=3, scramble=True, seed=seed + 7919 * k).random(per_family)
         for k in range(len(FAMILIES))
     ]
     best: dict[Family, tuple[float, Setting]] = {}
     for i in range(per_family):
         for family, unit in zip(FAMILIES, units, strict=True):
-            (t_low, t_high), (d_low, d_high) = bounds(family[1])
-            u = unit[i]
-            x = np.array([t_low + u[0] * (t_high - t_low), d_low + u[1] * (d_high - d_low)])
-            setting = setting_at(family, x)
+            low, high = np.array(bounds(family[1])).T
+            setting = setting_at(family, low + unit[i] * (high - low))
             value = search.evaluate(setting)
             if family not in best or value < best[family][0]:
                 best[family] = (value, setting)
@@ -467,7 +483,7 @@ def simplex(x0: np.ndarray, kind: str, edge: float) -> np.ndarray:
 def polish(search: Search, start: Setting, maxfev: int, edge: float = SIMPLEX) -> None:
     """Bounded Nelder-Mead from ``start`` in its family (at most ``maxfev`` evaluations)."""
     family = (start.integrator, start.kind)
-    x0 = np.array([math.log(start.timestep), math.log(start.value)])
+    x0 = np.array([math.log(start.timestep), math.log(start.value), math.log(start.tolerance)])
     try:
         minimize(
             lambda x: search.evaluate(setting_at(family, x)),
@@ -683,16 +699,22 @@ def prose(budget: int) -> str:
     (t_low, t_high) = TIMESTEP_RANGE
     u_low, u_high = DAMPING_RANGES["uniform"]
     a_low, a_high = DAMPING_RANGES["mass"]
+    tol_low, tol_high = TOLERANCE_RANGE
     return (
         "An independent search for MuJoCo's fastest settle of each robot that has a best above "
         "(the same model: the gallery's stripped URDF, root fixed, limits kept, from qpos = 0), "
         "sharing nothing with `mujoco_best.py` but the gallery's loading and rest check. Per "
         f"robot at most {budget} runs: over the integrators {', '.join(INTEGRATORS)} and both "
         f"damping kinds (the same c in [{u_low:g}, {u_high:g}] on every degree of freedom, or "
-        f"c_i = a M_ii(q0) with a in [{a_low:g}, {a_high:g}] 1/s) and the timestep in "
-        f"[{t_low * 1e3:g} ms, {t_high:g} s], a scrambled Halton sample in log scale "
+        f"c_i = a M_ii(q0) with a in [{a_low:g}, {a_high:g}] 1/s), the timestep in "
+        f"[{t_low * 1e3:g} ms, {t_high:g} s] and MuJoCo's constraint solver tolerance "
+        f"(`opt.tolerance`, 'tol' in the table) in [{tol_low:g}, {tol_high:g}] (on a soft "
+        "limit a step solves the constraint forces only to it, and at MuJoCo's default, 1e-8, "
+        "the residual may wander near 1e-10 and never settle below; off the limits it plays no "
+        "part), a scrambled Halton sample in log scale "
         f"({SAMPLE_SHARE:.0%} of the runs), then bounded Nelder-Mead in (log timestep, log "
-        "damping) from the best sample of each of the six families, the best settings tried "
+        "damping, log tolerance) from the best sample of each of the six families, the best "
+        "settings tried "
         "with the other integrators, then restarts from the best point; the objective is the "
         "steps to the level at a valid rest weighted by the integrator's cost of a step "
         "(failures penalized, graded by how near they came). The "

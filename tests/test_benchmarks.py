@@ -939,10 +939,14 @@ def test_mujocos_local_search_moves_downhill_and_samples_near_its_best():
 
     here = mb.Setting(0.2, "implicit", "mass", 30.0)
     around = mb.neighbours(here, 2.0)
-    assert len(set(around)) == 10 and all(s.kind == "mass" for s in around)
-    assert {(s.timestep, s.value) for s in around if s.integrator == here.integrator} == {
+    assert len(set(around)) == 11 and all(s.kind == "mass" for s in around)
+    same = [s for s in around if s.integrator == here.integrator and s.tolerance == here.tolerance]
+    assert {(s.timestep, s.value) for s in same} == {
         (here.timestep * a, here.value * b) for a in (2.0, 1.0, 0.5) for b in (2.0, 1.0, 0.5)
     } - {(here.timestep, here.value)}
+    # the same setting at the other solver tolerance is a neighbour too
+    assert here._replace(tolerance=mb.TIGHT) in around
+    assert mb.neighbours(here._replace(tolerance=mb.TIGHT), 2.0)[-1] == here
     end = mb.step_down(here, cost, 2.0**0.25, lambda: True)
     # Downhill to a point no neighbour improves on, with Euler's cheaper steps.
     assert cost(end) < cost(here) and end.integrator == "Euler"
@@ -969,6 +973,7 @@ def test_mujocos_local_search_moves_downhill_and_samples_near_its_best():
         assert all(1 / span <= s.timestep / centre.timestep <= span for s in drawn)
         assert all(1 / span <= s.value / centre.value <= span for s in drawn)
         assert {s.integrator for s in drawn} == set(mb.INTEGRATOR_NAMES)
+        assert {s.tolerance for s in drawn} == set(mb.TOLERANCES)
     best = min(book, key=book.get)
     assert book[best] <= min(book[s] for s in made[: 2 * mb.SCATTER])
     assert all(cost(s) >= book[best] for s in mb.neighbours(best, mb.REFINE_FACTORS[-1]))
@@ -1036,3 +1041,63 @@ def test_mujocos_stopping_rule_is_the_static_residual_pinocchio_gives():
         q = gallery.mujoco_q(m, qpos, model)
         gravity = pinocchio.computeGeneralizedGravity(model, data, q)
         assert check(qpos) == pytest.approx(np.max(np.abs(gravity)), rel=1e-9)
+
+
+def test_mujocos_best_sweeps_and_applies_the_solver_tolerance():
+    # mujoco_best's grid: every setting at MuJoCo's default solver tolerance, TIGHT_INTEGRATORS'
+    # at TIGHT too; configure puts the tolerance into the model, the label says it.
+    pytest.importorskip("mujoco")
+    import gallery
+    import mujoco
+    import mujoco_best as mb
+
+    settings = mb.sweep_settings()
+    default = [s for s in settings if s.tolerance == mb.DEFAULT_TOLERANCE]
+    tight = [s for s in settings if s.tolerance == mb.TIGHT]
+    assert len(default) + len(tight) == len(settings) == len(set(settings))
+    assert {s.integrator for s in tight} == set(mb.TIGHT_INTEGRATORS)
+    assert {s.twin() for s in tight} == {s for s in default if s.integrator in mb.TIGHT_INTEGRATORS}
+    m, why, _ = gallery.load_mujoco(pinsettle.robot_urdf("talos_left_arm"))
+    assert m is not None, why
+    assert mb.DEFAULT_TOLERANCE == m.opt.tolerance  # MuJoCo's own default
+    diag = mb.mass_diagonal(m)
+    setting = mb.Setting(0.2, "Euler", "mass", 0.0424, mb.TIGHT)
+    mb.configure(m, setting, diag)
+    assert m.opt.tolerance == mb.TIGHT and setting.label().endswith(", tol 1e-10")
+    check = mb.Checker(m, mb.force_scale(m))
+    # On talos_left_arm's limits the tight solve reaches 1e-10 within 2500 steps and stays
+    # below it; at the default the same setting's residual wanders between about 1e-10 and
+    # 1e-8 (below 1e-10 at a lucky step only). The check leaves the configured tolerance.
+    reached = mb.run(m, check, 2500)
+    assert m.opt.tolerance == mb.TIGHT
+    assert reached["status"] == "reached" and reached["constrained"]
+
+    def tail(s):
+        mb.configure(m, s, diag)
+        d = mujoco.MjData(m)
+        mujoco.mj_step(m, d, nstep=2400)
+        out = []
+        for _ in range(60):
+            mujoco.mj_step(m, d, nstep=mb.CHUNK)
+            out.append(check(d.qpos))
+        assert m.opt.tolerance == s.tolerance
+        return np.array(out)
+
+    assert tail(setting).max() <= mb.LEVELS[-1]
+    loose = tail(setting.twin())
+    assert loose.max() > 10 * mb.LEVELS[-1] and np.mean(loose <= mb.LEVELS[-1]) < 0.1
+    # A run with no constraint row is the same at either tolerance, so its twin is copied.
+    u, why, _ = gallery.load_mujoco(pinsettle.robot_urdf("ur5"))
+    assert u is not None, why
+    free = mb.Setting(0.45, "Euler", "mass", 2.0)
+    runs = {}
+    for s in (free, free.twin()):
+        mb.configure(u, s, mb.mass_diagonal(u))
+        runs[s] = mb.run(u, mb.Checker(u, mb.force_scale(u)))
+        d = mujoco.MjData(u)
+        mujoco.mj_step(u, d, nstep=runs[s]["steps"])
+        runs[s]["qpos"] = d.qpos.copy()
+    assert not runs[free]["constrained"]
+    assert np.array_equal(runs[free]["qpos"], runs[free.twin()]["qpos"])
+    assert mb.copied(free, runs[free]) == runs[free] | {"twin": free}
+    assert mb.copied(setting, reached) is None

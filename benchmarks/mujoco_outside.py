@@ -750,7 +750,11 @@ def closing(rows: list[dict[str, Any]]) -> list[str]:
     ]
     none = [row["recorded"].robot for row in rows if row["best"] is None]
     if none:
-        lines.append(f"The outside search reached no valid rest on: {', '.join(none)}.")
+        lines.append(
+            f"The outside search reached no valid rest on: {', '.join(none)}; there the "
+            "agreement is the section's replay alone (no faster setting was found, nor any "
+            "to compare with)."
+        )
     bad = [row for row in rows if not replays(row)]
     firsts = ", ".join(f"{row['recorded'].robot} {first_step(row)}" for row in rows)
     if bad:

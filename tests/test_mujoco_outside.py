@@ -282,6 +282,6 @@ def test_a_best_that_does_not_replay_is_no_agreement() -> None:
     assert [mo.agrees(r) for r in rows] == [True, False, False, True]
     text = "\n".join(mo.closing(rows))
     assert "on 2 of 4 robots; not on slow (2.00); lucky (its setting does not replay)." in text
-    assert "The outside search reached no valid rest on: lucky, alone." in text
+    assert "The outside search reached no valid rest on: lucky, alone; there the" in text
     assert "does NOT reach its level at a valid rest within its steps on: lucky." in text
     assert mo.table_row(rows[2]).endswith("| **no** |")

@@ -677,9 +677,8 @@ namespace
           return out;
         },
         "Every setting, declared once: name, kind ('number', 'integer', 'switch', "
-        "'auto_number', 'auto_switch', 'choice'), what a value must be, its help, its default and "
-        "whether "
-        "the command line has a flag for it.");
+        "'auto_number', 'auto_switch', 'choice'), what a value must be, its help, its default "
+        "and whether the command line has a flag for it.");
   }
 
   // The solver and the stops it applies.

@@ -31,20 +31,6 @@ namespace pinsettle
     throw std::invalid_argument("energy must be \"exact\" or \"simplified\", got \"" + name + "\"");
   }
 
-  const char * toString(Toggle toggle)
-  {
-    switch (toggle)
-    {
-    case Toggle::Off:
-      return "off";
-    case Toggle::On:
-      return "on";
-    case Toggle::Auto:
-      return "auto";
-    }
-    return "unknown";
-  }
-
   const char * toString(Status status)
   {
     switch (status)

@@ -36,9 +36,6 @@ namespace pinsettle
     Auto
   };
 
-  /// \brief Name of a toggle: "off", "on" or "auto".
-  const char * toString(Toggle toggle);
-
   /// Safety factor of the automatic step with backtracking and the exact energy: the largest
   /// that kept every basin of the bistable pendulum's releases (0.4 lost 4 of 540), well below
   /// 0.7, the largest at which every run of the library's scenes converged (docs/method.md,
@@ -59,12 +56,12 @@ namespace pinsettle
   /// fixed: 91,885).
   constexpr double kDtGrowthBacktrack = 2.5;
   /// \brief With scale_joint_inertia = Auto, the fewest degrees of freedom of a mechanism given
-  /// the fictitious joint inertia. Measured (one run each, on over off; docs/method.md): chains
+  /// the fictitious joint inertia. Measured (on over off, medians of 3; docs/method.md): chains
   /// released horizontal gain from 5 links (0.64 of the time) to 200 (0.036), and the talos
   /// (32) 0.84; below 20 the robots both gained (the Allegro hand 0.33, the SO-100 0.54) and lost
   /// (baxter, 19: 1.23; the xArm7 1.35; the finger_edu 1.18), and without stops the Panda's
   /// fingers slide off unseen by the runaway test (1e6 steps, against 51,201 without it).
-  constexpr long kJointInertiaMinDofs = 20;
+  constexpr int kJointInertiaMinDofs = 20;
 
   ///
   /// \brief Inputs of the kinetic-damping solver. The solver only reads them.
@@ -187,7 +184,7 @@ namespace pinsettle
   /// time, the MJCF ant 4.2, the vehicle 2.8). StepController applies it where the rest of its
   /// rule holds (the automatic step, the exact energy, no loops, more than one joint).
   ///
-  inline bool effectiveJointInertia(const Settings & settings, long nv, bool contacts)
+  inline bool effectiveJointInertia(const Settings & settings, int nv, bool contacts)
   {
     if (settings.scale_joint_inertia != Toggle::Auto)
       return settings.scale_joint_inertia == Toggle::On;

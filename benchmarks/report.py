@@ -1154,19 +1154,24 @@ def overhead_tasks(config: Config, results: Results, programs: Path, work: Path)
 def joint_inertia_run(
     scene: pinsettle.Scene, statics: Statics, q_star: np.ndarray, repeats: int, config: Config
 ) -> Record:
-    """The chain's default solve but with scale_joint_inertia off (the default, 'auto', gives
-    it from 20 links), from Python: status, steps, the median wall time of the repeats, the
-    joints given an inertia (none), the final residual (relative, independent physics) and the
-    distance to straight down."""
-    runs = [
-        pinsettle.solve(scene, scale_joint_inertia=False, max_time=config.scaling_max_time)
-        for _ in range(repeats)
-    ]
+    """The chain's solve with scale_joint_inertia off (the default, 'auto', gives it from 20
+    links) and its default solve, both from Python, each on a Solver kept for its repeats and
+    the two alternated (the same way for both: a ratio of 1 where they are the same run):
+    the off run's status, steps, median wall time, joints given an inertia (none), final
+    residual (relative, independent physics) and distance to straight down, and the default
+    run's median wall time."""
+    off = pinsettle.Solver(scene, scale_joint_inertia=False, max_time=config.scaling_max_time)
+    default = pinsettle.Solver(scene, max_time=config.scaling_max_time)
+    runs, default_runs = [], []
+    for _ in range(repeats):
+        runs.append(off.solve())
+        default_runs.append(default.solve())
     r = runs[-1]
     return {
         "status": r.status,
         "steps": r.steps,
         "seconds": statistics.median(x.wall_time for x in runs),
+        "default_seconds": statistics.median(x.wall_time for x in default_runs),
         "scaled_joints": r.scaled_joints,
         "residual": statics.residual(r.q),
         "distance": statics.distance(q_star, r.q),

@@ -1191,7 +1191,6 @@ def joint_inertia_table(results: D.Results) -> str:
         off = row.get("no_joint_inertia")
         if off is None:
             continue
-        default = solve_time(row)
         rows.append(
             [
                 str(row["n"]),
@@ -1199,7 +1198,8 @@ def joint_inertia_table(results: D.Results) -> str:
                 f"{off['steps']:,}",
                 f"{row['profile']['steps']:,}",
                 fmt_time(off["seconds"]),
-                f"{off['seconds'] / default:.2f}",
+                fmt_time(off["default_seconds"]),
+                f"{off['seconds'] / off['default_seconds']:.2f}",
                 fmt_e(off["residual"]),
                 fmt_e(off["distance"]),
             ]
@@ -1209,10 +1209,11 @@ def joint_inertia_table(results: D.Results) -> str:
     return (
         "The same chains with `scale_joint_inertia = False` (the default, 'auto', gives each "
         "joint a fictitious inertia that brings its rate down towards the slowest joint's from "
-        "20 degrees of freedom: docs/method.md), timed from Python (`pinsettle.solve`'s wall "
-        "time, median of the same repeats): status, steps and the default run's, time and its "
-        "ratio to the default run's above, the final residual (relative) and the distance to "
-        "straight down (rad).\n\n"
+        "20 degrees of freedom: docs/method.md): status, steps and the default run's above (its "
+        "damping's own run), its time and the default solve's, both timed from Python alike (the "
+        "result's wall time on a `pinsettle.Solver` kept for the repeats, the two alternated, "
+        "medians of the same repeats), their ratio (1 up to 19 links, where the two are the same "
+        "run), the final residual (relative) and the distance to straight down (rad).\n\n"
         + table(
             [
                 "links",
@@ -1220,12 +1221,13 @@ def joint_inertia_table(results: D.Results) -> str:
                 "steps",
                 "default steps",
                 "time",
+                "default time",
                 "ratio",
                 "final residual",
                 "distance",
             ],
             rows,
-            right=(0, 2, 3, 4, 5, 6, 7),
+            right=(0, 2, 3, 4, 5, 6, 7, 8),
         )
         + "\n"
     )

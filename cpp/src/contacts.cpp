@@ -65,8 +65,6 @@ namespace pinsettle
           row[m] = e.dot(data.J.col(m).head<3>()) + pe.dot(data.J.col(m).tail<3>());
     }
 
-    constexpr int kMaxSweeps = 2000;
-    constexpr int kRefreshSweeps = 8;
     // Solves of a step's impulses at most, each with the pairs and stops the last one's
     // velocities close (ContactStepper::apply).
     constexpr int kMaxContactRounds = 4;
@@ -89,70 +87,6 @@ namespace pinsettle
       return f.head<2>().norm() < mu * f[2] * (1. - 1e-9);
     }
 
-    // One contact's projected Gauss-Seidel update, in the space of w = Y lambda (the rows'
-    // velocities are u = Y^T w + b): the normal impulse, then the tangential one projected onto
-    // the disc mu lambda_n; w follows. A row's velocity costs a product of Y's column with w
-    // (nv terms), not with all of lambda: go1 lying on its collision points closes more rows
-    // than it has degrees of freedom.
-    void updateContact(
-      const Eigen::Ref<const Eigen::MatrixXd> & Y,
-      const Eigen::Ref<const Eigen::VectorXd> & b,
-      const Eigen::Vector2d & steps, // 1 / G_nn, 1 / (largest eigenvalue of G_tt)
-      double mu,
-      Eigen::Index r,
-      Eigen::Ref<Eigen::VectorXd> lambda,
-      Eigen::VectorXd & w)
-    {
-      const double old_n = lambda[r + 2];
-      const double un = Y.col(r + 2).dot(w) + b[r + 2];
-      const double ln = std::max(0., old_n - un * steps[0]);
-      lambda[r + 2] = ln;
-      if (ln != old_n)
-        w.noalias() += (ln - old_n) * Y.col(r + 2);
-      const Eigen::Vector2d old_t = lambda.segment<2>(r);
-      // No normal impulse, no friction, whatever the sliding velocity: its two products are
-      // skipped (most of a step's rows on talos lying on its collision points are pairs that
-      // may close but stay open).
-      if (ln == 0.)
-      {
-        if (!old_t.isZero(0.))
-        {
-          lambda.segment<2>(r).setZero();
-          w.noalias() -= Y.middleCols<2>(r) * old_t;
-        }
-        return;
-      }
-      const Eigen::Vector2d ut(Y.col(r).dot(w) + b[r], Y.col(r + 1).dot(w) + b[r + 1]);
-      // A projected gradient step of length 1 / (largest eigenvalue of the 2 x 2 block): its
-      // fixed point is Coulomb's law. A Newton step on the block (G_tt^-1) projected onto the
-      // disc is not: on a box held by four corners it stopped at forces that let it creep.
-      Eigen::Vector2d lt = old_t - ut * steps[1];
-      const double radius = mu * ln;
-      const double norm = lt.norm();
-      if (norm > radius)
-        lt *= norm > 0. ? radius / norm : 0.;
-      lambda.segment<2>(r) = lt;
-      if (lt != old_t)
-        w.noalias() += Y.middleCols<2>(r) * (lt - old_t);
-    }
-
-    // The step lengths of each contact's update (updateContact) and of each unilateral row's
-    // (1 / G_rr), from Y's columns; 0 for a row that moves nothing.
-    void computeSteps(
-      const Eigen::Ref<const Eigen::MatrixXd> & Y, Eigen::Index contacts, Eigen::Matrix2Xd & steps)
-    {
-      const auto inverse = [](double x) { return x > 0. ? 1. / x : 0.; };
-      for (Eigen::Index k = 0; k < contacts; ++k)
-      {
-        const Eigen::Index r = 3 * k;
-        const double a = Y.col(r).squaredNorm(), c = Y.col(r + 1).squaredNorm();
-        const double off = Y.col(r).dot(Y.col(r + 1));
-        const double largest = 0.5 * (a + c) + std::sqrt(0.25 * (a - c) * (a - c) + off * off);
-        steps.col(k) << inverse(Y.col(r + 2).squaredNorm()), inverse(largest);
-      }
-      for (Eigen::Index r = 3 * contacts; r < Y.cols(); ++r)
-        steps.col(r - 2 * contacts) << inverse(Y.col(r).squaredNorm()), 0.;
-    }
   } // namespace
 
   // --- GroundContacts ---------------------------------------------------------------------------
@@ -313,48 +247,6 @@ namespace pinsettle
     return contacts.pairs() == 0 || geometry.gap.minCoeff() >= -kContactGapTolerance;
   }
 
-  int solveContactImpulses(
-    const Eigen::Ref<const Eigen::MatrixXd> & Y,
-    const Eigen::Ref<const Eigen::VectorXd> & b,
-    const Eigen::Ref<const Eigen::VectorXd> & friction,
-    Eigen::Ref<Eigen::VectorXd> lambda,
-    ImpulseWorkspace & work)
-  {
-    const Eigen::Index contacts = friction.size();
-    const Eigen::Index updates = contacts + (lambda.size() - 3 * contacts);
-    if (work.steps.cols() < updates)
-      work.steps.resize(2, updates);
-    computeSteps(Y, contacts, work.steps);
-    work.w.noalias() = Y * lambda;
-    for (int sweep = 1; sweep <= kMaxSweeps; ++sweep)
-    {
-      work.w_sweep = work.w;
-      for (Eigen::Index k = 0; k < contacts; ++k)
-        updateContact(Y, b, work.steps.col(k), friction[k], 3 * k, lambda, work.w);
-      for (Eigen::Index r = 3 * contacts; r < lambda.size(); ++r)
-      {
-        const double old = lambda[r];
-        const double step = work.steps(0, r - 2 * contacts);
-        lambda[r] = std::max(0., old - (Y.col(r).dot(work.w) + b[r]) * step);
-        work.w.noalias() += (lambda[r] - old) * Y.col(r);
-      }
-      // The running sum drifts from Y lambda by round-off, sweep after sweep: made exact again
-      // every few sweeps (left to drift, a ball rolling down a slope veered off sideways).
-      if (sweep % kRefreshSweeps == 0)
-        work.w.noalias() = Y * lambda;
-      // Converged when a sweep no longer moves the velocities: impulses that trade load
-      // between redundant contacts (more rows than degrees of freedom) change nothing.
-      const double change = (work.w - work.w_sweep).lpNorm<Eigen::Infinity>();
-      if (change <= 1e-11 * work.w.lpNorm<Eigen::Infinity>() || change == 0.)
-      {
-        work.w.noalias() = Y * lambda;
-        return sweep;
-      }
-    }
-    work.w.noalias() = Y * lambda;
-    return kMaxSweeps;
-  }
-
   // --- The step ---------------------------------------------------------------------------------
 
   ContactStepper::ContactStepper(const GroundContacts & contacts, const JointStops * stops)
@@ -414,7 +306,7 @@ namespace pinsettle
       const Eigen::Index rows = assembleRows(model, data, h);
       auto lambda = lambda_.head(rows);
       solveContactImpulses(
-        Y_.leftCols(rows), b_.head(rows), mu_.head(activeCount()), lambda, impulses_);
+        Y_.leftCols(rows), b_.head(rows), mu_.head(activeCount()), lambda, impulses_, round_off_);
       dv_ = impulses_.w;
       llt_.matrixU().solveInPlace(dv_);
       keepImpulses(h);
@@ -468,6 +360,11 @@ namespace pinsettle
     Y_.leftCols(row) = J.transpose();
     llt_.matrixL().solveInPlace(Y_.leftCols(row));
     b_.head(row).noalias() += J * vfree_;
+    // What round-off leaves in J vfree: the sum of |J_ij vfree_j| over a row, some 50 ulps of it.
+    round_off_ = 0.;
+    for (Eigen::Index r = 0; r < row; ++r)
+      round_off_ = std::max(round_off_, J.row(r).cwiseAbs().dot(vfree_.cwiseAbs()));
+    round_off_ *= 1e-14;
     return row;
   }
 

@@ -5,6 +5,7 @@
 #ifndef __pinsettle_contacts_hpp__
 #define __pinsettle_contacts_hpp__
 
+#include "pinsettle/contact-impulses.hpp"
 #include "pinsettle/stability.hpp"
 #include "pinsettle/stops.hpp"
 
@@ -229,42 +230,6 @@ namespace pinsettle
     const Eigen::VectorXd & q);
 
   ///
-  /// \brief Memory of solveContactImpulses, grown by it when too small (a step loop's is sized
-  /// by its first solves, then reused).
-  ///
-  struct ImpulseWorkspace
-  {
-    /// Y lambda (dim Y.rows()): out, the impulses' velocity change in Y's space.
-    Eigen::VectorXd w;
-    /// w at the start of a sweep.
-    Eigen::VectorXd w_sweep;
-    /// The step lengths of each contact's update and each unilateral row's.
-    Eigen::Matrix2Xd steps;
-  };
-
-  ///
-  /// \brief Solve the contact impulses of a step: lambda in the friction cones (three per
-  /// active pair, ordered t1, t2, n), then one >= 0 per frictionless unilateral row (a joint
-  /// on its stop), with the velocities u = Y^T Y lambda + b complementary to them (projected
-  /// Gauss-Seidel in the space of Y lambda, started from lambda, until a sweep no longer
-  /// changes Y lambda).
-  ///
-  /// \param[in] Y A factor of the Delassus matrix G = J M^-1 J^T = Y^T Y of the active rows,
-  ///            e.g. L^-1 J^T with M = L L^T (nv x (3a + s)).
-  /// \param[in] b Velocities without impulses, the gap terms included (dim 3a + s).
-  /// \param[in] friction Coefficient of each active pair (dim a).
-  /// \param[in,out] lambda Impulses (dim 3a + s, N s or N m s): the start in, the answer out.
-  /// \param[in,out] work Its memory; work.w = Y lambda out.
-  /// \return The number of sweeps.
-  ///
-  int solveContactImpulses(
-    const Eigen::Ref<const Eigen::MatrixXd> & Y,
-    const Eigen::Ref<const Eigen::VectorXd> & b,
-    const Eigen::Ref<const Eigen::VectorXd> & friction,
-    Eigen::Ref<Eigen::VectorXd> lambda,
-    ImpulseWorkspace & work);
-
-  ///
   /// \brief The contacts' part of a step: the impulses of a step of length h from the free
   /// acceleration, folded into that acceleration so that the semi-implicit Euler step lands on
   /// a velocity the contacts allow (inelastic, sticking or sliding by Coulomb's law).
@@ -354,6 +319,7 @@ namespace pinsettle
     Eigen::MatrixXd Ja_, Y_;
     ImpulseWorkspace impulses_;
     Eigen::VectorXd b_, lambda_, mu_, vfree_, vnext_, dv_;
+    double round_off_ = 0.;           // of the rows' velocities J vfree_ (m/s or rad/s)
     Eigen::VectorXd stop_sign_;       // of each stop: +1 held at its lower end, -1 at its upper, 0
     Eigen::VectorXd stop_gap_;        // of each held stop (rad or m)
     Eigen::VectorXd stop_impulse_;    // of each held stop (N m s or N s)

@@ -78,6 +78,10 @@ namespace pinsettle
     const LoopConstraints * loops,
     const JointStops * stops);
 
+  /// \brief A Newton step that does not lower the residual is halved up to this many times
+  /// before Newton gives up (Solver's polish and takeover).
+  constexpr int kNewtonHalvings = 6;
+
   /// \brief A rest ends a run only with at most this many times Settings::max_e of potential
   /// energy left to release (computeRestEnergy): a quiet run that is not at a rest goes on.
   /// Measured with polish and the takeover off (docs/method.md, When is it a rest).

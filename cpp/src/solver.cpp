@@ -610,7 +610,10 @@ namespace pinsettle
     guard_.keep(work_.q, work_.v, state_.time);
     step_control_.restartGrowth();
     restartStretch();
-    resetRunaway(0.);
+    // The runaway monitor runs on across a push: a fall off a saddle into a basin releases a
+    // bounded energy, which no run of doublings mistakes for a runaway, while a mechanism that
+    // is pushed again and again on its way down (a ball rolling down a slope, stopped dead at
+    // each peak and read as unstable where it stood) would never be told to have none.
   }
 
   void Solver::damp(const StepEnergies & e, Result & result)

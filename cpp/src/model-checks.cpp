@@ -8,6 +8,8 @@
 
 #include <unistd.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -269,6 +271,55 @@ namespace pinsettle
       checkJointOrderAndIndices(model);
     }
 
+    // The bodies (BODY frames) joint j moves directly, named for a message: "body 'a'" or
+    // "bodies 'a', 'b'" (their inertias are summed into the joint's), else the joint's.
+    std::string bodiesOf(const pinocchio::Model & model, std::size_t j)
+    {
+      std::vector<std::string> names;
+      for (const pinocchio::Frame & frame : model.frames)
+        if (frame.type == pinocchio::BODY && frame.parentJoint == j)
+          names.push_back("'" + frame.name + "'");
+      if (names.empty())
+        return "the body of joint " + jointName(model, j);
+      std::string out = names.size() == 1 ? "body " : "bodies ";
+      for (std::size_t k = 0; k < names.size(); ++k)
+        out += (k > 0 ? ", " : "") + names[k];
+      return out + " (moved by joint " + jointName(model, j) + ")";
+    }
+
+    // What is wrong with a body's inertia, or empty: a mass that is negative or not finite, a
+    // centre of mass or rotational inertia that is not finite, a rotational inertia about the
+    // centre of mass that is not positive semidefinite (ABA would run on, with energies of
+    // either sign: a URDF's mass of -2 ended in a step of 2.9e41 s, a Python model's converged).
+    std::string inertiaFault(const pinocchio::Inertia & inertia)
+    {
+      std::ostringstream why;
+      const Eigen::Matrix3d I = inertia.inertia().matrix();
+      if (!std::isfinite(inertia.mass()) || inertia.mass() < 0.)
+        why << "has mass " << inertia.mass() << " kg; a mass must be finite and >= 0";
+      else if (!inertia.lever().allFinite() || !I.allFinite())
+        why << "has a centre of mass or rotational inertia that is not finite";
+      else
+      {
+        const Eigen::Vector3d moments =
+          Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(I, Eigen::EigenvaluesOnly).eigenvalues();
+        if (moments[0] < -1e-9 * std::max(moments.cwiseAbs().maxCoeff(), 1e-12))
+          why << "has a rotational inertia with principal moments (" << moments.transpose()
+              << ") kg m^2 about its centre of mass; an inertia must be positive semidefinite";
+      }
+      return why.str();
+    }
+
+    void checkInertias(const pinocchio::Model & model)
+    {
+      for (std::size_t j = 1; j < model.inertias.size(); ++j)
+      {
+        const std::string why = inertiaFault(model.inertias[j]);
+        if (!why.empty())
+          throw std::invalid_argument("model: " + bodiesOf(model, j) + " " + why);
+      }
+    }
+
     // Pinocchio's algorithms that work on subtrees (crba, computeMinverse, the gravity
     // derivatives) take a joint's descendants to be the joints right after it: depth-first
     // order, as the URDF parser adds them. A model built by hand in another order gets a wrong
@@ -394,6 +445,7 @@ namespace pinsettle
       checkJoint(model, j, model.joints[j]);
     checkTables(model);
     checkDepthFirstOrder(model);
+    checkInertias(model);
   }
 
   std::size_t computeDataMemory(const pinocchio::Model & model)

@@ -5,6 +5,7 @@ Only the kinematic and inertial model is built: meshes are never loaded for solv
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import site
@@ -14,6 +15,7 @@ import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
 import pinocchio
 
 from ._checks import unknown_key_message
@@ -237,6 +239,52 @@ def _build_capturing_stderr(
     return model, error, parser_says
 
 
+def _link_inertia_fault(inertial: ET.Element) -> str | None:
+    """What no rigid body has in a link's <inertial>: a negative or non-finite mass, an inertia
+    that is not finite or not positive semidefinite; None when it is sound (or unreadable:
+    urdfdom has judged those already)."""
+    try:
+        mass_tag = inertial.find("mass")
+        mass = float(mass_tag.get("value", "0")) if mass_tag is not None else 0.0
+        tag = inertial.find("inertia")
+        keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+        i = {k: float(tag.get(k, "0")) if tag is not None else 0.0 for k in keys}
+    except ValueError:
+        return None
+    if not math.isfinite(mass) or mass < 0:
+        return f"mass {mass} kg; a mass must be finite and >= 0"
+    matrix = np.array(
+        [
+            [i["ixx"], i["ixy"], i["ixz"]],
+            [i["ixy"], i["iyy"], i["iyz"]],
+            [i["ixz"], i["iyz"], i["izz"]],
+        ]
+    )
+    if not np.isfinite(matrix).all():
+        return "an inertia that is not finite"
+    moments = np.linalg.eigvalsh(matrix)
+    if moments[0] < -1e-9 * max(np.abs(moments).max(), 1e-12):
+        return (
+            f"an inertia with principal moments {np.array2string(moments, precision=4)} kg m^2; "
+            "an inertia must be positive semidefinite"
+        )
+    return None
+
+
+def _check_link_inertias(path: Path) -> None:
+    """Refuse a URDF link whose <inertial> no rigid body has, naming the link (Pinocchio sums
+    the links a fixed joint welds together, which can hide a negative mass in a positive sum)."""
+    try:
+        root = parse_xml(path)
+    except (ET.ParseError, OSError):
+        return  # urdfdom read it; the solver's model check still sees the summed inertias
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        fault = _link_inertia_fault(inertial) if inertial is not None else None
+        if fault is not None:
+            raise ValueError(f"{path}: link '{link.get('name')}' has {fault}")
+
+
 def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Model:
     """:func:`load_urdf` without the warning (for callers that apply the tags)."""
     path = Path(path)
@@ -255,6 +303,7 @@ def build_urdf_model(path: str | Path, floating: bool = False) -> pinocchio.Mode
     dropped = any(reason.startswith("Error:") for reason in reasons)
     if model is None or error is not None or dropped:
         raise ValueError(_urdf_fault(path, reasons, error))
+    _check_link_inertias(path)
     if parser_says:
         print(parser_says, file=sys.stderr)
     return model

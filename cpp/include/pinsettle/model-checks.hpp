@@ -34,6 +34,9 @@ namespace pinsettle
   /// - joints not in depth-first order (a joint's descendants not right after it, as a model
   ///   built by hand branch by branch can have them): pinocchio::crba and the derivatives assume
   ///   that order and would give a wrong mass matrix and stiffness.
+  /// - a body whose inertia no rigid body has: a negative or non-finite mass, a non-finite centre
+  ///   of mass or rotational inertia, a rotational inertia that is not positive semidefinite
+  ///   (the message names the body's frames and its joint).
   ///
   /// \throws std::invalid_argument naming the joint and why.
   ///

@@ -7,10 +7,11 @@ session-scoped models below are shared; a test that needs to change a model work
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,19 @@ PENDULUM_URDF = Path(__file__).parents[1] / "robots" / "pendulum.urdf"
 CHECKOUT = Path(__file__).resolve().parents[1]
 #: The file MuJoCo appends its warnings and errors to, in the working directory, by default.
 MUJOCO_LOG = "MUJOCO_LOG.TXT"
+
+
+@contextlib.contextmanager
+def mujoco_warnings(mujoco) -> Iterator[list[str]]:
+    """MuJoCo's warnings while in the block, kept in the list yielded instead of appended to
+    MUJOCO_LOG.TXT in the working directory (MuJoCo's default)."""
+    caught: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda text: caught.append(str(text).strip()))
+    try:
+        yield caught
+    finally:
+        mujoco.set_mju_user_warning(previous)
 
 
 @pytest.fixture(autouse=True)

@@ -16,6 +16,7 @@ import shutil
 import subprocess
 import sys
 import urllib.request
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -182,6 +183,23 @@ def test_the_animation_ends_on_the_final_pose(name, exported):
         b = data.oMf[model.getFrameId(spring.b_frame)].act(np.array(spring.b_point))
         track = clips[f"/meshcat/pinsettle/springs/{s}"].tracks["scale"]
         assert track.values[-1][2] == pytest.approx(np.linalg.norm(a - b), rel=1e-9)
+
+
+def test_the_energy_plot_of_a_run_without_steps_has_a_time_axis(tmp_path):
+    # free_fall is refused before its first step: one sample at t = 0, no simulated time.
+    # Its axis is one time step long (matplotlib warned of a singular axis before).
+    play = _play()
+    scene = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    result = pinsettle.solve(scene, **play.TRACE_SETTINGS)
+    assert result.status == "no_equilibrium" and result.steps == 0 and result.sim_time == 0
+    assert list(result.trace.time) == [0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any warning of the plot fails the test
+        path = play.plot_energy(result, tmp_path / "free_fall.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    plot = importlib.import_module("pinsettle._play_plot")
+    assert plot._time_range(np.asarray(result.trace.time), result) == (0.0, result.dt)
+    assert result.dt > 0
 
 
 def test_damping_events_are_marked(exported):

@@ -57,6 +57,7 @@ section it checks.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import math
 import re
@@ -64,7 +65,7 @@ import statistics
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -304,15 +305,16 @@ def settle(bench: Bench, setting: Setting, level: float, cap: int = MAX_STEPS) -
     d = mujoco.MjData(m)
     residual = math.inf
     deadline = time.perf_counter() + RUN_WALL
-    for step in range(1, cap + 1):
-        mujoco.mj_step(m, d)
-        if bench.diverged(d):
-            return Run("diverged", step, math.inf, None)
-        residual = bench.residual(d.qpos)
-        if residual <= level:
-            return Run("reached", step, residual, d.qpos.copy())
-        if time.perf_counter() > deadline:
-            return Run("wall", step, residual, None)
+    with warnings_off_the_log():  # a setting of the search may diverge: d.warning counts it
+        for step in range(1, cap + 1):
+            mujoco.mj_step(m, d)
+            if bench.diverged(d):
+                return Run("diverged", step, math.inf, None)
+            residual = bench.residual(d.qpos)
+            if residual <= level:
+                return Run("reached", step, residual, d.qpos.copy())
+            if time.perf_counter() > deadline:
+                return Run("wall", step, residual, None)
     return Run("budget" if cap >= MAX_STEPS else "cut", cap, residual, None)
 
 
@@ -607,10 +609,19 @@ def interleaved(
 
 def measure(recorded: Recorded, budget: int, seed: int) -> dict[str, Any]:
     """One robot, MuJoCo's warnings (bad states, counted in data.warning) kept off the log."""
+    with warnings_off_the_log():
+        return compare(recorded, budget, seed)
+
+
+@contextlib.contextmanager
+def warnings_off_the_log() -> Iterator[None]:
+    """MuJoCo's warnings (a diverging setting's bad states, which ``data.warning`` counts and
+    ``Bench.diverged`` reads) dropped: by default MuJoCo appends each to MUJOCO_LOG.TXT in the
+    working directory, a file left in the user's folder (or the checkout, by the tests)."""
     previous = mujoco.get_mju_user_warning()
     mujoco.set_mju_user_warning(lambda text: None)
     try:
-        return compare(recorded, budget, seed)
+        yield
     finally:
         mujoco.set_mju_user_warning(previous)
 

@@ -7,10 +7,11 @@ session-scoped models below are shared; a test that needs to change a model work
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,37 @@ import pinsettle
 import pytest
 
 PENDULUM_URDF = Path(__file__).parents[1] / "robots" / "pendulum.urdf"
+CHECKOUT = Path(__file__).resolve().parents[1]
+#: The file MuJoCo appends its warnings and errors to, in the working directory, by default.
+MUJOCO_LOG = "MUJOCO_LOG.TXT"
+
+
+@contextlib.contextmanager
+def mujoco_warnings(mujoco) -> Iterator[list[str]]:
+    """MuJoCo's warnings while in the block, kept in the list yielded instead of appended to
+    MUJOCO_LOG.TXT in the working directory (MuJoCo's default)."""
+    caught: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda text: caught.append(str(text).strip()))
+    try:
+        yield caught
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+@pytest.fixture(autouse=True)
+def no_mujoco_log():
+    """No test leaves MuJoCo's log in the checkout (or the folder it ran in): a warning of a
+    run expected to go bad is kept off the log by the code that steps it. The test that made
+    MuJoCo write one errors, with the file's first lines."""
+    places = {CHECKOUT, Path.cwd().resolve()}
+    before = {place for place in places if (place / MUJOCO_LOG).exists()}
+    yield
+    written = [place / MUJOCO_LOG for place in sorted(places - before)]
+    written = [path for path in written if path.exists()]
+    if written:
+        text = written[0].read_text(errors="replace")[:400]
+        pytest.fail(f"MuJoCo wrote {written[0]} during this test: {text}")
 
 
 @pytest.fixture(scope="session")

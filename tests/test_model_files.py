@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio
 import pinsettle
 import pytest
+from conftest import mujoco_warnings
 from scene_reference import Reference
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
@@ -81,8 +82,10 @@ def full_precision(mujoco):
 
 
 def write_mjcf(mujoco, xml: str, path: Path) -> Path:
-    """``xml`` (an MJCF or URDF text) compiled by MuJoCo and saved by it as MJCF."""
-    model = mujoco.MjModel.from_xml_string(xml)
+    """``xml`` (an MJCF or URDF text) compiled by MuJoCo and saved by it as MJCF; MuJoCo's
+    compile warnings (a URDF joint's limits of 0 0, which MuJoCo ignores) kept off its log."""
+    with mujoco_warnings(mujoco):
+        model = mujoco.MjModel.from_xml_string(xml)
     mujoco.mj_saveLastXML(str(path), model)
     return path
 

@@ -285,3 +285,25 @@ def test_a_best_that_does_not_replay_is_no_agreement() -> None:
     assert "The outside search reached no valid rest on: lucky, alone; there the" in text
     assert "does NOT reach its level at a valid rest within its steps on: lucky." in text
     assert mo.table_row(rows[2]).endswith("| **no** |")
+
+
+def test_a_diverging_setting_leaves_no_mujoco_log(tmp_path, monkeypatch) -> None:
+    # A step of 0.5 s without damping: the double pendulum blows up within a few steps, and
+    # MuJoCo, stepped plainly, appends its warning to MUJOCO_LOG.TXT in the working directory.
+    urdf = pinsettle.robot_urdf("double_pendulum")
+    bench = mo.Bench(urdf)
+    wild = mo.Setting(0.5, "Euler", "uniform", 0.0)
+    plain, searched = tmp_path / "plain", tmp_path / "searched"
+    plain.mkdir()
+    searched.mkdir()
+    monkeypatch.chdir(plain)
+    bench.configure(wild)
+    d = mujoco.MjData(bench.model)
+    mujoco.mj_step(bench.model, d, nstep=50)
+    assert d.warning[int(mujoco.mjtWarning.mjWARN_BADQACC)].number > 0
+    assert (plain / "MUJOCO_LOG.TXT").exists()
+    # The search's run of the same setting sees the divergence and writes no log.
+    monkeypatch.chdir(searched)
+    assert mo.settle(bench, wild, mo.LEVEL, cap=50).status == "diverged"
+    assert not (searched / "MUJOCO_LOG.TXT").exists()
+    assert mujoco.get_mju_user_warning() is None  # the default put back

@@ -16,6 +16,7 @@ import shutil
 import subprocess
 import sys
 import urllib.request
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -184,11 +185,122 @@ def test_the_animation_ends_on_the_final_pose(name, exported):
         assert track.values[-1][2] == pytest.approx(np.linalg.norm(a - b), rel=1e-9)
 
 
+def test_the_energy_plot_of_a_run_without_steps_has_a_time_axis(tmp_path):
+    # free_fall is refused before its first step: one sample at t = 0, no simulated time.
+    # Its axis is one time step long (matplotlib warned of a singular axis before).
+    play = _play()
+    scene = pinsettle.load_scene(ROBOTS / "free_fall.toml")
+    result = pinsettle.solve(scene, **play.TRACE_SETTINGS)
+    assert result.status == "no_equilibrium" and result.steps == 0 and result.sim_time == 0
+    assert list(result.trace.time) == [0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any warning of the plot fails the test
+        path = play.plot_energy(result, tmp_path / "free_fall.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    plot = importlib.import_module("pinsettle._play_plot")
+    assert plot._time_range(np.asarray(result.trace.time), result) == (0.0, result.dt)
+    assert result.dt > 0
+
+
 def test_damping_events_are_marked(exported):
     scene, result, viz, html, plot = exported("bistable_pendulum")
     assert len(viz.timeline.events["damping"]) == result.peaks > 0
     text = html.read_text(encoding="utf-8")
     assert "damping events" in text  # the on-page counter
+
+
+def _drawn_marks(viz) -> dict[str, set[int]]:
+    """Every node the playback drew a shape at, but the mechanism's own shapes: its path under
+    the playback's root (/meshcat/pinsettle) and its materials' colours (none for a mesh file
+    drawn in its own)."""
+    import umsgpack
+    from meshcat.servers.tree import find_node
+
+    mechanism = {
+        viz.getViewerNodeName(obj, pinocchio.GeometryType.VISUAL)
+        for obj in viz.visual_model.geometryObjects
+    }
+    marks: dict[str, set[int]] = {}
+
+    def walk(node, path):
+        if node.object is not None and path not in mechanism:
+            materials = umsgpack.unpackb(node.object)["object"].get("materials") or []
+            marks[path] = {m["color"] for m in materials if "color" in m}
+        for name, child in node.items():
+            walk(child, f"{path}/{name}" if path else name)
+
+    walk(find_node(viz.window.tree, ["meshcat", "pinsettle"]), "")
+    return marks
+
+
+def _check_legend_covers_the_marks(viz, html_text: str) -> None:
+    """Every mark drawn is named by an entry of the legend (its path matches the entry's
+    ``nodes``), each entry stands for marks drawn, its swatch in the colour of one of them;
+    the page carries that legend."""
+    from fnmatch import fnmatch
+
+    legend = viz._overlay()["legend"]
+    marks = _drawn_marks(viz)
+    for path in marks:
+        entries = [e for e in legend if any(fnmatch(path, n) for n in e["nodes"])]
+        assert entries, f"{viz.scene.name}: the mark {path} is in no entry of the legend {legend}"
+    for entry in legend:
+        covered = [p for p in marks if any(fnmatch(p, n) for n in entry["nodes"])]
+        assert covered, f"{viz.scene.name}: the entry {entry['text']!r} stands for no mark drawn"
+        colours = set().union(*(marks[p] for p in covered))
+        assert int(entry["color"][1:], 16) in colours, (entry, colours)
+    info = re.search(r'id="pinsettle-info">(.*?)</script>', html_text, re.S)
+    assert info and json.loads(info.group(1))["legend"] == legend
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_every_mark_drawn_is_in_the_legend(name, exported):
+    scene, result, viz, html, plot = exported(name)
+    _check_legend_covers_the_marks(viz, html.read_text("utf-8"))
+
+
+def test_the_legend_names_the_springs_and_the_flashes(exported):
+    scene, result, viz, html, plot = exported("ur5_tool_spring")
+    marks = _drawn_marks(viz)
+    # The spring (a coil and its two ends) and the damping flash are drawn ...
+    assert {"springs/0", "springs/0_a", "springs/0_b", "events/damping"} <= set(marks)
+    # ... and named: the coil's stiffness, the number of damping events.
+    texts = {entry["text"] for entry in viz._overlay()["legend"]}
+    (spring,) = scene.springs
+    assert f"coil between two dark balls: spring (k = {spring.stiffness:.3g} N/m)" in texts
+    damping = f"a damping event ({result.peaks}; gone on the final pose)"
+    assert any(text.endswith(damping) for text in texts), texts
+
+
+def test_the_damping_flash_fades_and_is_gone_on_the_final_pose(exported):
+    play = _play()
+    for name in SCENES:
+        scene, result, viz, html, plot = exported(name)
+        timeline, clips = viz.timeline, _clips(viz)
+        grid = timeline.frame_times()
+        for kind in ("damping", "push", "rollback"):
+            clip = clips.get(f"/meshcat/pinsettle/events/{kind}")
+            times = timeline.events[kind]
+            # Where it would show: FLASH_SECONDS from each event, before the final pose.
+            since = grid[:, None] - times[None, :]
+            showing = np.any((since >= 0) & (since < play.FLASH_SECONDS), axis=1)
+            showing &= grid < timeline.duration
+            if not showing.any():  # e.g. one damping event at the run's last moment
+                assert clip is None, (name, kind)
+                continue
+            visible = np.array(clip.tracks["visible"].values)
+            scale = np.array(clip.tracks["scale"].values)[:, 0]
+            assert np.allclose(np.array(clip.tracks["visible"].frames) / play.FPS, grid)
+            assert np.array_equal(visible, showing), (name, kind)
+            # Full size at an event, smaller as it fades, hidden and a speck at the end.
+            assert not visible[-1] and scale[-1] <= 1e-3, (name, kind)
+            assert clip.tracks["scale"].frames[-1] == pytest.approx(timeline.end * play.FPS)
+            first = int(np.flatnonzero(showing)[0])
+            assert scale[first] == pytest.approx(1 - (grid[first] - times.min()) / 0.25)
+    # ur5_tool_spring: its last damping event is the run's last moment (Newton's method
+    # finishes from there); the page opened on its end shows no flash.
+    timeline = exported("ur5_tool_spring")[2].timeline
+    assert timeline.events["damping"][-1] == pytest.approx(timeline.duration)
 
 
 # --- the live server ------------------------------------------------------------------------
@@ -287,6 +399,19 @@ def screenshot(browser: str, url: str, path: Path, budget_ms: int = 4000) -> np.
     pytest.fail(f"Chromium wrote no screenshot of {url} in three tries")
 
 
+def _hide_swatches(found: np.ndarray) -> None:
+    """Leave the legend's swatches out of a mask of pixels: the overlay's left column (its
+    lines of 19 px from the top, a dozen at most)."""
+    found[:300, :40] = False
+
+
+def _below_overlay(viz, h: int = 600) -> slice:
+    """The rows of a screenshot below the overlay's box: its title, clock and counter and a
+    line per entry of the legend, 19 px each (the view's top share the camera leaves to it)."""
+    lines = 3 + len(viz._overlay()["legend"])
+    return slice(max(h // 5, 20 + 19 * lines + 12), h)
+
+
 def drawn_fraction(pixels: np.ndarray) -> float:
     """Share of the view below the overlay (the lower four fifths, its right edge left out)
     that is not background. The background is a vertical gradient: each row's colour is read
@@ -318,7 +443,7 @@ def test_played_to_the_end_the_animation_holds_the_final_pose(name, exported, br
     budget = int(1000 * viz.timeline.end) + 6000
     played = screenshot(browser, html.as_uri(), tmp_path / "played.png", budget)
     h = played.shape[0]
-    below_overlay = slice(h // 5, h)  # the overlay's clock differs while it plays
+    below_overlay = _below_overlay(viz, h)  # the overlay's clock differs while it plays
     assert np.mean(np.abs(played[below_overlay] - end[below_overlay]) > 0.05) < 0.002
     # ... and that is not the start (except where the mechanism barely moves on screen).
     # The start is the page opened paused on its first frame: a short budget on the playing
@@ -353,6 +478,44 @@ def _overlay_text(dom: str) -> str:
 def _overlay_pixels(pixels: np.ndarray) -> int:
     """Dark (text) pixels where the overlay's box is (top left)."""
     return int(np.count_nonzero(pixels[12:90, 12:480].max(axis=2) < 0.35))
+
+
+def _flash_pixels(pixels: np.ndarray) -> float:
+    """Share of the view in the damping flash's translucent yellow, the legend's swatches
+    (left of the overlay's text) left out."""
+    r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
+    found = (r > 0.7) & (g > 0.55) & (r - b > 0.25) & (g - b > 0.12)
+    _hide_swatches(found)
+    return float(np.mean(found))
+
+
+def test_screenshot_shows_the_damping_flash_then_not_on_the_final_pose(exported, browser, tmp_path):
+    scene, result, viz, html, plot = exported("ur5_tool_spring")
+    timeline = viz.timeline
+    first, last = timeline.events["damping"][[0, -1]]
+    assert last == pytest.approx(timeline.duration)  # an event at the run's last moment
+    at = (first + 0.2 * _play().FLASH_SECONDS) * timeline.speed  # #t= is simulated time
+    flash = screenshot(browser, f"{html.as_uri()}#t={at:.6g}", tmp_path / "flash.png")
+    end = screenshot(browser, html.as_uri() + "#end", tmp_path / "end.png")
+    # The ball at the centre of mass: some 0.3% of the view at the first event, none at the
+    # end (the spring's orange is not counted: 0.01% of the view).
+    assert _flash_pixels(flash) > 0.0015 and _flash_pixels(end) < 0.0005
+
+
+def test_the_page_shows_every_entry_of_the_legend(exported, browser, tmp_path):
+    scene, result, viz, html, plot = exported("fourbar_stop")
+    legend = viz._overlay()["legend"]
+    assert len(legend) >= 4  # loads, joint spring, loop, stop, damping flash
+    dom = page_dom(browser, html.as_uri() + "#end", 2000, tmp_path)
+    entries = re.findall(
+        r'<div class="pinsettle-legend"><span class="pinsettle-swatch" '
+        r'style="background: rgb\((\d+), (\d+), (\d+)\);"></span>(.*?)</div>',
+        dom,
+    )
+    shown = [
+        (f"#{int(r):02x}{int(g):02x}{int(b):02x}", html_lib.unescape(t)) for r, g, b, t in entries
+    ]
+    assert shown == [(entry["color"], entry["text"]) for entry in legend], dom[-3000:]
 
 
 def test_live_page_has_the_overlay_of_the_static_page(live, browser, tmp_path):
@@ -462,6 +625,14 @@ def test_impacts_flash_the_link_that_hit(impacts):
     assert '"impact": [' in html.read_text(encoding="utf-8")
 
 
+def test_the_impact_flash_is_in_the_legend(impacts):
+    scene, result, viz, html = impacts
+    assert any(path.endswith("_impact") for path in _drawn_marks(viz))
+    _check_legend_covers_the_marks(viz, html.read_text("utf-8"))
+    texts = [entry["text"] for entry in viz._overlay()["legend"]]
+    assert any(t.startswith("link flashing pink-red") and t.endswith("(hinge)") for t in texts)
+
+
 def test_impact_joints_of_a_scene_with_locked_joints_are_the_full_models():
     # joint1 locked: the solver's model has joint2 and joint3 as its joints 1 and 2.
     scene = pinsettle.Scene.from_urdf(ROBOTS / "planar_3link.urdf").lock("joint1")
@@ -480,9 +651,12 @@ def test_impact_joints_of_a_scene_with_locked_joints_are_the_full_models():
 
 
 def _impact_pixels(pixels: np.ndarray) -> float:
-    """Share of the view in the impact colour (a lit pink-red: red high, green low)."""
+    """Share of the view in the impact colour (a lit pink-red: red high, green low), the
+    legend's swatches (left of the overlay's text) left out."""
     r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
-    return float(np.mean((r > 0.55) & (g < 0.3) & (b > 0.15) & (b < 0.6)))
+    found = (r > 0.55) & (g < 0.3) & (b > 0.15) & (b < 0.6)
+    _hide_swatches(found)
+    return float(np.mean(found))
 
 
 def test_screenshot_shows_the_flash_at_an_impact(impacts, browser, tmp_path):
@@ -806,7 +980,7 @@ def _color_pixels(pixels: np.ndarray, color: int) -> int:
     left out."""
     rgb = np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255]) / 255
     found = np.abs(pixels - rgb).max(axis=2) < 0.03
-    found[:160, :40] = False
+    _hide_swatches(found)
     return int(np.count_nonzero(found))
 
 

@@ -27,6 +27,7 @@ from ._solve import (
 )
 from ._solver import Solver, solve
 from ._sweep import distinct_rests, sweep
+from ._sweep_plot import plot_sweep
 from .robots import load_robot, load_urdf, robot_names, robot_urdf
 from .scenes import scene_names, scene_path, scenes_dir
 
@@ -49,6 +50,7 @@ __all__ = [
     "load_scene",
     "load_urdf",
     "play",
+    "plot_sweep",
     "robot_names",
     "robot_urdf",
     "scene_names",

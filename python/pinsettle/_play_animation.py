@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
-from ._play_forces import draw_forces, forces_legend, mark_tips
+from ._play_forces import _hex, draw_forces, forces_legend, mark_tips
 from ._play_meshes import _decompose, _frame_id, _helix, _local_corners, _normal_mesh_class
 from ._play_timeline import FPS, Timeline, _pulse
 from ._scene import Scene
@@ -25,6 +25,7 @@ _EVENT_COLORS = {"damping": 0xFFB000, "push": 0x1C7ED6, "rollback": 0xE03131, "i
 
 #: A link whose joint hits a stop is drawn in this colour for ``FLASH_SECONDS``.
 _IMPACT_COLOR = (0.93, 0.16, 0.42, 1.0)
+_IMPACT_HEX = int.from_bytes(bytes(int(255 * c) for c in _IMPACT_COLOR[:3]), "big")
 _CAMERA_DIRECTION = np.array([0.45, -1.0, 0.35])  # from the mechanism towards the camera
 _CAMERA_FOV = 40.0  # degrees, vertical
 
@@ -167,15 +168,82 @@ class _Tracks:
         _add_visibility(self.animation, path, frames, shown, self.fps)
 
 
-def legend(scene: Scene, result: Result) -> list[dict[str, str]]:
-    """What each kind of mark drawn is (for the overlay): the forces', and the grounds' and
-    contacts' for a scene with grounds."""
-    entries = forces_legend(scene, result)
+def legend(scene: Scene, result: Result, timeline: Timeline) -> list[dict[str, Any]]:
+    """What each kind of mark drawn is (for the overlay): the springs', the flashes' (those
+    shown at some frame), the forces', and the grounds' and contacts' for a scene with
+    grounds. Each entry: its swatch ``color``, its ``text`` and the ``nodes`` it stands for
+    (patterns of the marks' paths under the playback's root, as ``fnmatch`` reads them)."""
+    entries = _springs_legend(scene) + _flashes_legend(scene, timeline)
+    entries += forces_legend(scene, result)
     if scene.grounds:  # imported only for a scene that has them
         from ._play_contacts import contacts_legend
 
         entries += contacts_legend(scene, result)
     return entries
+
+
+def _springs_legend(scene: Scene) -> list[dict[str, Any]]:
+    if not scene.springs:
+        return []
+    values = [f"k = {spring.stiffness:.3g} N/m" for spring in scene.springs]
+    if len(values) > 1:
+        values = [f"{s}: {value}" for s, value in enumerate(values)]
+    text = f"coil between two dark balls: spring ({', '.join(values)})"
+    return [{"color": _hex(_SPRING_COLOR), "text": text, "nodes": ["springs/*"]}]
+
+
+#: What a flash marks, by kind of event.
+_FLASH_TEXTS = {
+    "damping": "ball at the centre of mass, fading out: a damping event",
+    "push": "ball at the centre of mass, fading out: a push off an unstable rest",
+    "rollback": "ball at the centre of mass, fading out: a roll-back (step halved)",
+}
+
+
+def _flashes_legend(scene: Scene, timeline: Timeline) -> list[dict[str, Any]]:
+    """The flashes that show at some frame: a ball per kind of event, and the links (or
+    joints) that hit a stop."""
+    entries = []
+    for kind in _flash_levels(timeline):
+        text = f"{_FLASH_TEXTS[kind]} ({timeline.events[kind].size}; gone on the final pose)"
+        color = _hex(_EVENT_COLORS[kind])
+        entries.append({"color": color, "text": text, "nodes": [f"events/{kind}"]})
+    hit = [scene.model.names[j] for j, _ in _impact_flashes(timeline, scene.model.njoints)]
+    if hit:
+        joints = ", ".join(hit)
+        text = f"link flashing pink-red (or a ball at its joint): a joint hit a stop ({joints})"
+        nodes = ["events/impact_*", "pinocchio/visuals/*_impact"]
+        entries.append({"color": _hex(_IMPACT_HEX), "text": text, "nodes": nodes})
+    return entries
+
+
+def _flash_levels(timeline: Timeline) -> dict[str, np.ndarray]:
+    """Per kind of event flashed by a ball (damping, push, roll-back), its size at each frame
+    of ``Timeline.frame_times`` (1 at an event, fading out, 0 on the final pose); the kinds
+    that never show left out (an event at the run's last moment only)."""
+    grid = timeline.frame_times()
+    out = {}
+    for kind, times in timeline.events.items():
+        if kind == "impact":  # impacts flash the link that hit
+            continue
+        level = _pulse(grid, times, timeline.duration)
+        if np.any(level > 0):
+            out[kind] = level
+    return out
+
+
+def _impact_flashes(timeline: Timeline, njoints: int) -> list[tuple[int, np.ndarray]]:
+    """Each joint that hits a stop (its index in the scene's model, of ``njoints``) and
+    whether its flash shows at each frame of ``Timeline.frame_times``; those that never show
+    left out."""
+    grid = timeline.frame_times()
+    out = []
+    for joint in np.unique(timeline.impact_joints):
+        at = timeline.events["impact"][timeline.impact_joints == joint]
+        flashing = _pulse(grid, at, timeline.duration) > 0
+        if 0 < joint < njoints and flashing.any():
+            out.append((int(joint), flashing))
+    return out
 
 
 def _mark_tips(scene: Scene, result: Result, size: float) -> np.ndarray:
@@ -196,7 +264,7 @@ def build_animation(viz: Any, scene: Scene, timeline: Timeline, visual: Any, res
     keys = _keyframes(viz, scene, timeline, visual)
     # The top of the view is left to the overlay (its lines, 19 px each, of a 600 px view);
     # the forces' arrows are sized by the view, and framed too (the grounds' slabs are not).
-    top = (20 + 19 * (3 + len(legend(scene, result)))) / 600
+    top = (20 + 19 * (3 + len(legend(scene, result, timeline)))) / 600
     target, distance, size = _view(keys, visual)
     target, distance, _ = _view(keys, visual, _mark_tips(scene, result, size), top)
     _place_camera(viz, target, distance)
@@ -264,17 +332,15 @@ def _add_springs(root: Any, ends: np.ndarray, radius: float, tracks: _Tracks) ->
 def _add_event_flashes(
     root: Any, timeline: Timeline, com: np.ndarray, radius: float, tracks: _Tracks
 ) -> None:
-    """Event flashes: a translucent ball at the centre of mass that pops up and fades."""
+    """Event flashes: a translucent ball at the centre of mass that pops up at each event and
+    fades out over ``FLASH_SECONDS``, hidden otherwise (and on the final pose)."""
     import meshcat.geometry as mg
     from meshcat.animation import AnimationClip, AnimationTrack
 
     grid = timeline.frame_times()
     grid_frames = (grid * FPS).tolist()
-    tiny = 1e-3
-    for kind, times in timeline.events.items():
-        if not times.size or kind == "impact":  # impacts flash the link that hit
-            continue
-        level = np.maximum(_pulse(grid, times), tiny)
+    tiny = 1e-3  # a scale of 0 makes a singular matrix in the viewer
+    for kind, level in _flash_levels(timeline).items():
         node = root[f"events/{kind}"]
         node.set_object(
             mg.Sphere(0.12 * radius),
@@ -284,14 +350,17 @@ def _add_event_flashes(
         static = np.diag([tiny, tiny, tiny, 1.0])
         static[:3, 3] = com[-1]
         node.set_transform(static)
+        node.set_property("visible", False)
         clip = AnimationClip(fps=tracks.fps)
         clip.tracks["position"] = AnimationTrack(
             "position", "vector3", list(grid_frames), position.tolist()
         )
+        sizes = np.maximum(level, tiny)
         clip.tracks["scale"] = AnimationTrack(
-            "scale", "vector3", list(grid_frames), [[v, v, v] for v in level]
+            "scale", "vector3", list(grid_frames), [[v, v, v] for v in sizes]
         )
         tracks.animation.clips[node.path] = clip
+        tracks.visibility(node.path, grid_frames, level > 0)
 
 
 def _add_impact_flashes(
@@ -299,12 +368,8 @@ def _add_impact_flashes(
 ) -> None:
     """Impacts on a stop: the link the joint carries turns _IMPACT_COLOR for a moment (a copy
     of its shapes in that colour is shown in their place); a ball at a joint without shapes."""
-    grid = timeline.frame_times()
-    grid_frames = (grid * FPS).tolist()
-    for joint in np.unique(timeline.impact_joints):
-        if not 0 < joint < viz.model.njoints:
-            continue
-        flashing = _pulse(grid, timeline.events["impact"][timeline.impact_joints == joint]) > 0
+    grid_frames = (timeline.frame_times() * FPS).tolist()
+    for joint, flashing in _impact_flashes(timeline, viz.model.njoints):
         shapes = [g for g, obj in enumerate(visual.geometryObjects) if obj.parentJoint == joint]
         for g in shapes:
             obj = visual.geometryObjects[g]
@@ -352,9 +417,8 @@ def _load_flash_shape(viz: Any, obj: pinocchio.GeometryObject) -> Any:
     node = viz.viewer[viz.getViewerNodeName(flash, pinocchio.GeometryType.VISUAL)]
     if obj.meshPath.lower().endswith(".dae"):
         # As a bare geometry: pinocchio loads a DAE with the file's own materials.
-        color = int.from_bytes(bytes(int(255 * c) for c in _IMPACT_COLOR[:3]), "big")
         node.set_object(
-            mg.DaeMeshGeometry.from_file(obj.meshPath), mg.MeshPhongMaterial(color=color)
+            mg.DaeMeshGeometry.from_file(obj.meshPath), mg.MeshPhongMaterial(color=_IMPACT_HEX)
         )
     else:
         viz.loadViewerGeometryObject(flash, pinocchio.GeometryType.VISUAL)

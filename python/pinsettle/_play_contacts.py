@@ -193,19 +193,26 @@ def _grounds_text(grounds: Iterable[Ground]) -> str:
     return ", ".join(f"{g.name} (friction {g.friction:.3g})" for g in grounds)
 
 
-def contacts_legend(scene: Scene, result: Result) -> list[dict[str, str]]:
-    """What the grounds, contact points and contact forces drawn are (for the overlay)."""
+def contacts_legend(scene: Scene, result: Result) -> list[dict[str, Any]]:
+    """What the grounds, contact points and contact forces drawn are: ``{"color", "text",
+    "nodes"}`` (for the overlay; see ``_play_animation.legend``)."""
+    grounds = ["contacts/ground_*"]
     entries = [
-        (GROUND_COLOR, f"{mark}: ground {grounds}")
-        for mark, grounds in (
+        (GROUND_COLOR, f"{mark}: ground {names}", grounds)
+        for mark, names in (
             ("slab", _grounds_text(g for g in scene.grounds if g.box is None)),
             ("box", _grounds_text(g for g in scene.grounds if g.box is not None)),
         )
-        if grounds
+        if names
     ]
     if scene.contacts:
         points = f"balls: contact points and spheres ({len(scene.contacts)})"
-        entries.append((CONTACT_COLOR, points))
-    entries += [(STICKING_COLOR, _forces_text(result, True))]
-    entries += [(SLIDING_COLOR, _forces_text(result, False))]
-    return [{"color": _hex(color), "text": text} for color, text in entries if text]
+        entries.append((CONTACT_COLOR, points, ["contacts/point_*"]))
+    arrows = ["contacts/normal_*", "contacts/tangential_*"]
+    entries += [(STICKING_COLOR, _forces_text(result, True), arrows)]
+    entries += [(SLIDING_COLOR, _forces_text(result, False), arrows)]
+    return [
+        {"color": _hex(color), "text": text, "nodes": nodes}
+        for color, text, nodes in entries
+        if text
+    ]

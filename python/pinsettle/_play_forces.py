@@ -383,16 +383,22 @@ def _stops_text(scene: Scene, result: Result) -> str:
     return f"{what} ({held})" if held else ""
 
 
-#: The legend's entries: the colour of a kind of mark, and what says what it is (or "").
+#: The legend's entries: the colour of a kind of mark, what says what it is (or ""), and the
+#: paths of its marks (as ``draw_forces`` names them).
 _LEGEND = (
-    (LOAD_COLOR, _loads_text),
-    (JOINT_SPRING_COLOR, _joint_springs_text),
-    (LOOP_COLOR, _loops_text),
-    (STOP_COLOR, _stops_text),
+    (LOAD_COLOR, _loads_text, "forces/load_*"),
+    (JOINT_SPRING_COLOR, _joint_springs_text, "forces/joint_spring_*"),
+    (LOOP_COLOR, _loops_text, "forces/loop_*"),
+    (STOP_COLOR, _stops_text, "forces/stop_*"),
 )
 
 
-def forces_legend(scene: Scene, result: Result) -> list[dict[str, str]]:
-    """What each kind of mark drawn is: ``{"color", "text"}`` (for the overlay)."""
-    texts = ((color, text(scene, result)) for color, text in _LEGEND)
-    return [{"color": _hex(color), "text": text} for color, text in texts if text]
+def forces_legend(scene: Scene, result: Result) -> list[dict[str, Any]]:
+    """What each kind of mark drawn is: ``{"color", "text", "nodes"}`` (for the overlay; see
+    ``_play_animation.legend``)."""
+    texts = ((color, text(scene, result), nodes) for color, text, nodes in _LEGEND)
+    return [
+        {"color": _hex(color), "text": text, "nodes": [nodes]}
+        for color, text, nodes in texts
+        if text
+    ]

@@ -53,12 +53,23 @@ def plot_energy(result: Result, path: str | Path, *, title: str | None = None) -
         fontsize=11,
     )
     ax.grid(True, which="major", alpha=0.3)
-    if t.size:
-        ax.set_xlim(float(t[0]), float(max(t[-1], result.sim_time)))
+    ax.set_xlim(*_time_range(t, result))
     # Below the axes, never on the curves (they fill the axes wherever the run went).
     fig.legend(loc="outside lower center", ncols=2, fontsize=8, frameon=False)
     fig.savefig(path, format="png")
     return path
+
+
+def _time_range(t: np.ndarray, result: Result) -> tuple[float, float]:
+    """The time axis: the trace's first sample to the end of the run; a run of one sample or
+    none (a free body refused before its first step) gets one time step (or 1 ms) of axis, not
+    an empty range."""
+    low = float(t[0]) if t.size and np.isfinite(t[0]) else 0.0
+    end = max(float(t[-1]) if t.size else low, float(result.sim_time))
+    if not np.isfinite(end) or end <= low:
+        step = float(result.dt)
+        end = low + (step if np.isfinite(step) and step > 0 else 1e-3)
+    return low, end
 
 
 def _positive(values: Any) -> np.ndarray:

@@ -196,11 +196,13 @@ def densify(timeline: Timeline, model: Any) -> Timeline:
     return replace(timeline, times=np.concatenate(times), q=np.concatenate(poses))
 
 
-def _pulse(grid: np.ndarray, times: np.ndarray) -> np.ndarray:
+def _pulse(grid: np.ndarray, times: np.ndarray, end: float) -> np.ndarray:
     """At each time of ``grid``, how strong the flash of the events at ``times`` is: 1 at an
-    event, fading to 0 over ``FLASH_SECONDS`` (the strongest of those under way)."""
+    event, fading to 0 over ``FLASH_SECONDS`` (the strongest of those under way), and 0 from
+    ``end`` on: the final pose, which the viewer holds, shows no flash (the last damping event,
+    from which Newton's method finishes, is often the run's last moment)."""
     if not times.size:
         return np.zeros(grid.shape)
     since = grid[:, None] - times[None, :]
     pulse = np.where((since >= 0) & (since < FLASH_SECONDS), 1 - since / FLASH_SECONDS, 0.0)
-    return np.asarray(pulse.max(axis=1), dtype=float)
+    return np.where(grid < end, pulse.max(axis=1), 0.0).astype(float)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _sweep, _sweep_cases
+from . import _sweep, _sweep_cases, _sweep_plot
 from ._cli_flags import add_flags, check_flags, flag, switch
 from ._scene import load_scene
 from .scenes import scene_path
@@ -38,6 +38,32 @@ def _random_count(args: argparse.Namespace) -> str | None:
 
 def _seed_with_random(args: argparse.Namespace) -> str | None:
     return "--seed goes with --random N" if args.seed is not None and args.random is None else None
+
+
+def _plot_file(args: argparse.Namespace) -> str | None:
+    """--plot FILE: a .png or .svg file in a folder that exists, matplotlib installed."""
+    if args.plot is None:
+        return None
+    path = Path(args.plot)
+    try:
+        _sweep_plot.plot_format(path, _sweep_plot.FLAG_NAMES)
+        _sweep_plot.require_matplotlib(f"--plot {args.plot}")
+    except (ValueError, ImportError) as error:
+        return str(error)
+    if not path.parent.is_dir():
+        return f"--plot {args.plot}: no such folder: {path.parent}"
+    if path.is_dir():
+        return f"--plot {args.plot} is a folder"
+    return None
+
+
+def _with_plot(args: argparse.Namespace) -> str | None:
+    given = [
+        f for f, v in (("--plot-column", args.plot_column), ("--plot-key", args.plot_key)) if v
+    ]
+    if given and args.plot is None:
+        return f"{given[0]} goes with --plot FILE"
+    return None
 
 
 def _workers_here(args: argparse.Namespace) -> str | None:
@@ -93,6 +119,25 @@ FLAGS = (
     ),
     flag("--out", metavar="FILE", help="the table: FILE.parquet or FILE.csv"),
     flag("--json", action="store_true", help="print one JSON object, no bar"),
+    flag(
+        "--plot",
+        metavar="FILE",
+        help="also plot the table, FILE.png or FILE.svg (matplotlib: pinsettle[viz]): a column "
+        "against the varied key, the jumps marked",
+        check=_plot_file,
+    ),
+    flag(
+        "--plot-column",
+        action="append",
+        metavar="NAME",
+        help="a column of the table to plot (repeatable; default: every joint's value)",
+    ),
+    flag(
+        "--plot-key",
+        metavar="KEY",
+        help="the column to plot against (default: the varied key; needed when several vary)",
+        check=_with_plot,
+    ),
 )
 
 
@@ -322,6 +367,8 @@ def _print_summary(df: Any, info: dict[str, Any]) -> None:
     shown += ["jump"] if "jump" in df.columns else []
     shown += ["error"] if len(failed) else []
     _print_rows(df, info, shown)
+    if info.get("plot"):
+        print(f"plot     {info['plot']}")
     if info["interrupted"]:
         print(
             "interrupted: run the same command again to solve the cases left"
@@ -373,6 +420,10 @@ def _run(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     if out is not None:
         write_table(df, out)
     info = summary(df, out)
+    if args.plot is not None:  # after the table is written: a bad column loses no case
+        names = _sweep_plot.FLAG_NAMES
+        _sweep_plot._plot(df, args.plot, args.plot_column, args.plot_key, None, names)
+        info["plot"] = args.plot
     if args.json:
         if out is None:
             info["rows"] = records(df)

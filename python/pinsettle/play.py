@@ -152,7 +152,7 @@ def _overlay(scene: Scene, result: Result, timeline: Timeline) -> dict[str, Any]
     """What the overlay of both pages shows (see ``_play_page``)."""
     status = f"{result.status}: {result.steps} steps, {result.peaks} damping events"
     return {
-        "legend": legend(scene, result),
+        "legend": legend(scene, result, timeline),
         "scene": scene.name,
         "status": status,
         "speed": timeline.speed,

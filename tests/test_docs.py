@@ -114,6 +114,13 @@ def test_readme_python_examples_run_and_print_what_their_comments_say():
     assert quoted >= 2  # the output comments are there to be checked
 
 
+def test_readme_cpp_example_is_a_whole_program():
+    # tests/test_cpp.py builds and runs it; this says early, without a build, that it is one.
+    block = _between(README.read_text(), "-->\n```cpp\n", "```\n<!-- /cpp:readme-example -->")
+    assert "<!-- cpp:readme-example" in README.read_text()
+    assert "int main(" in block and "#include <iostream>" in block, block
+
+
 def _slug(heading: str) -> str:
     """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
     text = heading.strip().lower().replace("`", "")

@@ -132,6 +132,22 @@ def test_demo_text_output():
     assert "recomputed with pinocchio" in proc.stdout
 
 
+def test_demo_text_gives_units_and_names_the_free_joints(ur5_json):
+    proc = run("demo", "ur5")
+    assert proc.returncode == 0, proc.stderr
+    out = ur5_json[1]
+    lines = {line[:17].strip(): line[17:] for line in proc.stdout.splitlines()}
+    assert lines["residual"].startswith(f"{out['residual']:.3e} N m (max |net static"), lines
+    assert lines["check"] == f"|g(q)| = {out['residual']:.3e} N m recomputed with pinocchio"
+    assert lines["stability"] == (
+        "neutral (smallest stiffness eigenvalue 0 N m/rad: 3 directions free to move at no "
+        "cost, moving shoulder_pan_joint, wrist_2_joint, wrist_3_joint)"
+    )
+    # The JSON keeps its fields: the raw smallest eigenvalue and the count.
+    assert out["stability"] == "neutral" and out["neutral_directions"] == 3
+    assert "min_stiffness_eigenvalue" in out
+
+
 def test_demo_not_converged_exits_1():
     proc = run("demo", "ur5", "--max-steps", "5")
     assert proc.returncode == 1

@@ -78,7 +78,34 @@ def test_cpp_boost_tests(cpp_build: Path, suite: str) -> None:
     assert "failed" not in proc.stdout.lower() or "0 failed" in proc.stdout.lower()
 
 
-@pytest.mark.parametrize("name", ["example_ur5", "example_pendulum"])
+@pytest.mark.parametrize("name", ["example_ur5", "example_pendulum", "readme_example"])
 def test_cpp_example_against_installed_package(cpp_build: Path, name: str) -> None:
     proc = _run(["ctest", "--test-dir", str(cpp_build), "-R", f"^{name}$", "--output-on-failure"])
     assert "100% tests passed" in proc.stdout
+
+
+def test_readme_cpp_example_as_written(cpp_build: Path) -> None:
+    # The README's C++ block (tests/cpp/readme_example.cmake extracts it) given the UR5: it
+    # converges, and what it prints is a rest (Pinocchio's gravity at the printed pose, to the
+    # 6 digits the stream gives) and the Python solve's own answer with the same settings.
+    import numpy as np
+    import pinocchio
+
+    urdf = pinsettle.robot_urdf("ur5")
+    proc = _run([str(cpp_build / "readme_example"), str(urdf)])
+    status, q_line = proc.stdout.splitlines()
+    head = status.split()
+    assert head[:2] == ["converged", "in"] and head[3:5] == ["steps,", "residual"], status
+    assert float(head[5]) < 1e-10, status
+    q = np.array([float(x) for x in q_line.removeprefix("q ").split()])
+    model = pinsettle.load_robot("ur5")
+    expected = pinsettle.solve(model, pinocchio.neutral(model), max_e=1e-16)
+    assert int(head[2]) == expected.steps, (status, expected.steps)
+    assert q == pytest.approx(expected.q, abs=1e-5)
+    g = pinocchio.computeGeneralizedGravity(model, model.createData(), q)
+    assert np.abs(g).max() < 1e-3  # 6-digit angles: 1e-6 rad times a stiffness below 65 N m/rad
+    # The program's own error path: a missing file is a message and exit 2, not an abort.
+    missing = subprocess.run(
+        [str(cpp_build / "readme_example"), "no_such.urdf"], capture_output=True, text=True
+    )
+    assert missing.returncode == 2 and missing.stderr.startswith("error: "), missing

@@ -4,8 +4,11 @@ repository."""
 
 from __future__ import annotations
 
+import io
 import re
+import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -39,12 +42,83 @@ def test_readme_keeps_the_test_command_and_the_speed_summary():
     assert "docs/benchmarks.md" in summary
 
 
-def test_readme_python_examples_run():
+# A line of a README example that prints, with a trailing comment: the output it prints.
+PRINT_WITH_OUTPUT = re.compile(r"^print\(.*\)\s*#\s*(?P<output>.+)$")
+# A number as printed or as quoted (a quote may end in "...": its digits cut, not rounded).
+NUMBER = re.compile(r"(?<![\w.])[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?(?:\.\.\.)?(?![\w.])")
+
+
+def _quote_mismatch(printed: str, quoted: str) -> str | None:
+    """Why ``printed`` is not what the comment ``quoted`` says it prints (None: it is). The
+    words and signs must match; an integer exactly; a decimal number to the digits shown
+    (within half a unit of its last digit, or below one unit above it when it ends in "...")."""
+    words = NUMBER.sub("#", printed).split(), NUMBER.sub("#", quoted).split()
+    if words[0] != words[1]:
+        return f"prints {printed!r}, the comment says {quoted!r}"
+    # The same words around: as many numbers.
+    for got_text, shown in zip(NUMBER.findall(printed), NUMBER.findall(quoted), strict=True):
+        cut = shown.endswith("...")
+        digits = shown.removesuffix("...")
+        got, want = float(got_text), float(digits)
+        if not re.search(r"[.eE]", digits):
+            if got != want:
+                return f"prints {got_text}, the comment says {shown}"
+            continue
+        mantissa, _, exponent = digits.lower().partition("e")
+        decimals = len(mantissa.partition(".")[2])
+        unit = 10.0 ** (int(exponent or 0) - decimals)  # of the last digit shown
+        slack = 1e-9 * unit  # the decimal digits' binary round-off
+        if cut:  # the same sign, and the digits shown then more
+            close = got * want >= 0 and -slack <= abs(got) - abs(want) < unit + slack
+        else:
+            close = abs(got - want) <= unit / 2 + slack
+        if not close:
+            return f"prints {got_text}, the comment says {shown} (to the digits shown)"
+    return None
+
+
+def test_quoted_output_is_compared_to_the_digits_shown():
+    assert _quote_mismatch("converged 23 2.249070279087094e-15", "converged 23 2.2e-15") is None
+    assert _quote_mismatch("{'hinge': 0.637354} stable", "{'hinge': 0.6373...} stable") is None
+    # A stale comment fails: another step count, another residual, another word.
+    assert _quote_mismatch("converged 23 2.249070279087094e-15", "converged 48 2.9e-15")
+    assert _quote_mismatch("converged 23 2.249070279087094e-15", "converged 23 2.9e-15")
+    assert _quote_mismatch("max_steps 23 2.249070279087094e-15", "converged 23 2.2e-15")
+    assert _quote_mismatch("{'hinge': 0.6372} stable", "{'hinge': 0.6373...} stable")
+    assert _quote_mismatch("converged 23 2.26e-15", "converged 23 2.2e-15")  # rounds to 2.3
+    assert _quote_mismatch("{'hinge': -0.63735} stable", "{'hinge': 0.6373...} stable")
+
+
+def test_readme_python_examples_run_and_print_what_their_comments_say():
     blocks = re.findall(r"^```python\n(.*?)^```", README.read_text(), re.S | re.M)
     assert len(blocks) >= 2
-    namespace: dict[str, object] = {}
+    printed: dict[int, str] = {}  # a block's line number -> what its print printed
+
+    def record(*args: object, **kwargs: Any) -> None:
+        out = io.StringIO()
+        print(*args, **kwargs, file=out)
+        printed[sys._getframe(1).f_lineno] = out.getvalue().rstrip("\n")
+
+    namespace: dict[str, object] = {"print": record}
+    quoted = 0
     for block in blocks:  # in order: a later example may use an earlier one's imports
+        printed.clear()
         exec(compile(block, str(README), "exec"), namespace)
+        for number, line in enumerate(block.splitlines(), start=1):
+            found = PRINT_WITH_OUTPUT.match(line)
+            if found:
+                quoted += 1
+                assert number in printed, f"README: {line!r} printed nothing"
+                mismatch = _quote_mismatch(printed[number], found["output"].strip())
+                assert mismatch is None, f"README: {line!r} {mismatch}"
+    assert quoted >= 2  # the output comments are there to be checked
+
+
+def test_readme_cpp_example_is_a_whole_program():
+    # tests/test_cpp.py builds and runs it; this says early, without a build, that it is one.
+    block = _between(README.read_text(), "-->\n```cpp\n", "```\n<!-- /cpp:readme-example -->")
+    assert "<!-- cpp:readme-example" in README.read_text()
+    assert "int main(" in block and "#include <iostream>" in block, block
 
 
 def _slug(heading: str) -> str:

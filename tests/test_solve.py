@@ -710,6 +710,81 @@ def test_result_summary_names_the_joints(ur5):
     assert all(ur5.names[j] in text for j in range(1, ur5.njoints))
 
 
+def _summary_line(text: str, head: str) -> str:
+    lines = [line for line in text.splitlines() if line.startswith(head)]
+    assert len(lines) == 1, text
+    return lines[0][len(head) :].strip()
+
+
+def test_summary_gives_the_units_and_the_joints_free_to_move(ur5):
+    result = pinsettle.solve(ur5)
+    assert result.stability == "neutral" and result.neutral_directions == 3
+    text = result.summary(ur5)
+    assert _summary_line(text, "residual").startswith(f"{result.residual:.3e} N m (")
+    # The joints whose motion alone costs nothing, by Pinocchio's gravity derivatives: a zero
+    # column (and row) of K. Hanging down, the UR5 turns freely about the vertical at the
+    # base and at the wrist, and its last joint turns the flange about its own axis.
+    k = pinocchio.computeGeneralizedGravityDerivatives(ur5, ur5.createData(), result.q)
+    free = [
+        ur5.names[j]
+        for j in range(1, ur5.njoints)
+        if np.abs(k[:, ur5.idx_vs[j]]).max() <= 1e-9 * np.abs(k).max()
+    ]
+    assert free == ["shoulder_pan_joint", "wrist_2_joint", "wrist_3_joint"], k
+    assert _summary_line(text, "stability") == (
+        "neutral (smallest stiffness eigenvalue 0 N m/rad: 3 directions free to move at no "
+        "cost, moving " + ", ".join(free) + ")"
+    )
+    # Without the model: no joint kinds, no names.
+    bare = result.summary()
+    assert _summary_line(bare, "residual").startswith(f"{result.residual:.3e} N m or N (")
+    assert _summary_line(bare, "stability") == (
+        "neutral (smallest stiffness eigenvalue 0: 3 directions free to move at no cost)"
+    )
+
+
+def test_summary_prints_a_neutral_verdicts_round_off_eigenvalue_as_zero():
+    scene = pinsettle.load_scene("ur5_tool_spring")
+    result = pinsettle.solve(scene)
+    report = pinsettle.assess_stability(scene, result.q)
+    # The smallest eigenvalue is round-off, not 0, and within the verdict's tolerance.
+    assert result.stability == "neutral" and result.min_stiffness_eigenvalue != 0.0
+    assert abs(result.min_stiffness_eigenvalue) <= report.tolerance
+    line = _summary_line(result.summary(scene), "stability")
+    assert line.startswith("neutral (smallest stiffness eigenvalue 0 N m/rad: 1 direction "), line
+    # The flange turns about the spring's line through tool0 at no cost.
+    assert line.endswith("free to move at no cost, moving wrist_3_joint)"), line
+
+
+def test_summary_units_of_a_prismatic_and_of_a_mixed_mechanism(panda):
+    scene = pinsettle.load_scene("slider_spring")  # a 500 N/m joint spring on a slider
+    result = pinsettle.solve(scene)
+    text = result.summary(scene)
+    assert _summary_line(text, "residual").startswith(f"{result.residual:.3e} N (")
+    assert _summary_line(text, "stability") == "stable (smallest stiffness eigenvalue 500 N/m)"
+    # The Panda's fingers slide: its residual mixes N m and N. They rest on their stops: the
+    # stiffness is that of the arm's joints off the stops, in N m/rad.
+    result = pinsettle.solve(panda)
+    assert {"panda_finger_joint1", "panda_finger_joint2"} <= set(result.at_limit), result.at_limit
+    text = result.summary(panda)
+    assert _summary_line(text, "residual").startswith(f"{result.residual:.3e} N m or N (")
+    assert _summary_line(text, "stability").startswith(
+        "neutral (smallest stiffness eigenvalue 0 N m/rad on the joints off their stops: 1 "
+        "direction free to move at no cost, moving panda_joint1)"
+    )
+
+
+def test_summary_of_a_rest_held_in_every_motion():
+    # Four sticking corners hold the box in every motion: K restricted to nothing.
+    scene = pinsettle.load_scene("box_on_floor")
+    result = pinsettle.solve(scene)
+    assert result.stability == "stable" and len(result.contacts) == 4
+    assert result.min_stiffness_eigenvalue == 0.0 and result.neutral_directions == 0
+    text = result.summary(scene)
+    assert _summary_line(text, "stability") == "stable (held in every motion by its contacts)"
+    assert _summary_line(text, "residual").startswith(f"{result.residual:.3e} N m or N (")
+
+
 # --- Rest on an equilibrium: the stability verdict decides ---------------------------------
 
 

@@ -23,6 +23,7 @@ from pinsettle._cli_flags import Flag, add_flags, flag, setting_flags
 from pinsettle._memory import new_data
 from pinsettle._progress import StatusLine, status_line
 from pinsettle._settings import SETTING_FIELDS, SETTING_TYPES
+from pinsettle._solve import effort_kinds, effort_unit
 
 #: The solver settings' flags, made from the settings' one declaration (a flag's name is its
 #: setting's, as _setting_overrides reads it).
@@ -146,15 +147,16 @@ def _demo(args: argparse.Namespace) -> int:
         print(json.dumps(result.to_dict()))
     else:
         print(f"{args.robot}: {model.nq} configuration variables, released at rest from neutral")
-        print(result.summary())
+        print(result.summary(model))
         independent = _rest_check(model, result.q, result.limits)
+        unit = effort_unit(effort_kinds(model))
         if result.at_limit:
             print(
-                f"check            {independent:.3e}: |g(q)| off the stops, pull asked of a "
-                "stop, recomputed with pinocchio"
+                f"check            {independent:.3e} {unit}: |g(q)| off the stops, pull asked "
+                "of a stop, recomputed with pinocchio"
             )
         else:
-            print(f"check            |g(q)| = {independent:.3e} recomputed with pinocchio")
+            print(f"check            |g(q)| = {independent:.3e} {unit} recomputed with pinocchio")
     return 0 if result.converged else 1
 
 
@@ -234,7 +236,7 @@ def _solve(args: argparse.Namespace) -> int:
         print(json.dumps(out))
     else:
         _print_title(scene)
-        print(result.summary())
+        print(result.summary(scene))
     return 0 if result.converged else 1
 
 

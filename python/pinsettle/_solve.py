@@ -4,7 +4,7 @@ settings are in ``_settings``)."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -211,21 +211,24 @@ class Result:
         object.__setattr__(result, "__dict__", fields)
         return result
 
-    def summary(self) -> str:
-        """A readable report with the final joint values by name."""
-        neutral = f", {self.neutral_directions} neutral" if self.neutral_directions else ""
+    def summary(self, model: Any = None) -> str:
+        """A readable report with the final joint values by name. Given ``model``, the model or
+        scene solved, the residual and the stiffness are in its joints' units and the stability
+        line names the joints its neutral directions move (the stiffness assessed again at
+        ``q``, with ``limits=self.limits``); without it the residual reads N m or N."""
+        kinds = None if model is None else effort_kinds(model)
+        # The stiffness is that of the joints off their stops.
+        off_stops = None if model is None else effort_kinds(model, without=self.at_limit)
         lines = [
             f"status           {self.status}",
             self._steps_line(),
             f"wall time        {self.wall_time * 1e3:.3f} ms",
-            self._residual_line(),
+            self._residual_line("N m or N" if kinds is None else effort_unit(kinds)),
             self._time_step_line(),
             f"kinetic energy   {self.kinetic_energy:.3e} J",
             *self._loops_lines(),
             *self._contacts_lines(),
-            f"stability        {self.stability} (smallest stiffness eigenvalue "
-            f"{self.min_stiffness_eigenvalue:.4g}{neutral}"
-            + (", on the joints off their stops)" if self.at_limit else ")"),
+            self._stability_line(off_stops, None if model is None else neutral_joints(model, self)),
             *self._note_lines(),
         ]
         if self.reason:
@@ -234,6 +237,36 @@ class Result:
             lines.append("joints")
             lines += [self._joint_line(name, value) for name, value in self.joints.items()]
         return "\n".join(lines)
+
+    def _stability_line(self, kinds: set[str] | None, moving: tuple[str, ...] | None) -> str:
+        """The verdict and what it rests on: the smallest stiffness eigenvalue (0 when within
+        the verdict's tolerance, as a neutral verdict's smallest is), the directions free to
+        move at no cost and the joints they move (``moving``, when known)."""
+        head = f"stability        {self.stability} ("
+        if self.stability in ("stable", "marginal") and self.min_stiffness_eigenvalue == 0.0:
+            # Stable with a zero eigenvalue: K restricted to no motion at all (a stable
+            # verdict's smallest eigenvalue is above a tolerance > 0 otherwise).
+            return head + f"held in every motion by {self._holders()})"
+        smallest = 0.0 if self.stability == "neutral" else self.min_stiffness_eigenvalue
+        unit = "" if kinds is None else stiffness_unit(kinds)
+        text = f"smallest stiffness eigenvalue {smallest:.4g}{unit}"
+        if self.at_limit:
+            text += " on the joints off their stops"
+        count = self.neutral_directions
+        if count:
+            text += ": " if self.stability == "neutral" else "; also "
+            text += f"{count} direction{'s' if count > 1 else ''} free to move at no cost"
+            if moving:
+                text += ", moving " + ", ".join(moving)
+        return head + text + ")"
+
+    def _holders(self) -> str:
+        """What holds a rest in every motion: its contacts, its stops, or both."""
+        if self.contacts and self.at_limit:
+            return "its contacts and its stops"
+        if self.contacts:
+            return "its contacts"
+        return "its stops" if self.at_limit else "its constraints"
 
     def _steps_line(self) -> str:
         pushes = (
@@ -246,7 +279,7 @@ class Result:
             f"{self.sim_time:.4g} s simulated)"
         )
 
-    def _residual_line(self) -> str:
+    def _residual_line(self, unit: str) -> str:
         if self.loops:
             along = ", along the motions the loops allow)"
         elif self.limits:
@@ -257,7 +290,7 @@ class Result:
             f", {self.residual_before_polish:.3e} before the Newton polish" if self.polished else ""
         )
         return (
-            f"residual         {self.residual:.3e} (max |net static generalized force|"
+            f"residual         {self.residual:.3e} {unit} (max |net static generalized force|"
             f"{along}{polish}"
         )
 
@@ -500,3 +533,78 @@ def assess_stability(model: Any, q: Any, *, limits: bool | None = None) -> Stabi
         stops = (True, []) if _limits_flag(limits, True) else None
         raw = _core.stiffness(model, as_vector(q, "q", model.nq, "model.nq"), None, None, stops)
     return StabilityReport(**raw)
+
+
+def effort_kinds(model: Any, without: Collection[str] = ()) -> set[str]:
+    """The units of the generalized forces of a model's joints, or of a scene's free joints
+    (its locked joints left out), less the joints named in ``without``: 'N m' along a
+    velocity that turns a body (revolute, helical, spherical, a free-flyer's angular part),
+    'N' along one that only moves it along a line (prismatic, a free-flyer's linear part),
+    read off each joint's motion subspace."""
+    locked = set(without)
+    if isinstance(model, Scene):
+        locked.update(model.locked)
+        model = model.model
+    _check_model(model)
+    q = pinocchio.neutral(model)
+    kinds: set[str] = set()
+    for j, (joint, name) in enumerate(zip(model.joints, model.names, strict=True)):
+        if j == 0 or model.nvs[j] == 0 or name in locked:  # the universe, a mimic follower
+            continue
+        data = joint.createData()
+        joint.calc(data, q)
+        subspace = np.asarray(data.S).reshape(6, -1)
+        kinds.update("N m" if np.any(column[3:] != 0.0) else "N" for column in subspace.T)
+    return kinds
+
+
+def effort_unit(kinds: set[str]) -> str:
+    """The unit of a residual over joints of these ``effort_kinds``: 'N m', 'N' or, mixed,
+    'N m or N'."""
+    return " or ".join(unit for unit in ("N m", "N") if unit in kinds) or "N m or N"
+
+
+def stiffness_unit(kinds: set[str]) -> str:
+    """' N m/rad' or ' N/m', the unit of a stiffness eigenvalue over joints of one kind; ''
+    over both (an eigenvector then mixes turns and moves: no one unit)."""
+    if kinds == {"N m"}:
+        return " N m/rad"
+    return " N/m" if kinds == {"N"} else ""
+
+
+#: A joint is named as moved by the neutral directions when its velocity carries at least
+#: this share of them (the diagonal of the projector onto them, summed over its velocities:
+#: 1 for a joint a neutral direction moves alone).
+NEUTRAL_SHARE = 0.01
+
+
+def neutral_joints(model: Any, result: Result) -> tuple[str, ...]:
+    """The joints that the neutral directions of ``result``'s rest move, in the model's order,
+    from the stiffness assessed again at ``result.q`` (``assess_stability``, with
+    ``limits=result.limits``). () without neutral directions, with contacts (the solver's
+    verdict restricts K to the motions they leave free; ``assess_stability`` leaves them out),
+    when the assessment does not find the solver's verdict, or has no memory for it."""
+    if not result.neutral_directions or result.contacts:
+        return ()
+    try:
+        report = assess_stability(model, result.q, limits=result.limits)
+    except MemoryError:
+        return ()
+    if (report.verdict, report.neutral_directions) != (
+        result.stability,
+        result.neutral_directions,
+    ):
+        return ()
+    stiffness = report.stiffness_matrix
+    values, vectors = np.linalg.eigh(0.5 * (stiffness + stiffness.T))
+    free = report.basis @ vectors[:, np.abs(values) <= report.tolerance]
+    # An orthonormal basis of the neutral motions in joint velocities: the share of each
+    # velocity is then the same whichever eigenvectors eigh picked among equal eigenvalues.
+    share = np.sum(np.linalg.qr(free)[0] ** 2, axis=1)
+    naming = model.compile(result.q).model if isinstance(model, Scene) else model
+    moved = []
+    for j in range(1, naming.njoints):
+        start, size = naming.idx_vs[j], naming.nvs[j]
+        if size and share[start : start + size].sum() >= NEUTRAL_SHARE:
+            moved.append(str(naming.names[j]))
+    return tuple(moved)

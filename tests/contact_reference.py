@@ -108,9 +108,16 @@ def read_listed_contacts(path: Path) -> tuple[list[Plane | Box], list[Sphere]]:
     return planes, spheres
 
 
+def frame_id(model, frame: str) -> int:
+    """A frame by name, a body's first (an MJCF joint often has its body's name)."""
+    if model.existFrame(frame, pinocchio.FrameType.BODY):
+        return int(model.getFrameId(frame, pinocchio.FrameType.BODY))
+    return int(model.getFrameId(frame))
+
+
 def point_jacobian(model, data, frame: str, x: np.ndarray) -> np.ndarray:
     """3 x nv: the world velocity of the point of frame's body at the world point x."""
-    fid = model.getFrameId(frame)
+    fid = frame_id(model, frame)
     J = pinocchio.getFrameJacobian(model, data, fid, pinocchio.LOCAL_WORLD_ALIGNED)
     r = x - data.oMf[fid].translation
     skew = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
@@ -153,7 +160,7 @@ def check_rest(model, q, planes, spheres, contacts, springs=(), stops=None) -> R
     total_n, total_t = np.zeros(3), np.zeros(3)
     for c in contacts:
         plane, sphere = by_plane[c.ground], by_point[c.name]
-        centre = data.oMf[model.getFrameId(sphere.frame)].act(sphere.point)
+        centre = data.oMf[frame_id(model, sphere.frame)].act(sphere.point)
         gap, normal = plane.touch(centre, sphere.radius)
         x = centre - sphere.radius * normal
         assert np.allclose(x, c.point, atol=1e-12) and abs(gap - c.gap) < 1e-12
@@ -172,7 +179,7 @@ def check_rest(model, q, planes, spheres, contacts, springs=(), stops=None) -> R
         total_n += c.normal_force * normal
         total_t += c.tangential_force
     gaps = [
-        plane.touch(data.oMf[model.getFrameId(s.frame)].act(s.point), s.radius)[0]
+        plane.touch(data.oMf[frame_id(model, s.frame)].act(s.point), s.radius)[0]
         for s in spheres
         for plane in planes
     ]

@@ -610,7 +610,6 @@ REFUSED = [
     ("<equality><joint joint1='j' joint2='k'/></equality>", "", ["<joint>", "joint equality"]),
     ("", " gravcomp='1'", ["gravcomp", "gravity compensation"]),
     ("<option density='1.2'/>", "", ["<option density>", "buoyancy"]),
-    ("<compiler settotalmass='3'/>", "", ["settotalmass"]),
 ]
 
 
@@ -638,7 +637,7 @@ def test_mjcf_refuses_what_it_cannot_honour(section, body_attrs, fragments, tmp_
         ('type="ball" range="0 30"', ["ball joint", "cone limit"]),
         ('type="ball" stiffness="2"', ["stiffness", "ball joint"]),
         ('stiffness="2 1"', ["polynomial spring"]),
-        ('springdamper="0.1 1"', ["springdamper"]),
+        ('type="ball" springdamper="0.1 1"', ["springdamper", "ball joint"]),
     ],
 )
 def test_mjcf_refuses_joint_statics_it_cannot_honour(joint, fragments, tmp_path):

@@ -713,6 +713,9 @@ CASES: list[Case] = [
     _dm("suite/humanoid.xml"),
     _dm("suite/humanoid.xml", floating=True),
     _dm("suite/humanoid_CMU.xml", floating=True),
+    _dm("suite/cheetah.xml"),  # masses scaled to a total (settotalmass)
+    _dm("suite/dog.xml"),  # springdamper joints, a ball beside it
+    _dm("suite/dog.xml", flags=("--free-objects", "lock")),
     _dm("suite/ball_in_cup.xml", may_refuse=True),  # a tendon's range (the string)
     _dm("suite/manipulator.xml", may_refuse=True),  # a tendon equality
     _dm("suite/fish.xml", may_refuse=True),  # buoyancy
@@ -731,7 +734,7 @@ CASES: list[Case] = [
     _gym("inverted_double_pendulum.xml"),
     _gym("pusher.xml"),
     _gym("reacher.xml"),
-    _gym("half_cheetah.xml", may_refuse=True),  # settotalmass
+    _gym("half_cheetah.xml"),  # masses scaled to a total (settotalmass)
     _gym("swimmer.xml", may_refuse=True),  # buoyancy
     # gymnasium-robotics: the Fetch arm held by a weld, objects beside a robot, the Shadow
     # and Adroit hands (coupled by tendon ranges), the Franka kitchen.

@@ -35,15 +35,23 @@ RIM_POINTS = 8
 HULL_POINTS = 16
 #: Directions along which a thinned hull is kept close to the full one.
 DIRECTIONS = 1000
+#: How far an ellipsoid's contact spheres may fall short of it, in any direction, relative to
+#: its smallest semi-axis.
+ELLIPSOID_TOL = 0.02
+#: Directions along which an ellipsoid's contact spheres are measured against it.
+ELLIPSOID_DIRECTIONS = 4000
+#: The largest lattice of an ellipsoid's contact spheres (six more on its axes).
+ELLIPSOID_MOST = 1024
 #: The shapes contacts are taken from.
-SHAPES = "sphere, capsule, box, cylinder, mesh (its convex hull)"
+SHAPES = "sphere, capsule, box, cylinder, ellipsoid, mesh (its convex hull)"
 
 
 @dataclass(frozen=True)
 class Shape:
     """A collision shape of a body, in ``frame`` at ``placement``: ``kind`` 'sphere' (size:
     radius), 'capsule' or 'cylinder' (radius, half length along the shape's z axis), 'box' (half
-    sides) or 'mesh' (``vertices`` in the shape's frame, any count: the hull is taken here).
+    sides), 'ellipsoid' (semi-axes along the shape's x, y, z) or 'mesh' (``vertices`` in the
+    shape's frame, any count: the hull is taken here).
     ``what`` names it in messages (its kind as the source calls it)."""
 
     name: str
@@ -106,6 +114,59 @@ def rim_points(radius: float, half_length: float, count: int = RIM_POINTS) -> np
     return np.array([(x, y, z) for z in (-half_length, half_length) for x, y in ring])
 
 
+def _lattice(count: int) -> np.ndarray:
+    """``count`` unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
+    k = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * k / count
+    phi = math.pi * (1.0 + math.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+
+
+@dataclass(frozen=True)
+class Rounded:
+    """An ellipsoid as contact spheres: how many, their radius (m), and how far (m) they fall
+    short of the ellipsoid at most (along ``ELLIPSOID_DIRECTIONS`` directions)."""
+
+    name: str
+    count: int
+    radius: float
+    shortfall: float
+
+
+def ellipsoid_points(semi_axes: Sequence[float]) -> tuple[np.ndarray, float, float]:
+    """Contact spheres whose convex hull lies inside an ellipsoid and falls short of it by at
+    most ``ELLIPSOID_TOL`` times its smallest semi-axis: their centres (rows, in the
+    ellipsoid's frame), their radius and the largest shortfall measured (m).
+
+    The radius is the ellipsoid's smallest radius of curvature, c^2 / a (c its smallest, a its
+    largest semi-axis): the ellipsoid is then exactly the inner body that lies that far inside
+    it, grown by a sphere of that radius. The centres are points of that inner body: for each
+    direction u of a Fibonacci lattice (the six axis directions first: an ellipsoid lying on an
+    axis end rests on a centre exactly below it), the point of the inner body whose outward
+    normal is A^-1 u, A the semi-axes. The lattice doubles from 8 until the spheres fall short
+    of the ellipsoid by at most 0.8 times the tolerance along ``ELLIPSOID_DIRECTIONS``
+    directions, or
+    reaches ``ELLIPSOID_MOST`` (a needle of 1:30 or thinner may fall short by more: the
+    shortfall returned says by how much)."""
+    axes = np.asarray(semi_axes, dtype=float)
+    radius = float(axes.min() ** 2 / axes.max())
+    check = directions(ELLIPSOID_DIRECTIONS)
+    exact = np.linalg.norm(check * axes, axis=1)  # the ellipsoid's support in each direction
+    count = 8
+    while True:
+        normals = np.vstack([np.eye(3), -np.eye(3), _lattice(count)]) / axes
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        touching = normals * axes**2 / np.linalg.norm(normals * axes, axis=1)[:, None]
+        # Centres that coincide (all of them on a sphere) are one.
+        centres = np.unique(np.round(touching - radius * normals, 15), axis=0)
+        shortfall = float(np.max(exact - (check @ centres.T).max(axis=1) - radius))
+        # A fifth of the tolerance kept for the directions between those measured.
+        if shortfall <= 0.8 * ELLIPSOID_TOL * axes.min() or count >= ELLIPSOID_MOST:
+            return centres, radius, max(shortfall, 0.0)
+        count *= 2
+
+
 def convex_hull(vertices: np.ndarray, what: str) -> np.ndarray:
     """The vertices of the convex hull of a point set (qhull, through coal: Pinocchio's
     collision library).
@@ -134,12 +195,7 @@ def convex_hull(vertices: np.ndarray, what: str) -> np.ndarray:
 def directions(count: int = DIRECTIONS) -> np.ndarray:
     """``count`` unit vectors spread evenly over the sphere (a Fibonacci lattice), with the six
     axis directions first."""
-    k = np.arange(count) + 0.5
-    z = 1.0 - 2.0 * k / count
-    phi = math.pi * (1.0 + math.sqrt(5.0)) * k
-    r = np.sqrt(1.0 - z * z)
-    lattice = np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
-    return np.vstack([np.eye(3), -np.eye(3), lattice])
+    return np.vstack([np.eye(3), -np.eye(3), _lattice(count)])
 
 
 def thin(points: np.ndarray, count: int) -> tuple[np.ndarray, float]:
@@ -183,9 +239,11 @@ def _positive(shape: Shape, count: int) -> tuple[float, ...]:
     return size
 
 
-def shape_points(shape: Shape, hull_points: int) -> tuple[np.ndarray, float, Thinned | None]:
+def shape_points(
+    shape: Shape, hull_points: int
+) -> tuple[np.ndarray, float, Thinned | Rounded | None]:
     """The contact points of a shape in its own frame (rows), their common radius, and how a
-    mesh's hull was thinned (None when it was not).
+    mesh's hull was thinned or an ellipsoid rounded into spheres (None otherwise).
 
     Raises:
         SceneError: a shape of another kind, or a size that is not positive (names the shape).
@@ -201,6 +259,9 @@ def shape_points(shape: Shape, hull_points: int) -> tuple[np.ndarray, float, Thi
         return rim_points(radius, half), 0.0, None
     if kind == "box":
         return box_corners(_positive(shape, 3)), 0.0, None
+    if kind == "ellipsoid":
+        centres, radius, shortfall = ellipsoid_points(_positive(shape, 3))
+        return centres, radius, Rounded(shape.name, len(centres), radius, shortfall)
     if kind == "mesh":
         assert shape.vertices is not None
         what = f"{shape.what or 'mesh'} '{shape.name}' (frame '{shape.frame}')"
@@ -223,6 +284,7 @@ class ShapeContacts:
 
     contacts: list[tuple[str, str, tuple[float, float, float], float]]
     thinned: list[Thinned]
+    rounded: list[Rounded] = field(default_factory=list)
 
 
 def shape_contacts(shapes: Iterable[Shape], hull_points: int) -> ShapeContacts:
@@ -230,9 +292,11 @@ def shape_contacts(shapes: Iterable[Shape], hull_points: int) -> ShapeContacts:
     ``name#1``, ``name#2``, ...: several)."""
     out = ShapeContacts([], [])
     for shape in shapes:
-        local, radius, thinned = shape_points(shape, hull_points)
-        if thinned is not None:
-            out.thinned.append(thinned)
+        local, radius, how = shape_points(shape, hull_points)
+        if isinstance(how, Thinned):
+            out.thinned.append(how)
+        elif isinstance(how, Rounded):
+            out.rounded.append(how)
         for k, p in enumerate(local, start=1):
             name = shape.name if len(local) == 1 else f"{shape.name}#{k}"
             x, y, z = (float(c) for c in shape.placement.act(p))
@@ -255,6 +319,21 @@ def thinning_note(thinned: Sequence[Thinned], hull_points: int) -> str | None:
     )
 
 
+def rounding_note(rounded: Sequence[Rounded]) -> str | None:
+    """The note on ellipsoids taken as spheres: how many, and how far short at most."""
+    if not rounded:
+        return None
+    worst = max(rounded, key=lambda r: r.shortfall)
+    s, them = ("s", "them") if len(rounded) > 1 else ("", "it")
+    return (
+        f"collision contacts: {len(rounded)} ellipsoid{s} as {sum(r.count for r in rounded)} "
+        f"spheres inside {them}, each of its smallest radius of curvature; they fall short of "
+        f"the ellipsoid{s} by at most {worst.shortfall * 1e3:.3g} mm along "
+        f"{ELLIPSOID_DIRECTIONS} directions ('{worst.name}'; at most {ELLIPSOID_TOL:.0%} of "
+        "the smallest semi-axis)"
+    )
+
+
 # --- pinocchio's geometry ------------------------------------------------------------------------
 
 
@@ -271,6 +350,8 @@ def _geometry_kind(geometry: Any) -> tuple[str, tuple[float, ...], np.ndarray | 
         return "cylinder", (geometry.radius, geometry.halfLength), None
     if isinstance(geometry, coal.Box):
         return "box", tuple(float(x) for x in geometry.halfSide), None
+    if isinstance(geometry, coal.Ellipsoid):
+        return "ellipsoid", tuple(float(x) for x in geometry.radii), None
     if isinstance(geometry, coal.ConvexBase):
         return "mesh", (), np.array(geometry.points(), dtype=float).reshape(-1, 3)
     if isinstance(geometry, coal.BVHModelBase):
@@ -400,7 +481,7 @@ def take_contacts(
     made = shape_contacts(moving, hull_points)
     kinds = ", ".join(
         f"{n} {k}{('es' if k in ('box', 'mesh') else 's') if n > 1 else ''}"
-        for k in ("sphere", "capsule", "box", "cylinder", "mesh")
+        for k in ("sphere", "capsule", "box", "cylinder", "ellipsoid", "mesh")
         if (n := sum(s.kind == k for s in moving))
     )
     left = len(collision.fixed) + held
@@ -408,5 +489,5 @@ def take_contacts(
         f"collision contacts: {len(made.contacts)} points from {len(moving)} shapes of {where} "
         f"({kinds})" + (f"; {left} shapes fixed to the world left out" if left else "")
     ]
-    thinned = thinning_note(made.thinned, hull_points)
-    return made, [*collision.notes, *notes, *([thinned] if thinned else [])]
+    extra = [thinning_note(made.thinned, hull_points), rounding_note(made.rounded)]
+    return made, [*collision.notes, *notes, *(note for note in extra if note)]

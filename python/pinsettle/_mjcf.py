@@ -44,7 +44,7 @@ import pinocchio
 from ._memory import new_data
 from ._mjcf_actuators import _actuators, _ActuatorSprings
 from ._mjcf_contacts import MjcfCollision, mjcf_collision
-from ._mjcf_mass import _EPS, _GeomMass, _mesh_mass, _MeshMass, _primitive, _shape_mass
+from ._mjcf_mass import _EPS, _MINVAL, _GeomMass, _mesh_mass, _MeshMass, _primitive, _shape_mass
 from ._mjcf_parse import (
     _MASS_SHAPES,
     MjcfError,
@@ -60,7 +60,7 @@ from ._mjcf_parse import (
     _rotation,
     _to_se3,
 )
-from ._mjcf_statics import _joint_statics, _option, _other_sections, _Statics
+from ._mjcf_statics import _joint_statics, _option, _other_sections, _Statics, springdamper_gains
 
 __all__ = ["FREE_OBJECTS", "MjcfError", "MjcfModel", "is_mjcf", "load_mjcf"]
 
@@ -94,6 +94,9 @@ class MjcfModel:
     inertias: dict[str, tuple[float, np.ndarray, np.ndarray]] = field(default_factory=dict)
     #: The file's floors and geoms, for contacts (``Scene.add_collision_contacts``).
     collision: MjcfCollision | None = None
+    #: The joints with a ``springdamper``: (stiffness, damping) as MuJoCo's compiler sets them
+    #: (the stiffness is their spring in ``joint_springs``; damping has no force at rest).
+    springdampers: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def is_mjcf(path: str | Path) -> bool:
@@ -142,7 +145,12 @@ class _Writer:
             inertiafromgeom="auto",
             boundinertia=repr(c.boundinertia),
         )
-        world = ET.SubElement(self.xml, "worldbody")
+        self._tree(ET.SubElement(self.xml, "worldbody"), structure)
+        if c.settotalmass > 0:
+            self._scale_masses(c.settotalmass)
+
+    def _tree(self, world: ET.Element, structure: _Structure) -> None:
+        reader = self.reader
         if structure.single:
             self._free(world, reader.bodies[0], structure.free[reader.bodies[0].name])
             return
@@ -155,6 +163,26 @@ class _Writer:
                 self._free(root, body, structure.free[body.name])
             else:  # fixed, or a locked free object (its free joint left out)
                 self._body(root, body, body.pose)
+
+    def _scale_masses(self, total: float) -> None:
+        """<compiler settotalmass>: every body's mass and inertia times one factor, so that
+        the masses add up to ``total`` (MuJoCo's mj_setTotalmass, applied last: after
+        boundmass and boundinertia; a locked free object counts, as it is a body in MuJoCo)."""
+        elements = [el for el in self.xml.iter("inertial") if float(el.get("mass", "0")) > 0]
+        given = sum(float(el.get("mass", "0")) for el in elements)
+        scale = max(_MINVAL, total / max(_MINVAL, given))
+        for el in elements:
+            for key in ("mass", "diaginertia", "fullinertia"):
+                if key in el.attrib:
+                    el.set(key, _text(np.array(el.get(key, "").split(), float) * scale))
+        self.inertias = {
+            name: (mass * scale, com, inertia * scale)
+            for name, (mass, com, inertia) in self.inertias.items()
+        }
+        self.reader.notes.append(
+            f"masses and inertias scaled by {scale:.6g}: from {given:.6g} to a total of "
+            f"{total:g} (<compiler settotalmass>)"
+        )
 
     def _free(self, parent: ET.Element, body: _Body, joint: str) -> None:
         """A free body at the origin: Pinocchio misplaces a free body that has a pose of its
@@ -268,13 +296,18 @@ class _Writer:
         parts = [part for geom in body.geoms if (part := self._geom_mass(body, geom))]
         if not parts:
             if c.boundmass > 0:
+                # MuJoCo (4.0, measured) puts the bounded mass at the body's own pos attribute,
+                # as written, taken in the body's frame; its inertia is round.
+                where = f'{self.reader.path}: <body name="{body.name}"> pos'
+                at = _floats(body.element.get("pos", "0 0 0"), where, (3,))
                 ET.SubElement(
                     el,
                     "inertial",
-                    pos="0 0 0",
+                    pos=_text(at),
                     mass=repr(c.boundmass),
                     diaginertia=_text([c.boundinertia] * 3),
                 )
+                self.inertias[body.name] = (c.boundmass, at, c.boundinertia * np.eye(3))
             return
         mass = sum(part.mass for part in parts)
         com: np.ndarray = np.sum([part.mass * part.com for part in parts], axis=0) / mass
@@ -685,17 +718,17 @@ def _loops(
             a = reader._resolved(el, None)
             label = a.get("name") or f"equality{k}"
             where = f"{reader.path}: {_describe(el)} in <equality>"
-            if el.tag not in ("connect", "weld"):
+            if _flag(a.get("active", "true"), f"{where} active", ("true", "false")) == "false":
+                inactive.append(label)
+            elif not (flags["equality"] and flags["constraint"]):
+                disabled.append(label)
+            elif el.tag not in ("connect", "weld"):
                 reader.refuse(
                     f"{_describe(el)} in <equality>",
                     f"(a {el.tag} equality: connect and weld equalities are honoured, as loops)",
                     "remove it in a copy (its joints or bodies then settle independently), "
                     'or <option><flag equality="disable"/>',
                 )
-            elif _flag(a.get("active", "true"), f"{where} active", ("true", "false")) == "false":
-                inactive.append(label)
-            elif not (flags["equality"] and flags["constraint"]):
-                disabled.append(label)
             elif "site1" in a or "site2" in a:
                 loops.append(_site_loop(ends, el.tag, a, label, where))
             else:
@@ -799,11 +832,13 @@ def load_mjcf(
         model.referenceConfigurations[name] = q
     model.referenceConfigurations["qpos0"] = q0
     loops = _loops(reader, model, q0, read.flags)
+    springs, gains = _springs(read, model, q0, writer.inertias)
     reader.check_refusals()
     return MjcfModel(
         model=model,
         name=str(writer.xml.get("model")),
-        joint_springs=read.statics.springs,
+        joint_springs=springs,
+        springdampers=gains,
         loops=loops,
         start=start,
         notes=reader.notes,
@@ -839,6 +874,27 @@ def _read_file(path: Path, floating: bool, free_objects: str, actuator_springs: 
         reader.notes.append(floor_note)
     structure = _structure(reader, floating, free_objects)
     return _FileRead(reader, gravity, flags, statics, actuators, structure, collision)
+
+
+def _springs(
+    read: _FileRead,
+    model: pinocchio.Model,
+    q0: np.ndarray,
+    inertias: Mapping[str, tuple[float, np.ndarray, np.ndarray]],
+) -> tuple[list[tuple[str, float, float]], dict[str, tuple[float, float]]]:
+    """The joint springs, those of springdamper joints with MuJoCo's stiffness (from the built
+    model at qpos0), and each springdamper joint's stiffness and damping."""
+    items = read.statics.springdampers
+    gains = springdamper_gains(read.reader, model, q0, items, read.structure.added, inertias)
+    if gains:
+        read.reader.notes.append(
+            f"springdamper of {_names(list(gains))}: stiffness and damping from the joint's "
+            "inertia at qpos0, as MuJoCo compiles them"
+        )
+    springs = read.statics.springs + [
+        (item.joint.name, gains[item.joint.name][0], item.rest) for item in items if item.spring
+    ]
+    return springs, gains
 
 
 def _check_joints(

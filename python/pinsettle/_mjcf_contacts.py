@@ -201,7 +201,10 @@ class MjcfCollision:
         """A geom as a contact shape in its body's frame."""
         kind = geom.attrs.get("type", "sphere")
         what = f"{geom.label} ({kind} geom) of body '{body}'"
-        if kind in ("sphere", "capsule", "cylinder", "box") and "mesh" not in geom.attrs:
+        if (
+            kind in ("sphere", "capsule", "cylinder", "box", "ellipsoid")
+            and "mesh" not in geom.attrs
+        ):
             rotation, center, size = _primitive(geom, kind, where)
             return Shape(name, body, _to_se3(rotation, center), kind, tuple(size), what=what)
         if kind == "mesh":

@@ -98,6 +98,8 @@ class _Compiler:
     inertiagrouprange: tuple[int, int] = (0, 5)
     boundmass: float = 0.0
     boundinertia: float = 0.0
+    #: The total mass every body's mass and inertia are scaled to (<= 0: none).
+    settotalmass: float = -1.0
     meshdir: str | None = None
     texturedir: str | None = None
     assetdir: str | None = None
@@ -162,8 +164,8 @@ _TOP_LEVEL = {
     "keyframe",
     "deformable",
 }
-# A way forward for what MuJoCo's compiler expands (attached models, composites, replicas, mass
-# scaling): MuJoCo writes the model it compiled as plain MJCF, which pinsettle reads.
+# A way forward for what MuJoCo's compiler expands (attached models, composites, replicas):
+# MuJoCo writes the model it compiled as plain MJCF, which pinsettle reads.
 _EXPAND = (
     "expand it with MuJoCo: save the compiled model (mujoco.MjModel.from_xml_path, then "
     "mujoco.mj_saveLastXML) and solve the saved file"
@@ -239,7 +241,7 @@ _COMPILER_ATTRIBUTES: tuple[tuple[str, str | None, Callable[[str, str], Any]], .
     ("inertiagrouprange", "inertiagrouprange", _group_range),
     ("boundmass", "boundmass", _number),
     ("boundinertia", "boundinertia", _number),
-    ("settotalmass", None, _number),
+    ("settotalmass", "settotalmass", _number),
     ("coordinate", None, _as_text),
     ("meshdir", "meshdir", _as_text),
     ("texturedir", "texturedir", _as_text),
@@ -362,8 +364,6 @@ class _Reader:
                 value = read(el.attrib[key], f"{where} {key}")
                 if name is not None:
                     setattr(c, name, value)
-                elif key == "settotalmass" and value > 0:
-                    self.refuse("<compiler settotalmass>", "(masses scaled to a total)", _EXPAND)
                 elif key == "coordinate" and value != "local":
                     self.refuse(
                         f'<compiler coordinate="{value}">',
@@ -609,6 +609,13 @@ class _Reader:
         if el.tag == "freejoint":
             attrs = dict(el.attrib)
             kind = "free"
+            unknown = sorted(set(attrs) - {"name", "group", "align"})
+            if unknown:
+                raise MjcfError(
+                    f"{where}: <freejoint> takes name, group and align only, not "
+                    f"{', '.join(unknown)} (MuJoCo refuses it too): remove "
+                    f"{'them' if len(unknown) > 1 else 'it'}"
+                )
         else:
             attrs = self._resolved(el, childclass)
             kind = _flag(attrs.get("type", "hinge"), f"{where} type", _JOINT_KINDS)

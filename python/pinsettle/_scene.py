@@ -825,7 +825,7 @@ class Scene:
 
         Raises:
             SceneError: no collision geometry, or none on a moving body; a shape of another
-                kind (ellipsoid, cone, height field, ...) or a size that is not positive (the
+                kind (cone, height field, ...) or a size that is not positive (the
                 message names the shape); an unknown name in ``exclude``; a contact name taken.
         """
         count = _hull_points(hull_points)

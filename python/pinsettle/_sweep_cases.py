@@ -401,7 +401,10 @@ def _add_constraints(scene: Scene, data: Mapping[str, Any]) -> None:
     for limit in data["joint_limits"]:
         scene.set_limit(limit.joint, limit.lower, limit.upper)
     for g in data["grounds"]:
-        scene.add_ground(g.point, g.normal, g.friction, g.name)
+        if g.box is None:
+            scene.add_ground(g.point, g.normal, g.friction, g.name)
+        else:  # a box is turned by its rpy, not by a normal
+            scene.add_ground(g.point, None, g.friction, g.name, box=g.box, rpy=g.rpy)
     for c in data["contacts"]:
         scene.add_contact(c.frame, c.point, c.radius, c.name)
 

@@ -385,6 +385,32 @@ CASES: dict[str, tuple[str, type[Exception], list[str]]] = {
         pinsettle.SceneError,
         ["[[load]] #1", "needs 'joint'", "or 'frame'"],
     ),
+    # -- [model] contacts and floor
+    "floor-with-contacts-none": (
+        HEAD + 'contacts = "none"\nfloor = true\n',
+        pinsettle.SceneError,
+        ["[model] floor needs contact points", 'contacts = "none" leaves them out'],
+    ),
+    "floor-not-a-height": (
+        HEAD + 'floor = "low"\n',
+        pinsettle.SceneError,
+        ["[model] floor must be true", "a height z (m)", "'low'"],
+    ),
+    "floor-without-collision-geometry": (
+        FLOATING + "floor = true\n",
+        pinsettle.SceneError,
+        ["[model] contacts", "pendulum.urdf has no collision geometry"],
+    ),
+    "hull-points-without-contacts": (
+        HEAD + "hull_points = 8\n",
+        pinsettle.SceneError,
+        ["[model] hull_points is for contacts from the model's collision shapes"],
+    ),
+    "contacts-exclude-with-contacts-none": (
+        HEAD + 'contacts = "none"\ncontacts_exclude = ["arm"]\n',
+        pinsettle.SceneError,
+        ["[model] contacts_exclude is for contacts", 'without contacts = "none"'],
+    ),
     # -- tables of the wrong kind
     "joint-spring-a-table": (
         HEAD + '[joint_spring]\njoint = "hinge"\nstiffness = 1.0\n',
@@ -459,6 +485,31 @@ CLI_ERRORS: dict[str, tuple[list[str], list[str]]] = {
         ["--start", "'hinge'", "one degree of freedom"],
     ),
     "flag-out-of-range": (["solve", "pendulum", "--kt", "1.5"], ["kt must be in [0, 1)"]),
+    # -- the contacts of a model file
+    "no-contacts-with-contacts": (
+        ["solve", str(PENDULUM), "--no-contacts", "--contacts", "collision"],
+        ["--no-contacts and --contacts collision: give one of them"],
+    ),
+    "floor-with-no-contacts": (
+        ["solve", str(PENDULUM), "--floor", "--no-contacts"],
+        ["--floor needs contact points, and --no-contacts leaves them out"],
+    ),
+    "floor-without-collision-geometry": (
+        ["solve", str(PENDULUM), "--floating", "--floor"],
+        ["pendulum.urdf has no collision geometry"],
+    ),
+    "urdf-contacts-without-floor": (
+        ["solve", str(PENDULUM), "--contacts", "collision"],
+        ["pendulum.urdf: contacts 'collision'", "a URDF has no ground", "--floor"],
+    ),
+    "contacts-flag-on-a-scene-file": (
+        ["solve", "pendulum", "--no-contacts"],
+        ["contacts applies to a model file", "[model] contacts"],
+    ),
+    "floor-flag-on-a-scene-file": (
+        ["solve", "box_on_floor", "--floor"],
+        ["floor applies to a model file", "[model] floor"],
+    ),
 }
 
 # Command line runs on good scenes: id -> arguments.

@@ -385,6 +385,62 @@ CASES: dict[str, tuple[str, type[Exception], list[str]]] = {
         pinsettle.SceneError,
         ["[[load]] #1", "needs 'joint'", "or 'frame'"],
     ),
+    # -- [[payload]]
+    "payload-missing-mass": (
+        HEAD + '[[payload]]\nframe = "arm"\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "missing key 'mass'"],
+    ),
+    "payload-missing-frame": (
+        HEAD + "[[payload]]\nmass = 1.0\n",
+        pinsettle.SceneError,
+        ["[[payload]] #1", "missing key 'frame'"],
+    ),
+    "payload-unknown-key": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = 1.0\npoint = [0.0, 0.0, 0.1]\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "unknown key 'point'", "offset"],
+    ),
+    "payload-unknown-frame": (
+        HEAD + '[[payload]]\nframe = "armm"\nmass = 1.0\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "frame: unknown frame 'armm'", "did you mean 'arm'?"],
+    ),
+    "payload-on-the-world": (
+        HEAD + '[[payload]]\nframe = "universe"\nmass = 1.0\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "'universe' is fixed to the world"],
+    ),
+    "payload-mass-zero": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = 0.0\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be > 0 (kg), got 0.0"],
+    ),
+    "payload-mass-negative": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = -3\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be > 0 (kg), got -3.0"],
+    ),
+    "payload-mass-nan": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = nan\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be finite, got nan"],
+    ),
+    "payload-mass-a-string": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = "2 kg"\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be a number", "'2 kg'"],
+    ),
+    "payload-offset-of-two": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = 1.0\noffset = [0.0, 0.1]\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "offset must have 3 entries, got 2"],
+    ),
+    "payload-a-table": (
+        HEAD + '[payload]\nframe = "arm"\nmass = 1.0\n',
+        pinsettle.SceneError,
+        ["'payload' must be an array of tables ([[payload]])"],
+    ),
     # -- [model] contacts and floor
     "floor-with-contacts-none": (
         HEAD + 'contacts = "none"\nfloor = true\n',

@@ -49,6 +49,7 @@ from ._scene_values import (
     JointLoad,
     JointSpring,
     Loop,
+    Payload,
     PointLoad,
     SceneError,
     Spring,
@@ -79,6 +80,7 @@ __all__ = [
     "JointLoad",
     "JointSpring",
     "Loop",
+    "Payload",
     "PointLoad",
     "Scene",
     "SceneError",
@@ -127,7 +129,7 @@ def _release_mimic(model: pinocchio.Model) -> tuple[pinocchio.Model, list[Coupli
 
 class Scene:
     """A mechanism to settle: a ``pinocchio.Model`` plus gravity, start pose, locked joints,
-    springs, loads, loops and joint stops.
+    springs, loads, payloads, loops, joint stops and ground contacts.
 
     The scene owns a copy of the model (gravity is set on it). Joint names are the model's
     joint names; frame names are its frame names (URDF link names); ``"universe"`` is the
@@ -179,6 +181,7 @@ class Scene:
         self.joint_springs: list[JointSpring] = []
         self.springs: list[Spring] = []
         self.loads: list[JointLoad | PointLoad] = []
+        self.payloads: list[Payload] = []  # add_payload, [[payload]]: weights at points
         #: Loop closures of the tree (``add_loop``, ``[[loop]]``).
         self.loops: list[Loop] = []
         self.locked: list[str] = []
@@ -684,6 +687,28 @@ class Scene:
         self._changed()
         return self
 
+    def add_payload(self, frame: str, mass: Any, offset: Any = (0.0, 0.0, 0.0)) -> Scene:
+        """A payload of ``mass`` (kg) at ``offset`` (m, in the frame's axes) from the origin of
+        ``frame``: its weight, mass times the scene's gravity, hangs at that point, a point
+        load that follows the gravity (``scene.gravity``) when it changes.
+
+        Raises:
+            SceneError: an unknown frame (with a close match), a frame fixed to the world, a
+                mass that is not a finite number > 0, an offset that is not 3 finite numbers.
+        """
+        name = self._frame_name(frame, "frame")
+        if self.model.frames[_body_frame(self.model, name)].parentJoint == 0:
+            raise SceneError(
+                f"frame: '{name}' is fixed to the world: a payload there hangs on nothing that "
+                "moves"
+            )
+        kg = _number(mass, "mass")
+        if not kg > 0:
+            raise SceneError(f"mass must be > 0 (kg), got {kg}")
+        self.payloads.append(Payload(name, kg, _vector(offset, "offset", 3)))  # type: ignore[arg-type]
+        self._changed()
+        return self
+
     def add_coupling(
         self, follower: str, leader: str, multiplier: Any = 1.0, offset: Any = 0.0
     ) -> Scene:
@@ -1043,7 +1068,7 @@ class Scene:
 
     @property
     def has_elements(self) -> bool:
-        return bool(self.joint_springs or self.springs or self.loads)
+        return bool(self.joint_springs or self.springs or self.loads or self.payloads)
 
     def compile(self, q_locked: np.ndarray | None = None) -> _Compiled:
         """The reduced model (locked joints removed at their value in ``q_locked``, the start
@@ -1108,6 +1133,7 @@ class Scene:
             ("joint_springs", self.joint_springs),
             ("springs", self.springs),
             ("loads", self.loads),
+            ("payloads", self.payloads),
             ("loops", self.loops),
             ("couplings", self.couplings),
             ("stops set", self.joint_limits),
@@ -1464,6 +1490,8 @@ def _add_elements(scene: Scene, file: SceneFile) -> None:
                 force=load.force,
                 torque=load.torque,
             )
+    for k, p in enumerate(file.payloads, start=1):
+        _at(f"[[payload]] #{k}", scene.add_payload, p.frame, p.mass, p.offset)
     for k, loop in enumerate(file.loops, start=1):
         _at(f"[[loop]] #{k}", scene.add_loop, loop.a, loop.b, loop.kind)
     for k, limit in enumerate(file.limits, start=1):

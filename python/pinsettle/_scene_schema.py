@@ -275,6 +275,15 @@ class LoadEntry:
 
 
 @dataclass(frozen=True)
+class PayloadEntry:
+    """``[[payload]]``: ``Scene.add_payload``, a mass's weight at a point of a frame."""
+
+    frame: Any = key()
+    mass: Any = key()
+    offset: Any = key((0.0, 0.0, 0.0))
+
+
+@dataclass(frozen=True)
 class LoopEntry:
     """``[[loop]]``: ``Scene.add_loop``."""
 
@@ -328,6 +337,7 @@ class SceneFile:
     joint_springs: list[JointSpringEntry]
     springs: list[SpringEntry]
     loads: list[LoadEntry]
+    payloads: list[PayloadEntry]
     loops: list[LoopEntry]
     limits: list[LimitEntry]
     grounds: list[GroundEntry]
@@ -340,6 +350,7 @@ _ARRAYS: tuple[tuple[str, type[Any], str], ...] = (
     ("joint_spring", JointSpringEntry, "joint_springs"),
     ("spring", SpringEntry, "springs"),
     ("load", LoadEntry, "loads"),
+    ("payload", PayloadEntry, "payloads"),
     ("loop", LoopEntry, "loops"),
     ("limit", LimitEntry, "limits"),
     ("ground", GroundEntry, "grounds"),

@@ -56,8 +56,9 @@ FLAGS = (
         metavar="KEY=LO:HI:N",
         help="a scene value and its values: N evenly spaced from LO to HI, or a list V1,V2,... "
         "(repeatable: the full grid). Keys: start.JOINT, joint_spring[i].stiffness|rest|damping, "
-        "spring[i].stiffness|rest_length|damping, load[i].effort|force|torque|point, gravity, "
-        "payload.FRAME.mass (a vector value: a magnitude along the scene's own vector)",
+        "spring[i].stiffness|rest_length|damping, load[i].effort|force|torque|point, "
+        "payload[i].mass|offset, gravity, payload.FRAME.mass (a vector value: a magnitude "
+        "along the scene's own vector)",
     ),
     flag(
         "--random",

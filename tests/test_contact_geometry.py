@@ -466,10 +466,16 @@ def test_a_scene_file_takes_the_floors_unless_it_gives_grounds(tmp_path):
     scene = pinsettle.load_scene(toml)
     assert [(g.name, g.friction) for g in scene.grounds] == [("ground1", 0.3)]
     assert any("the scene's grounds replace them" in n for n in scene.notes)
-    # Without contacts = "collision", the floor is noted and left out.
-    plain = pinsettle.load_scene(path)
-    assert not plain.grounds and not plain.contacts
-    assert any("floor floor (plane geoms)" in n and "play no part" in n for n in plain.notes)
+    # Without a contacts key (and for the file alone), the floors are taken as MuJoCo does;
+    # with contacts = "none" the floor is noted and left out.
+    toml.write_text('[model]\nmjcf = "file.xml"\n', encoding="utf-8")
+    default = pinsettle.load_scene(toml)
+    assert [(g.name, g.friction) for g in default.grounds] == [("floor", 1.0)]
+    assert default.contacts == pinsettle.load_scene(path).contacts and default.contacts
+    toml.write_text('[model]\nmjcf = "file.xml"\ncontacts = "none"\n', encoding="utf-8")
+    for plain in (pinsettle.load_scene(toml), pinsettle.load_scene(path, contacts="none")):
+        assert not plain.grounds and not plain.contacts
+        assert any("floor floor (plane geoms)" in n and "play no part" in n for n in plain.notes)
 
 
 def test_a_urdf_scene_file_gives_the_same_contacts_as_the_python_call(tmp_path):
@@ -583,7 +589,7 @@ def test_a_geom_touching_one_floor_and_not_another_is_refused(tmp_path):
     ("table", "message"),
     [
         ('contacts = "mesh"', r"\[model\] contacts must be 'collision'.*got 'mesh'"),
-        ("hull_points = 8", r"\[model\] hull_points is for contacts = \"collision\""),
+        ("hull_points = 8", r"\[model\] hull_points is for contacts from the model's collision"),
         (
             'contacts = "collision"\nhull_points = 2',
             r"\[model\] contacts: hull_points must be an integer >= 4",

@@ -553,7 +553,8 @@ def test_shadow_hand_with_limits_disabled(tmp_path, mujoco):
     path.write_text(text.replace("</compiler>", f"</compiler>{flag}", 1))
     notes = " | ".join(load_mjcf(path).notes)
     assert "ranges of tendons robot0:T_WRJ1r" in notes and "and 40 more not applied" in notes
-    assert_rest_is_mujocos(mujoco, path, solve_json(str(path)))
+    # Judged by MuJoCo's forces without contacts: the file's floor left out.
+    assert_rest_is_mujocos(mujoco, path, solve_json(str(path), "--no-contacts"))
 
 
 # --- free objects beside a robot; a file's own free joint ---------------------------------------
@@ -604,16 +605,17 @@ def assert_bodies_where_mujoco_puts_them(mujoco, path: Path, scene, qpos) -> Non
 
 
 def test_free_objects_kept_fall(tmp_path, mujoco):
+    # Without the file's floor (contacts "none"), nothing holds the free objects.
     path = tmp_path / "objects.xml"
     path.write_text(OBJECTS)
-    scene = pinsettle.load_scene(path)
+    scene = pinsettle.load_scene(path, contacts="none")
     kinds = {scene.model.names[j]: scene.model.joints[j].shortname() for j in range(1, 5)}
     assert kinds["crate_free"] == kinds["ball_free"] == "JointModelFreeFlyer"
     notes = " | ".join(scene.notes)
     assert "free objects crate, ball kept free" in notes and "--free-objects lock" in notes
     mj = mujoco.MjModel.from_xml_path(str(path))
     assert_bodies_where_mujoco_puts_them(mujoco, path, scene, mj.qpos0)
-    out = solve_json(str(path))
+    out = solve_json(str(path), "--no-contacts")
     assert out["status"] == "no_equilibrium"
     assert "crate_free" in out["reason"] or "ball_free" in out["reason"], out["reason"]
 
@@ -621,7 +623,8 @@ def test_free_objects_kept_fall(tmp_path, mujoco):
 def test_free_objects_locked_where_the_file_places_them(tmp_path, mujoco):
     path = tmp_path / "objects.xml"
     path.write_text(OBJECTS)
-    scene = pinsettle.load_scene(path, free_objects="lock")
+    # Judged by MuJoCo's forces without contacts: the file's floor left out.
+    scene = pinsettle.load_scene(path, free_objects="lock", contacts="none")
     assert list(scene.model.names)[1:] == ["shoulder", "elbow"]
     assert "free objects crate, ball locked where the file places them" in scene.notes[-1]
     mj = mujoco.MjModel.from_xml_path(str(path))
@@ -631,11 +634,11 @@ def test_free_objects_locked_where_the_file_places_them(tmp_path, mujoco):
     key = mj.key("raised").qpos.copy()
     key[2:] = mj.qpos0[2:]
     assert_bodies_where_mujoco_puts_them(mujoco, path, scene, key)
-    out = solve_json(str(path), "--free-objects", "lock")
+    out = solve_json(str(path), "--free-objects", "lock", "--no-contacts")
     assert_rest_is_mujocos(mujoco, path, out, free_objects="lock")
     # The same through a scene file's [model] free_objects.
     toml = tmp_path / "objects.toml"
-    toml.write_text('[model]\nmjcf = "objects.xml"\nfree_objects = "lock"\n')
+    toml.write_text('[model]\nmjcf = "objects.xml"\nfree_objects = "lock"\ncontacts = "none"\n')
     assert solve_json(str(toml))["joints"] == out["joints"]
 
 
@@ -663,10 +666,11 @@ def test_free_objects_errors(tmp_path):
 def test_thrower_with_its_free_object(mujoco):
     # pybullet's thrower.xml: an arm beside a free ball ('object'). Kept, the ball falls and
     # the solve names it; locked, the arm rests where MuJoCo's forces hold it.
+    # Without the file's floor (--no-contacts): MuJoCo's forces without contacts judge it.
     path = model_file("pybullet_data", "mjcf", "thrower.xml")
-    out = solve_json(str(path))
+    out = solve_json(str(path), "--no-contacts")
     assert out["status"] == "no_equilibrium" and "'object_free'" in out["reason"]
-    locked = solve_json(str(path), "--free-objects", "lock")
+    locked = solve_json(str(path), "--free-objects", "lock", "--no-contacts")
     assert_rest_is_mujocos(mujoco, path, locked, free_objects="lock")
 
 
@@ -677,10 +681,12 @@ def test_fetch_tasks_with_a_free_object(task, mujoco):
     # the same masses as MuJoCo's).
     path = model_file("gymnasium_robotics", "envs", "assets", "fetch", task)
     reach = model_file("gymnasium_robotics", "envs", "assets", "fetch", "reach.xml")
-    kept = pinsettle.load_scene(path)
+    # The models alone: contacts "none" (the file's floor and the meshes' hulls not read).
+    kept = pinsettle.load_scene(path, contacts="none")
     assert kept.model.names[-1] == "object0:joint" and "object0 kept free" in kept.notes[-1]
-    locked = pinsettle.load_scene(path, free_objects="lock")
-    assert list(locked.model.names) == list(pinsettle.load_scene(reach).model.names)
+    locked = pinsettle.load_scene(path, free_objects="lock", contacts="none")
+    reach_names = pinsettle.load_scene(reach, contacts="none").model.names
+    assert list(locked.model.names) == list(reach_names)
     mj = mujoco.MjModel.from_xml_path(str(path))
     assert_bodies_where_mujoco_puts_them(mujoco, path, locked, mj.qpos0)
     assert assert_inertias_are_mujocos(mujoco, path, free_objects="lock") == 20
@@ -924,8 +930,9 @@ def test_hand_manipulate_tasks_with_their_free_objects(task, tmp_path, mujoco):
     path = folder / f"without_limits_{task}"
     flag = '<option><flag limit="disable"/></option>'
     path.write_text(original.read_text().replace("</compiler>", f"</compiler>{flag}", 1))
-    kept = solve_json(str(path))
+    # Without the file's floor (--no-contacts), judged by MuJoCo's forces without contacts.
+    kept = solve_json(str(path), "--no-contacts")
     assert kept["status"] == "no_equilibrium"
     assert "'object:joint'" in kept["reason"] or "'target:joint'" in kept["reason"]
-    locked = solve_json(str(path), "--free-objects", "lock")
+    locked = solve_json(str(path), "--free-objects", "lock", "--no-contacts")
     assert_rest_is_mujocos(mujoco, path, locked, free_objects="lock")

@@ -385,6 +385,88 @@ CASES: dict[str, tuple[str, type[Exception], list[str]]] = {
         pinsettle.SceneError,
         ["[[load]] #1", "needs 'joint'", "or 'frame'"],
     ),
+    # -- [[payload]]
+    "payload-missing-mass": (
+        HEAD + '[[payload]]\nframe = "arm"\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "missing key 'mass'"],
+    ),
+    "payload-missing-frame": (
+        HEAD + "[[payload]]\nmass = 1.0\n",
+        pinsettle.SceneError,
+        ["[[payload]] #1", "missing key 'frame'"],
+    ),
+    "payload-unknown-key": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = 1.0\npoint = [0.0, 0.0, 0.1]\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "unknown key 'point'", "offset"],
+    ),
+    "payload-unknown-frame": (
+        HEAD + '[[payload]]\nframe = "armm"\nmass = 1.0\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "frame: unknown frame 'armm'", "did you mean 'arm'?"],
+    ),
+    "payload-on-the-world": (
+        HEAD + '[[payload]]\nframe = "universe"\nmass = 1.0\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "'universe' is fixed to the world"],
+    ),
+    "payload-mass-zero": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = 0.0\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be > 0 (kg), got 0.0"],
+    ),
+    "payload-mass-negative": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = -3\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be > 0 (kg), got -3.0"],
+    ),
+    "payload-mass-nan": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = nan\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be finite, got nan"],
+    ),
+    "payload-mass-a-string": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = "2 kg"\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "mass must be a number", "'2 kg'"],
+    ),
+    "payload-offset-of-two": (
+        HEAD + '[[payload]]\nframe = "arm"\nmass = 1.0\noffset = [0.0, 0.1]\n',
+        pinsettle.SceneError,
+        ["[[payload]] #1", "offset must have 3 entries, got 2"],
+    ),
+    "payload-a-table": (
+        HEAD + '[payload]\nframe = "arm"\nmass = 1.0\n',
+        pinsettle.SceneError,
+        ["'payload' must be an array of tables ([[payload]])"],
+    ),
+    # -- [model] contacts and floor
+    "floor-with-contacts-none": (
+        HEAD + 'contacts = "none"\nfloor = true\n',
+        pinsettle.SceneError,
+        ["[model] floor needs contact points", 'contacts = "none" leaves them out'],
+    ),
+    "floor-not-a-height": (
+        HEAD + 'floor = "low"\n',
+        pinsettle.SceneError,
+        ["[model] floor must be true", "a height z (m)", "'low'"],
+    ),
+    "floor-without-collision-geometry": (
+        FLOATING + "floor = true\n",
+        pinsettle.SceneError,
+        ["[model] contacts", "pendulum.urdf has no collision geometry"],
+    ),
+    "hull-points-without-contacts": (
+        HEAD + "hull_points = 8\n",
+        pinsettle.SceneError,
+        ["[model] hull_points is for contacts from the model's collision shapes"],
+    ),
+    "contacts-exclude-with-contacts-none": (
+        HEAD + 'contacts = "none"\ncontacts_exclude = ["arm"]\n',
+        pinsettle.SceneError,
+        ["[model] contacts_exclude is for contacts", 'without contacts = "none"'],
+    ),
     # -- tables of the wrong kind
     "joint-spring-a-table": (
         HEAD + '[joint_spring]\njoint = "hinge"\nstiffness = 1.0\n',
@@ -459,6 +541,31 @@ CLI_ERRORS: dict[str, tuple[list[str], list[str]]] = {
         ["--start", "'hinge'", "one degree of freedom"],
     ),
     "flag-out-of-range": (["solve", "pendulum", "--kt", "1.5"], ["kt must be in [0, 1)"]),
+    # -- the contacts of a model file
+    "no-contacts-with-contacts": (
+        ["solve", str(PENDULUM), "--no-contacts", "--contacts", "collision"],
+        ["--no-contacts and --contacts collision: give one of them"],
+    ),
+    "floor-with-no-contacts": (
+        ["solve", str(PENDULUM), "--floor", "--no-contacts"],
+        ["--floor needs contact points, and --no-contacts leaves them out"],
+    ),
+    "floor-without-collision-geometry": (
+        ["solve", str(PENDULUM), "--floating", "--floor"],
+        ["pendulum.urdf has no collision geometry"],
+    ),
+    "urdf-contacts-without-floor": (
+        ["solve", str(PENDULUM), "--contacts", "collision"],
+        ["pendulum.urdf: contacts 'collision'", "a URDF has no ground", "--floor"],
+    ),
+    "contacts-flag-on-a-scene-file": (
+        ["solve", "pendulum", "--no-contacts"],
+        ["contacts applies to a model file", "[model] contacts"],
+    ),
+    "floor-flag-on-a-scene-file": (
+        ["solve", "box_on_floor", "--floor"],
+        ["floor applies to a model file", "[model] floor"],
+    ),
 }
 
 # Command line runs on good scenes: id -> arguments.

@@ -245,6 +245,60 @@ def test_weld_hung_arm_on_its_stops_comes_to_rest(tmp_path: Path) -> None:
     assert answer["residual"] <= gallery.REL_TOL * verdict.scale
 
 
+def test_mjcf_rests_on_its_floor() -> None:
+    """gymnasium's ant, its root free: ``pinsettle solve ant.xml --json`` takes the file's
+    floor and geoms (MuJoCo collides them) by default and stands the ant on it, a rest MuJoCo
+    confirms: the answer's contact forces, through MuJoCo's Jacobians, and its stops balance
+    MuJoCo's static force, the floor carries the weight to 1e-9, no contact sinks in (by the
+    answer or by MuJoCo's own contacts at the answer, each of the answer's found there)."""
+    _require("gymnasium", "gymnasium's ant")
+    _require("mujoco", "the MJCF judge")
+    _require("scipy", "the judge")
+    root = gallery.package_dir("gymnasium")
+    assert root is not None
+    path = root / "envs/mujoco/assets/ant.xml"
+    run = gallery.run_cli(path, False)
+    assert run.code == 0 and run.answer is not None, run.stderr[-500:]
+    answer = run.answer
+    assert answer["status"] == "converged", (answer["status"], answer["reason"])
+    assert len(answer["contacts"]) >= 3 and all(c["ground"] == "floor" for c in answer["contacts"])
+    verdict = gallery.judge_mjcf_on_floor(path, answer)
+    assert not verdict.problems, verdict.problems
+    assert answer["residual"] <= gallery.REL_TOL * verdict.scale
+    # The same file without its floor falls: nothing else holds it.
+    fall = gallery.run_cli(path, False, ("--no-contacts",))
+    assert fall.answer is not None and fall.answer["status"] == "no_equilibrium"
+    assert gallery.judge(path, fall.answer, False).falls
+
+
+def test_judge_rejects_a_rest_off_the_floor() -> None:
+    """The floor judge catches a wrong rest: the ant lifted 1 mm (MuJoCo finds no contacts),
+    a contact force halved (the weight is not carried), a joint moved (not a rest)."""
+    _require("gymnasium", "gymnasium's ant")
+    _require("mujoco", "the MJCF judge")
+    _require("scipy", "the judge")
+    root = gallery.package_dir("gymnasium")
+    assert root is not None
+    path = root / "envs/mujoco/assets/ant.xml"
+    run = gallery.run_cli(path, False)
+    assert run.answer is not None and run.answer["converged"], run.stderr[-300:]
+
+    def lift(a: dict[str, Any]) -> None:
+        a["joints"]["root"][2] += 1e-3
+
+    def halve(a: dict[str, Any]) -> None:
+        a["contacts"][0]["normal_force"] *= 0.5
+
+    def move(a: dict[str, Any]) -> None:
+        a["joints"]["hip_1"] += 1e-3
+
+    for change, reason in ((lift, "distance"), (halve, "carry"), (move, "not a rest")):
+        wrong = copy.deepcopy(run.answer)
+        change(wrong)
+        problems = gallery.judge_mjcf_on_floor(path, wrong).problems
+        assert any(reason in p for p in problems), f"{change.__name__}: {problems}"
+
+
 def test_judge_tells_a_fall() -> None:
     case = _case("pybullet_data", "mjcf/capsule.xml")  # a lone free body
     run = _run(case)

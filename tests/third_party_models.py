@@ -356,21 +356,24 @@ def _mj_falls(m: Any, d: Any, free_roots: list[int], added_root: bool) -> bool:
     return any(abs(pull[k]) > 1e-3 * _mj_weight(m, body) for k, body in dofs)
 
 
-def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Verdict:
-    """MuJoCo's verdict on an answer: a right rest, or whether a fall is right."""
+def _mj_force_scale(m: Any, d: Any, file_limits: bool) -> float:
+    """The force scale: the largest static force over random poses inside the ranges."""
+    rng = np.random.default_rng(40)
+    scale = float(np.abs(_mj_static_force(m, d, m.qpos0)).max(initial=0.0))
+    for _ in range(SCALE_POSES):
+        pose = _mj_random_qpos(m, rng, file_limits)
+        scale = max(scale, float(np.abs(_mj_static_force(m, d, pose)).max(initial=0.0)))
+    return max(scale, 1e-300)
+
+
+def _mj_answer_qpos(
+    m: Any, answer: dict[str, Any], floating: bool, problems: list[str]
+) -> tuple[np.ndarray, list[int], list[int], bool]:
+    """MuJoCo's qpos of an answer's joints (matched by name), the dofs held (a free body the
+    answer leaves out stays where the file puts it), the free roots' joints, and whether
+    --floating added a root; what does not match goes to ``problems``."""
     import mujoco
 
-    m = _mujoco_model(path)
-    d = mujoco.MjData(m)
-    # MuJoCo applies no joint range where the file disables limits or all constraints.
-    file_limits = not m.opt.disableflags & (_DSBL_LIMIT | _DSBL_CONSTRAINT)
-    # Contacts, actuators and friction loss play no part in statics with constant loads;
-    # MuJoCo's soft limit rows are off: the stops are split off below, from the answer.
-    m.opt.disableflags |= _DSBL_CONTACT | _DSBL_ACTUATION | _DSBL_FRICTIONLOSS | _DSBL_LIMIT
-    m.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
-    verdict = Verdict()
-    if answer is None:
-        return verdict
     names = {j: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or "" for j in range(m.njnt)}
     joints = dict(answer["joints"])
     # pinsettle names an unnamed joint after its body; those are matched in order.
@@ -395,13 +398,13 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
         if kind == _FREE and m.body_parentid[m.jnt_bodyid[j]] == 0:
             free_roots.append(j)
         if name not in joints:
-            verdict.problems.append(f"joint '{name}' is missing from the answer")
+            problems.append(f"joint '{name}' is missing from the answer")
             continue
         value = joints.pop(name)
         if kind in (_FREE, _BALL):
             size = 7 if kind == _FREE else 4
             if not isinstance(value, list) or len(value) != size:
-                verdict.problems.append(f"joint '{name}': {size} values expected, got {value}")
+                problems.append(f"joint '{name}': {size} values expected, got {value}")
                 continue
             qpos[adr : adr + size] = value  # quaternions w first, as MuJoCo's qpos
         else:
@@ -409,32 +412,18 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
     if added_root:
         joints.pop(next(iter(n for n in answer["joints"] if n not in known)), None)
     if joints:
-        verdict.problems.append(f"joints MuJoCo does not have: {', '.join(joints)}")
-    verdict.falls = _mj_falls(m, d, free_roots, added_root)
-    if verdict.problems or verdict.falls or not answer.get("converged"):
-        return verdict
-    if added_root:
-        verdict.problems.append("a rest with the free-flyer of --floating is not judged here")
-        return verdict
+        problems.append(f"joints MuJoCo does not have: {', '.join(joints)}")
+    return qpos, held, free_roots, added_root
 
-    # The force scale: the largest static force over random poses inside the ranges.
-    rng = np.random.default_rng(40)
-    scale = float(np.abs(_mj_static_force(m, d, m.qpos0)).max(initial=0.0))
-    for _ in range(SCALE_POSES):
-        pose = _mj_random_qpos(m, rng, file_limits)
-        scale = max(scale, float(np.abs(_mj_static_force(m, d, pose)).max(initial=0.0)))
-    verdict.scale = scale = max(scale, 1e-300)
 
-    f = _mj_static_force(m, d, qpos)
-    eq_rows = np.flatnonzero(d.efc_type[: d.nefc] == _EQUALITY)
-    jac = d.efc_J[: d.nefc * m.nv].reshape(d.nefc, m.nv)[eq_rows] if d.nefc else np.zeros((0, m.nv))
-    if eq_rows.size:
-        violation = float(np.abs(d.efc_pos[eq_rows]).max())
-        if violation > EQUALITY_TOL:
-            verdict.problems.append(
-                f"MuJoCo's equality constraints are off by {violation:.3g} at the answer"
-            )
+def _mj_stops(
+    m: Any, qpos: np.ndarray, answer: dict[str, Any], file_limits: bool, problems: list[str]
+) -> tuple[list[tuple[int, float]], list[str]]:
+    """The stops the answer lists, as (dof, sign) and joint names, checked against MuJoCo's
+    ranges (every limited joint inside, a listed one on its bound; else ``problems``)."""
+    import mujoco
 
+    names = {j: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or "" for j in range(m.njnt)}
     # The stops: where the answer says a joint rests, and MuJoCo's ranges everywhere.
     at_limit: dict[str, str] = dict(answer.get("at_limit", {}))
     stops: list[tuple[int, float]] = []
@@ -448,20 +437,58 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
         lo, hi = m.jnt_range[j]
         x = qpos[m.jnt_qposadr[j]]
         if x < lo - RANGE_TOL or x > hi + RANGE_TOL:
-            verdict.problems.append(f"joint '{names[j]}' = {x:.12g} outside [{lo:.12g}, {hi:.12g}]")
+            problems.append(f"joint '{names[j]}' = {x:.12g} outside [{lo:.12g}, {hi:.12g}]")
     for name, side in at_limit.items():
         j = by_name.get(name, -1)
         if j < 0 or not (file_limits and m.jnt_limited[j]):
-            verdict.problems.append(f"'{name}' listed at a {side} stop MuJoCo does not have")
+            problems.append(f"'{name}' listed at a {side} stop MuJoCo does not have")
             continue
         bound = m.jnt_range[j][0 if side == "lower" else 1]
         x = qpos[m.jnt_qposadr[j]]
         if abs(x - bound) > RANGE_TOL * max(1.0, abs(bound)):
-            verdict.problems.append(
-                f"'{name}' listed at its {side} stop {bound:.12g} is at {x:.12g}"
-            )
+            problems.append(f"'{name}' listed at its {side} stop {bound:.12g} is at {x:.12g}")
         stops.append((int(m.jnt_dofadr[j]), 1.0 if side == "lower" else -1.0))
         stopped.append(name)
+
+    return stops, stopped
+
+
+def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Verdict:
+    """MuJoCo's verdict on an answer: a right rest, or whether a fall is right."""
+    import mujoco
+
+    m = _mujoco_model(path)
+    d = mujoco.MjData(m)
+    # MuJoCo applies no joint range where the file disables limits or all constraints.
+    file_limits = not m.opt.disableflags & (_DSBL_LIMIT | _DSBL_CONSTRAINT)
+    # Contacts, actuators and friction loss play no part in statics with constant loads;
+    # MuJoCo's soft limit rows are off: the stops are split off below, from the answer.
+    m.opt.disableflags |= _DSBL_CONTACT | _DSBL_ACTUATION | _DSBL_FRICTIONLOSS | _DSBL_LIMIT
+    m.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
+    verdict = Verdict()
+    if answer is None:
+        return verdict
+    qpos, held, free_roots, added_root = _mj_answer_qpos(m, answer, floating, verdict.problems)
+    verdict.falls = _mj_falls(m, d, free_roots, added_root)
+    if verdict.problems or verdict.falls or not answer.get("converged"):
+        return verdict
+    if added_root:
+        verdict.problems.append("a rest with the free-flyer of --floating is not judged here")
+        return verdict
+
+    verdict.scale = scale = _mj_force_scale(m, d, file_limits)
+
+    f = _mj_static_force(m, d, qpos)
+    eq_rows = np.flatnonzero(d.efc_type[: d.nefc] == _EQUALITY)
+    jac = d.efc_J[: d.nefc * m.nv].reshape(d.nefc, m.nv)[eq_rows] if d.nefc else np.zeros((0, m.nv))
+    if eq_rows.size:
+        violation = float(np.abs(d.efc_pos[eq_rows]).max())
+        if violation > EQUALITY_TOL:
+            verdict.problems.append(
+                f"MuJoCo's equality constraints are off by {violation:.3g} at the answer"
+            )
+
+    stops, stopped = _mj_stops(m, qpos, answer, file_limits, verdict.problems)
 
     free = [k for k in range(m.nv) if k not in held]
     index = {dof: k for k, dof in enumerate(free)}
@@ -478,6 +505,108 @@ def judge_mjcf(path: Path, answer: dict[str, Any] | None, floating: bool) -> Ver
         )
     if not eq_rows.size:  # on a tree the stops' reactions are determined: compare them
         _compare_reactions(verdict, answer, stopped, reactions, scale, "MuJoCo's")
+    return verdict
+
+
+#: How far a contact may sink into its floor at a rest (m), by pinsettle's gap or MuJoCo's.
+CONTACT_GAP_TOL = 1e-6
+
+#: The floor's load against the weight, relative, at a rest on a floor.
+WEIGHT_TOL = 1e-9
+
+
+def _mj_contact_force(m: Any, d: Any, contacts: list[dict[str, Any]]) -> np.ndarray:
+    """The generalized force of the answer's contact forces (normal and tangential, world
+    axes, at each contact's point), on the bodies of the geoms they are named after
+    (``geom#k``), by MuJoCo's point Jacobians."""
+    import mujoco
+
+    total = np.zeros(m.nv)
+    jacp = np.zeros((3, m.nv))
+    for c in contacts:
+        geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, c["name"].split("#")[0])
+        force = c["normal_force"] * np.array(c["normal"]) + np.array(c["tangential_force"])
+        mujoco.mj_jac(m, d, jacp, None, np.array(c["point"], dtype=float), m.geom_bodyid[geom])
+        total += jacp.T @ force
+    return total
+
+
+def _mj_contact_problems(path: Path, qpos: np.ndarray, answer: dict[str, Any]) -> list[str]:
+    """MuJoCo's own contacts at the answer (the file as it is, contacts on): none sunk in
+    deeper than CONTACT_GAP_TOL, and one at each of the answer's closed contacts, between its
+    geom and its floor, at distance within CONTACT_GAP_TOL."""
+    import mujoco
+
+    m = _mujoco_model(path)
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_forward(m, d)
+    touching: dict[tuple[str, str], float] = {}
+    problems = []
+    for k in range(d.ncon):
+        contact = d.contact[k]
+        pair = tuple(
+            sorted(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or "" for g in contact.geom)
+        )
+        touching[pair] = min(touching.get(pair, np.inf), float(contact.dist))
+        if contact.dist < -CONTACT_GAP_TOL:
+            problems.append(f"MuJoCo's contact {pair} is sunk in {-contact.dist:.3g} m")
+    for c in answer["contacts"]:
+        pair = tuple(sorted((c["name"].split("#")[0], c["ground"])))
+        if pair not in touching:
+            problems.append(f"MuJoCo finds no contact {pair} where the answer has one")
+        elif abs(touching[pair]) > CONTACT_GAP_TOL:
+            problems.append(f"MuJoCo's contact {pair} is at distance {touching[pair]:.3g} m")
+    return problems
+
+
+def judge_mjcf_on_floor(path: Path, answer: dict[str, Any]) -> Verdict:
+    """MuJoCo's verdict on a rest on an MJCF file's floors: the answer's contact forces
+    (through MuJoCo's Jacobians) and its stops balance MuJoCo's static force (as judge_mjcf,
+    the stops' reactions >= 0), the floors carry the weight (WEIGHT_TOL), each force lies in
+    its friction cone (MuJoCo's friction of the pair: the larger, at equal priority), no gap
+    below -CONTACT_GAP_TOL, and MuJoCo's own contacts agree (_mj_contact_problems)."""
+    import mujoco
+
+    m = _mujoco_model(path)
+    d = mujoco.MjData(m)
+    file_limits = not m.opt.disableflags & (_DSBL_LIMIT | _DSBL_CONSTRAINT)
+    m.opt.disableflags |= _DSBL_CONTACT | _DSBL_ACTUATION | _DSBL_FRICTIONLOSS | _DSBL_LIMIT
+    verdict = Verdict()
+    qpos, held, _, _ = _mj_answer_qpos(m, answer, False, verdict.problems)
+    if not verdict.problems and (held or not answer.get("converged") or not answer["contacts"]):
+        verdict.problems.append("not a rest on the floors (converged, with contacts) to judge")
+    if verdict.problems:
+        return verdict
+    verdict.scale = scale = _mj_force_scale(m, d, file_limits)
+    f = _mj_static_force(m, d, qpos) + _mj_contact_force(m, d, answer["contacts"])
+    stops, _ = _mj_stops(m, qpos, answer, file_limits, verdict.problems)
+    worst, _ = _stop_equilibrium(f, np.zeros((0, m.nv)), stops)
+    verdict.relative_force = worst / scale
+    if worst > REL_TOL * scale:
+        verdict.problems.append(
+            f"MuJoCo's static force with the answer's contact forces is {worst:.3g} (force "
+            f"scale {scale:.3g}): not a rest"
+        )
+    weight = float(m.body_subtreemass[0] * np.linalg.norm(m.opt.gravity))
+    load = sum(
+        c["normal_force"] * c["normal"][2] + c["tangential_force"][2] for c in answer["contacts"]
+    )
+    if abs(load - weight) > WEIGHT_TOL * weight:
+        verdict.problems.append(f"the floors carry {load:.12g} N of a weight of {weight:.12g} N")
+    for c in answer["contacts"]:
+        geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, c["name"].split("#")[0])
+        floor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, c["ground"])
+        mu = max(m.geom_friction[geom][0], m.geom_friction[floor][0])
+        if np.linalg.norm(c["tangential_force"]) > mu * c["normal_force"] * (1 + 1e-9):
+            verdict.problems.append(
+                f"contact {c['name']}: its force is outside its cone (mu {mu:g})"
+            )
+        if c["gap"] < -CONTACT_GAP_TOL or c["normal_force"] < 0:
+            verdict.problems.append(
+                f"contact {c['name']}: gap {c['gap']:.3g} m, normal force {c['normal_force']:.3g} N"
+            )
+    verdict.problems += _mj_contact_problems(path, qpos, answer)
     return verdict
 
 
@@ -693,6 +822,11 @@ def _bullet(path: str, **kw: Any) -> Case:
     return Case("pybullet_data", path, **kw)
 
 
+#: The flag of the files with a floor: the judge is MuJoCo's statics with its contacts off, so
+#: these files are solved without their floors (``--no-contacts``; an MJCF file's floors are
+#: taken by default). ``test_mjcf_rests_on_its_floor`` judges rests on a file's floor.
+NO_FLOOR = ("--no-contacts",)
+
 #: The gallery. Rests, falls and refusals are not declared: the judge decides from the file
 #: which the answer must be (a rest, checked by MuJoCo or Pinocchio; a fall where gravity pulls
 #: a coordinate nothing holds; a refusal only where ``may_refuse`` says what the file needs
@@ -705,17 +839,17 @@ CASES: list[Case] = [
     # and free bodies; tendons, buoyancy and coupled joints that statics cannot honour.
     _dm("suite/acrobot.xml"),
     _dm("suite/cartpole.xml"),
-    _dm("suite/finger.xml"),
+    _dm("suite/finger.xml", flags=NO_FLOOR),
     _dm("suite/pendulum.xml"),
     _dm("suite/point_mass.xml"),
     _dm("suite/reacher.xml"),
-    _dm("suite/walker.xml"),
-    _dm("suite/humanoid.xml"),
-    _dm("suite/humanoid.xml", floating=True),
-    _dm("suite/humanoid_CMU.xml", floating=True),
-    _dm("suite/cheetah.xml"),  # masses scaled to a total (settotalmass)
-    _dm("suite/dog.xml"),  # springdamper joints, a ball beside it
-    _dm("suite/dog.xml", flags=("--free-objects", "lock")),
+    _dm("suite/walker.xml", flags=NO_FLOOR),
+    _dm("suite/humanoid.xml", flags=NO_FLOOR),
+    _dm("suite/humanoid.xml", floating=True, flags=NO_FLOOR),
+    _dm("suite/humanoid_CMU.xml", floating=True, flags=NO_FLOOR),
+    _dm("suite/cheetah.xml", flags=NO_FLOOR),  # masses scaled to a total (settotalmass)
+    _dm("suite/dog.xml", flags=NO_FLOOR),  # springdamper joints, a ball beside it
+    _dm("suite/dog.xml", flags=("--free-objects", "lock", *NO_FLOOR)),
     _dm("suite/ball_in_cup.xml", may_refuse=True),  # a tendon's range (the string)
     _dm("suite/manipulator.xml", may_refuse=True),  # a tendon equality
     _dm("suite/fish.xml", may_refuse=True),  # buoyancy
@@ -728,33 +862,33 @@ CASES: list[Case] = [
     _dm("locomotion/walkers/assets/humanoid_CMU_V2020.xml", floating=True),
     _dm("locomotion/walkers/assets/rodent.xml"),
     # gymnasium's MuJoCo environments.
-    _gym("ant.xml", floating=True),
-    _gym("hopper.xml"),
-    _gym("humanoidstandup.xml", floating=True),
+    _gym("ant.xml", floating=True, flags=NO_FLOOR),
+    _gym("hopper.xml", flags=NO_FLOOR),
+    _gym("humanoidstandup.xml", floating=True, flags=NO_FLOOR),
     _gym("inverted_double_pendulum.xml"),
-    _gym("pusher.xml"),
+    _gym("pusher.xml", flags=NO_FLOOR),
     _gym("reacher.xml"),
-    _gym("half_cheetah.xml"),  # masses scaled to a total (settotalmass)
+    _gym("half_cheetah.xml", flags=NO_FLOOR),  # masses scaled to a total (settotalmass)
     _gym("swimmer.xml", may_refuse=True),  # buoyancy
     # gymnasium-robotics: the Fetch arm held by a weld, objects beside a robot, the Shadow
     # and Adroit hands (coupled by tendon ranges), the Franka kitchen.
     # Fetch hangs from its weld with its torso pressed on a stop (once called converged at
     # 2.1 N m, then ringing at its stops for ever).
-    _robotics("fetch/reach.xml"),
-    _robotics("fetch/pick_and_place.xml", may_refuse=True),  # the block falls
-    _robotics("fetch/pick_and_place.xml", flags=("--free-objects", "lock")),
-    _robotics("fetch/push.xml", flags=("--free-objects", "lock")),
-    _robotics("fetch/slide.xml", flags=("--free-objects", "lock")),
+    _robotics("fetch/reach.xml", flags=NO_FLOOR),
+    _robotics("fetch/pick_and_place.xml", may_refuse=True, flags=NO_FLOOR),  # the block falls
+    _robotics("fetch/pick_and_place.xml", flags=("--free-objects", "lock", *NO_FLOOR)),
+    _robotics("fetch/push.xml", flags=("--free-objects", "lock", *NO_FLOOR)),
+    _robotics("fetch/slide.xml", flags=("--free-objects", "lock", *NO_FLOOR)),
     _robotics("hand/manipulate_block.xml", may_refuse=True),
     _robotics("adroit_hand/adroit_hammer.xml", may_refuse=True),
     _robotics("kitchen_franka/kitchen_assets/kitchen_env_model.xml", may_refuse=True),
-    _robotics("point/point.xml"),
+    _robotics("point/point.xml", flags=NO_FLOOR),
     # pybullet's MJCF files MuJoCo 3 still reads.
-    _bullet("mjcf/humanoid.xml"),
-    _bullet("mjcf/capsule.xml"),  # a lone free body with an unnamed <freejoint>
-    _bullet("mjcf/thrower.xml"),  # an arm and a free ball beside it, which falls
-    _bullet("mjcf/thrower.xml", flags=("--free-objects", "lock")),
-    _bullet("mjcf/striker.xml"),  # a free target without weight beside an arm
+    _bullet("mjcf/humanoid.xml", flags=NO_FLOOR),
+    _bullet("mjcf/capsule.xml", flags=NO_FLOOR),  # a lone free body, an unnamed <freejoint>
+    _bullet("mjcf/thrower.xml", flags=NO_FLOOR),  # an arm and a free ball beside it: it falls
+    _bullet("mjcf/thrower.xml", flags=("--free-objects", "lock", *NO_FLOOR)),
+    _bullet("mjcf/striker.xml", flags=NO_FLOOR),  # a free target without weight beside an arm
     # pybullet's URDF robots: arms, grippers with <mimic>, legged robots hanging from their
     # base or floating, wheeled ones; files urdfdom cannot read are refused.
     _bullet("kuka_iiwa/model.urdf"),

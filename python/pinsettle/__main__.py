@@ -19,7 +19,14 @@ import numpy as np
 import pinocchio
 
 import pinsettle
-from pinsettle._cli_flags import Flag, add_flags, flag, setting_flags
+from pinsettle._cli_flags import (
+    CONTACT_FLAGS,
+    Flag,
+    add_flags,
+    contact_options,
+    flag,
+    setting_flags,
+)
 from pinsettle._memory import new_data
 from pinsettle._progress import StatusLine, status_line
 from pinsettle._settings import SETTING_FIELDS, SETTING_TYPES
@@ -52,6 +59,7 @@ MODEL_FILE_FLAGS = (
         "spring of stiffness kp towards its control (0, or the ctrl of the keyframe a scene "
         "file's [start] pose names) (default: actuators left out)",
     ),
+    *CONTACT_FLAGS,
 )
 
 START_FLAG = flag(
@@ -185,6 +193,7 @@ def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray |
         floating=True if args.floating else None,
         free_objects=args.free_objects,
         actuator_springs=True if args.actuator_springs else None,
+        **contact_options(args),
     )
     if not args.start:
         return scene, None

@@ -87,3 +87,67 @@ def setting_flags(fields: Iterable[Mapping[str, Any]]) -> tuple[Flag, ...]:
             kinds = {"number": float, "integer": int, "auto_number": _auto_or_number}
             out.append(flag(name, type=kinds[kind], help=text))
     return tuple(out)
+
+
+# --- the contacts of a model file ---------------------------------------------------------------
+
+
+def _floor_height(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a height (m), or nothing (a plane under the model), got '{text}'"
+        ) from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite height (m), got '{text}'")
+    return value
+
+
+def _one_contacts_flag(args: argparse.Namespace) -> str | None:
+    if args.no_contacts and args.contacts is not None:
+        return f"--no-contacts and --contacts {args.contacts}: give one of them"
+    if args.no_contacts and args.floor is not None:
+        return "--floor needs contact points, and --no-contacts leaves them out: give one of them"
+    return None
+
+
+#: How a model file's collision shapes become contacts (``contact_options`` reads them).
+CONTACT_FLAGS = (
+    flag(
+        "--contacts",
+        choices=["collision", "none"],
+        help="with a model file: its collision shapes as contact points (collision), or none. "
+        "Default: an MJCF file's floors and the geoms MuJoCo collides with them are taken, as "
+        "MuJoCo does; a URDF's collision shapes need --floor",
+    ),
+    flag(
+        "--no-contacts",
+        action="store_true",
+        help="with a model file: no contacts (an MJCF file's floors and geoms left out); the "
+        "same as --contacts none",
+    ),
+    flag(
+        "--floor",
+        nargs="?",
+        const=True,
+        type=_floor_height,
+        metavar="Z",
+        help="with a model file: a level floor (normal +z, friction 0.5) under the model's "
+        "lowest collision point at its start pose, or at height Z (m), with the file's "
+        "collision shapes as contacts (it replaces an MJCF file's own floors)",
+        check=_one_contacts_flag,
+    ),
+)
+
+
+def contact_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``load_scene``'s ``contacts`` and ``floor`` from the flags of ``CONTACT_FLAGS`` (checked
+    first); none given: nothing, the scene's own."""
+    check_flags(args, CONTACT_FLAGS)
+    options: dict[str, Any] = {}
+    if args.no_contacts or args.contacts is not None:
+        options["contacts"] = "none" if args.no_contacts else args.contacts
+    if args.floor is not None:
+        options["floor"] = args.floor
+    return options

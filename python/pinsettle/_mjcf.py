@@ -499,8 +499,8 @@ def _free_objects(
     falls = "they fall" if len(objects) > 1 else "it falls"
     reader.notes.append(
         f'free object{s} {names} kept free (free_objects = "keep"): unless contacts hold {them} '
-        f'([model] contacts = "collision"), under gravity {falls} and the solve ends '
-        "no_equilibrium; "
+        f'(the file\'s floors, taken unless contacts = "none"), under gravity {falls} and '
+        "the solve ends no_equilibrium; "
         f'free_objects = "lock" (--free-objects lock) fixes {them} where the file places {them}'
     )
 

@@ -122,8 +122,8 @@ class MjcfCollision:
         return (
             f"floor{'s' if len(self.floors) > 1 else ''} "
             f"{_names([f.name for f in self.floors])} ({kinds} geoms) and the geoms that touch "
-            'them play no part: [model] contacts = "collision" (Scene.add_collision_contacts) '
-            "makes them grounds and contacts"
+            'them play no part: no contacts taken (contacts = "none", --no-contacts; '
+            "Scene.add_collision_contacts takes them)"
         )
 
     def collision(self, model: pinocchio.Model, exclude: Collection[str] = ()) -> Collision:

@@ -26,7 +26,9 @@ from ._checks import as_flag, as_vector, unknown_key_message
 from ._collision_contacts import (
     HULL_POINTS,
     Collision,
+    _frame_joint,
     geometry_collision,
+    moves_after_locking,
     take_contacts,
     urdf_geometry,
 )
@@ -47,6 +49,7 @@ from ._scene_values import (
     JointLoad,
     JointSpring,
     Loop,
+    Payload,
     PointLoad,
     SceneError,
     Spring,
@@ -77,6 +80,7 @@ __all__ = [
     "JointLoad",
     "JointSpring",
     "Loop",
+    "Payload",
     "PointLoad",
     "Scene",
     "SceneError",
@@ -87,6 +91,9 @@ __all__ = [
     "model_stops",
     "named_value",
 ]
+
+#: The Coulomb friction of a ground when none is given (add_ground, add_floor, [[ground]]).
+DEFAULT_FRICTION = 0.5
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -122,7 +129,7 @@ def _release_mimic(model: pinocchio.Model) -> tuple[pinocchio.Model, list[Coupli
 
 class Scene:
     """A mechanism to settle: a ``pinocchio.Model`` plus gravity, start pose, locked joints,
-    springs, loads, loops and joint stops.
+    springs, loads, payloads, loops, joint stops and ground contacts.
 
     The scene owns a copy of the model (gravity is set on it). Joint names are the model's
     joint names; frame names are its frame names (URDF link names); ``"universe"`` is the
@@ -174,6 +181,7 @@ class Scene:
         self.joint_springs: list[JointSpring] = []
         self.springs: list[Spring] = []
         self.loads: list[JointLoad | PointLoad] = []
+        self.payloads: list[Payload] = []  # add_payload, [[payload]]: weights at points
         #: Loop closures of the tree (``add_loop``, ``[[loop]]``).
         self.loops: list[Loop] = []
         self.locked: list[str] = []
@@ -679,6 +687,28 @@ class Scene:
         self._changed()
         return self
 
+    def add_payload(self, frame: str, mass: Any, offset: Any = (0.0, 0.0, 0.0)) -> Scene:
+        """A payload of ``mass`` (kg) at ``offset`` (m, in the frame's axes) from the origin of
+        ``frame``: its weight, mass times the scene's gravity, hangs at that point, a point
+        load that follows the gravity (``scene.gravity``) when it changes.
+
+        Raises:
+            SceneError: an unknown frame (with a close match), a frame fixed to the world, a
+                mass that is not a finite number > 0, an offset that is not 3 finite numbers.
+        """
+        name = self._frame_name(frame, "frame")
+        if self.model.frames[_body_frame(self.model, name)].parentJoint == 0:
+            raise SceneError(
+                f"frame: '{name}' is fixed to the world: a payload there hangs on nothing that "
+                "moves"
+            )
+        kg = _number(mass, "mass")
+        if not kg > 0:
+            raise SceneError(f"mass must be > 0 (kg), got {kg}")
+        self.payloads.append(Payload(name, kg, _vector(offset, "offset", 3)))  # type: ignore[arg-type]
+        self._changed()
+        return self
+
     def add_coupling(
         self, follower: str, leader: str, multiplier: Any = 1.0, offset: Any = 0.0
     ) -> Scene:
@@ -734,7 +764,7 @@ class Scene:
         self,
         point: Any = (0.0, 0.0, 0.0),
         normal: Any = None,
-        friction: Any = 0.5,
+        friction: Any = DEFAULT_FRICTION,
         name: str | None = None,
         *,
         box: Any = None,
@@ -829,13 +859,20 @@ class Scene:
                 message names the shape); an unknown name in ``exclude``; a contact name taken.
         """
         count = _hull_points(hull_points)
-        if isinstance(exclude, str) or not all(isinstance(n, str) for n in exclude):
-            raise SceneError(f"exclude must be a list of shape or frame names, got {exclude!r}")
+        _check_exclude(exclude)
         take_floors = as_flag(floors, "floors")
         collision, where = self._collision(geometry, exclude)
-        for name in exclude:
-            if name not in collision.names:
-                raise SceneError("exclude: " + _close(name, collision.names, "shape or frame"))
+        self._add_shapes(collision, where, count, exclude)
+        if self._mjcf_collision is not None and geometry is None:
+            floor_notes = self._take_floors(collision, bool(take_floors))  # it edits notes
+            self.notes += floor_notes
+        return self
+
+    def _add_shapes(
+        self, collision: Collision, where: str, count: int, exclude: Sequence[str]
+    ) -> None:
+        """The contact points of ``collision``'s shapes on moving bodies, and its notes."""
+        _check_excluded(collision, exclude)
         made, notes = take_contacts(collision, self.model, self.locked, count, where)
         taken = {c.name for c in self.contacts}
         for name, _, _, _ in made.contacts:
@@ -846,10 +883,38 @@ class Scene:
             self._frame_name(frame, "frame")  # add_contact's checks, once per frame
         self.contacts += [ContactPoint(*contact) for contact in made.contacts]
         self._changed()
-        if self._mjcf_collision is not None and geometry is None:
-            notes += self._take_floors(collision, bool(take_floors))
         self.notes += notes
-        return self
+
+    def add_floor(
+        self, height: Any = None, friction: Any = DEFAULT_FRICTION, name: str = "floor"
+    ) -> Scene:
+        """A level ground plane (normal +z) at ``height`` (m), or, when None, just under the
+        scene's lowest contact point at its start pose (a sphere's lowest point): the
+        mechanism starts touching it. Its Coulomb ``friction`` as for ``add_ground``.
+
+        Raises:
+            SceneError: the scene has no contact points yet (``add_collision_contacts``,
+                ``add_contact``), a height that is not a finite number, a name taken.
+        """
+        if not self.contacts:
+            raise SceneError(
+                "a floor needs contact points to rest on it, and the scene has none: take the "
+                "model's collision shapes first (add_collision_contacts, [model] contacts = "
+                '"collision", --contacts collision) or add points (add_contact, [[contact]])'
+            )
+        z = self._lowest_contact() if height is None else _number(height, "floor height")
+        return self.add_ground((0.0, 0.0, z), (0.0, 0.0, 1.0), friction, name)
+
+    def _lowest_contact(self) -> float:
+        """The lowest world z of the contacts' spheres at the start (locked joints there)."""
+        model = self.model
+        data = model.createData()
+        pinocchio.framesForwardKinematics(model, data, self.q0())
+        lowest = math.inf
+        for c in self.contacts:
+            placement = data.oMf[_body_frame(model, c.frame)]
+            lowest = min(lowest, float(placement.act(np.array(c.point))[2]) - c.radius)
+        return lowest
 
     def _take_floors(self, collision: Collision, take: bool) -> list[str]:
         """An MJCF file's floors as grounds (``take``), or a note that they are not."""
@@ -858,8 +923,8 @@ class Scene:
         if not take:
             return (
                 [
-                    "the file's floors are not grounds (floors = False, or [[ground]] given): "
-                    "the scene's grounds replace them"
+                    "the file's floors are not grounds (floors = False: [[ground]] tables or a "
+                    "floor given): the scene's grounds replace them"
                 ]
                 if collision.grounds
                 else []
@@ -1003,7 +1068,7 @@ class Scene:
 
     @property
     def has_elements(self) -> bool:
-        return bool(self.joint_springs or self.springs or self.loads)
+        return bool(self.joint_springs or self.springs or self.loads or self.payloads)
 
     def compile(self, q_locked: np.ndarray | None = None) -> _Compiled:
         """The reduced model (locked joints removed at their value in ``q_locked``, the start
@@ -1068,6 +1133,7 @@ class Scene:
             ("joint_springs", self.joint_springs),
             ("springs", self.springs),
             ("loads", self.loads),
+            ("payloads", self.payloads),
             ("loops", self.loops),
             ("couplings", self.couplings),
             ("stops set", self.joint_limits),
@@ -1118,6 +1184,8 @@ def load_scene(
     floating: bool | None = None,
     free_objects: str | None = None,
     actuator_springs: bool | None = None,
+    contacts: str | None = None,
+    floor: Any = None,
 ) -> Scene:
     """Read a scene: a scene file (TOML; the format is documented in the README), a scene of
     the library by name (``pinsettle.scene_names()``), or a model file as a scene with only
@@ -1125,6 +1193,12 @@ def load_scene(
     has it: fixed, or free by an MJCF ``<freejoint>``; ``floating`` adds a free-flyer where
     there is none). ``free_objects`` ('keep' or 'lock') and ``actuator_springs``: an MJCF
     file's free objects and position actuators, as in ``Scene.from_mjcf``.
+
+    Contacts of a model file, as ``[model] contacts`` and ``floor`` of a scene file say them:
+    an MJCF file's floors and the geoms MuJoCo collides with them are taken by default, as
+    MuJoCo does (``contacts="none"`` leaves them out); ``contacts="collision"`` takes a URDF's
+    collision shapes, which rest on ``floor``: True, a level plane under the lowest of them
+    at the start pose, or a height z (m); a floor replaces an MJCF file's own.
 
     Raises:
         FileNotFoundError: no such file or scene name.
@@ -1138,17 +1212,17 @@ def load_scene(
     except ValueError as error:
         raise SceneError(str(error)) from None
     if kind != "scene":
-        return _scene_from_model_file(path, kind, bool(floating), free_objects, actuator_springs)
-    if floating is not None:
-        raise SceneError(
-            f"{path}: floating applies to a model file (URDF, MJCF); a scene file says it in "
-            "[model] floating"
-        )
-    for key, value in (("free_objects", free_objects), ("actuator_springs", actuator_springs)):
-        if value is not None:
-            raise SceneError(
-                f"{path}: {key} applies to an MJCF file; a scene file says it in [model] {key}"
-            )
+        scene = _scene_from_model_file(path, kind, bool(floating), free_objects, actuator_springs)
+        _model_file_contacts(scene, path, kind, contacts, floor)
+        return scene
+    _model_file_options_only(
+        path,
+        floating=floating,
+        contacts=contacts,
+        floor=floor,
+        free_objects=free_objects,
+        actuator_springs=actuator_springs,
+    )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
@@ -1159,6 +1233,32 @@ def load_scene(
         return _scene_from_dict(data, path)
     except SceneError as error:
         raise SceneError(f"{path}: {error}") from None
+
+
+def _check_exclude(exclude: Any) -> None:
+    """``exclude`` of ``add_collision_contacts``: a list of names (not one string)."""
+    if isinstance(exclude, str) or not all(isinstance(n, str) for n in exclude):
+        raise SceneError(f"exclude must be a list of shape or frame names, got {exclude!r}")
+
+
+def _body_frame(model: pinocchio.Model, name: str) -> int:
+    """A frame by name, a body's first (as the compiled scene resolves names)."""
+    if model.existFrame(name, pinocchio.FrameType.BODY):
+        return int(model.getFrameId(name, pinocchio.FrameType.BODY))
+    return int(model.getFrameId(name))
+
+
+def _model_file_options_only(path: Path, **options: Any) -> None:
+    """A scene file says its model's options in [model]: load_scene's are for model files."""
+    for key, value in options.items():
+        if value is None:
+            continue
+        files = "an MJCF file" if key in ("free_objects", "actuator_springs") else "a model file"
+        raise SceneError(
+            f"{path}: {key} applies to {files}"
+            + (" (URDF, MJCF)" if files == "a model file" else "")
+            + f"; a scene file says it in [model] {key}"
+        )
 
 
 def _hull_points(value: Any) -> int:
@@ -1220,6 +1320,26 @@ def _scene_from_model_file(
     except SceneError as error:
         raise SceneError(f"{path}: {error}") from None
     return scene
+
+
+def _model_file_contacts(
+    scene: Scene, path: Path, kind: str, contacts: str | None, floor: Any
+) -> None:
+    """A model file's contacts (``load_scene``'s ``contacts`` and ``floor``); errors name the
+    file. A URDF's collision shapes need a floor to rest on."""
+    has_floor = floor is not None and floor is not False
+    if kind == "urdf" and contacts == "collision" and not has_floor:
+        raise SceneError(
+            f"{path}: contacts 'collision' takes the URDF's collision shapes, but a URDF has no "
+            "ground for them: add a floor (floor=True, --floor: a plane under the model; or "
+            "floor=Z, --floor Z), or write a scene file with [[ground]] tables"
+        )
+    try:
+        take_model_contacts(scene, contacts, floor)
+        scene.compile()
+    except SceneError as error:
+        message = str(error)
+        raise SceneError(message if str(path) in message else f"{path}: {message}") from None
 
 
 def _description(path: Path) -> str:
@@ -1370,6 +1490,8 @@ def _add_elements(scene: Scene, file: SceneFile) -> None:
                 force=load.force,
                 torque=load.torque,
             )
+    for k, p in enumerate(file.payloads, start=1):
+        _at(f"[[payload]] #{k}", scene.add_payload, p.frame, p.mass, p.offset)
     for k, loop in enumerate(file.loops, start=1):
         _at(f"[[loop]] #{k}", scene.add_loop, loop.a, loop.b, loop.kind)
     for k, limit in enumerate(file.limits, start=1):
@@ -1390,15 +1512,111 @@ def _add_elements(scene: Scene, file: SceneFile) -> None:
 
 
 def _add_collision_contacts(scene: Scene, file: SceneFile) -> None:
-    """[model] contacts = "collision": the model's collision shapes as contacts, and an MJCF
-    file's floors as grounds unless the scene gives [[ground]] tables."""
+    """[model] contacts and floor: the model's collision shapes as contacts (an MJCF file's
+    by default) and its floors as grounds unless the scene gives [[ground]] tables or a
+    floor."""
     m = file.model
-    if m.contacts != "collision":
-        return
     _at(
         "[model] contacts",
-        scene.add_collision_contacts,
+        take_model_contacts,
+        scene,
+        m.contacts,
+        m.floor,
+        grounds=bool(file.grounds),
         hull_points=m.hull_points,
         exclude=m.contacts_exclude,
-        floors=not file.grounds,
     )
+
+
+#: The way out of an MJCF file's contacts, for the errors of contacts taken by default.
+_NO_CONTACTS = (
+    'or leave the file\'s contacts out: [model] contacts = "none" (--no-contacts, contacts="none")'
+)
+
+
+def take_model_contacts(
+    scene: Scene,
+    contacts: str | None,
+    floor: Any = None,
+    *,
+    grounds: bool = False,
+    hull_points: Any = HULL_POINTS,
+    exclude: Sequence[str] = (),
+) -> None:
+    """The contacts a scene file's [model] (or ``load_scene``'s options) asks for.
+
+    ``contacts``: 'collision' (the model's collision shapes, ``add_collision_contacts``),
+    'none', or None: an MJCF file's floors and the geoms MuJoCo collides with them, as MuJoCo
+    does, where the file has floors (or ``grounds``: the scene gives grounds of its own, which
+    replace the file's floors) and they touch a moving geom; nothing for other models.
+    ``floor``: None or False (no floor), True (a level plane under the lowest contact point at
+    the start) or a height (m); it takes the collision shapes unless contacts is 'none', which
+    is then an error.
+    """
+    if contacts not in (None, "collision", "none"):
+        raise SceneError(f"contacts must be 'collision', 'none' or None, got {contacts!r}")
+    has_floor = floor is not None and floor is not False
+    if has_floor and not (floor is True or isinstance(floor, (int, float, np.number))):
+        raise SceneError(
+            f"floor must be True (under the lowest contact point), a height (m) or None, "
+            f"got {floor!r}"
+        )
+    if contacts == "none":
+        if has_floor:
+            raise SceneError(
+                "a floor needs contact points, and contacts 'none' leaves them out: give one "
+                "or the other"
+            )
+        return
+    if contacts is None and not has_floor:
+        _take_mjcf_contacts(scene, grounds, hull_points, exclude)
+        return
+    scene.add_collision_contacts(
+        hull_points=hull_points, exclude=exclude, floors=not grounds and not has_floor
+    )
+    if has_floor:
+        scene.add_floor(None if floor is True else floor)
+
+
+def _take_mjcf_contacts(
+    scene: Scene, grounds: bool, hull_points: Any, exclude: Sequence[str]
+) -> None:
+    """An MJCF file's contacts by default: its floors and the geoms MuJoCo collides with them,
+    where it has floors (or the scene grounds) and they touch a moving geom; else a note."""
+    mjcf = scene._mjcf_collision
+    if mjcf is None or not (mjcf.floors or grounds):
+        return  # nothing to rest on: the file solves as it did without contacts
+    count = _hull_points(hull_points)
+    _check_exclude(exclude)
+    try:
+        collision, where = scene._collision(None, exclude)
+    except SceneError as error:
+        raise SceneError(f"{error}; {_NO_CONTACTS}") from None
+    _check_excluded(collision, exclude)
+    if not mjcf.enabled:
+        scene.notes += collision.notes
+        return
+    if not any(_moves(scene, shape.frame) for shape in collision.shapes):
+        scene.notes.append(
+            "the file's floors touch no geom of a moving body: no contacts (contype, "
+            "conaffinity, <contact>)"
+        )
+        return
+    try:
+        scene._add_shapes(collision, where, count, exclude)
+    except SceneError as error:
+        raise SceneError(f"{error}; {_NO_CONTACTS}") from None
+    floor_notes = scene._take_floors(collision, not grounds)  # it edits notes
+    scene.notes += floor_notes
+
+
+def _moves(scene: Scene, frame: str) -> bool:
+    """Whether a frame's body moves with the scene's locked joints held."""
+    return moves_after_locking(scene.model, _frame_joint(scene.model, frame), scene.locked)
+
+
+def _check_excluded(collision: Collision, exclude: Sequence[str]) -> None:
+    """Each name of ``exclude`` is a shape or frame of the source."""
+    for name in exclude:
+        if name not in collision.names:
+            raise SceneError("exclude: " + _close(name, collision.names, "shape or frame"))

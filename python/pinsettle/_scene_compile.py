@@ -21,6 +21,7 @@ from ._scene_values import (
     JointLoad,
     JointSpring,
     Loop,
+    Payload,
     PointLoad,
     SceneError,
     Spring,
@@ -37,6 +38,7 @@ class SceneParts(Protocol):
     joint_springs: list[JointSpring]
     springs: list[Spring]
     loads: list[JointLoad | PointLoad]
+    payloads: list[Payload]
     loops: list[Loop]
     couplings: list[Coupling]
     joint_limits: list[JointLimit]
@@ -84,6 +86,15 @@ def _reduced_model(full: pinocchio.Model, locked_ids: list[int], q_ref: np.ndarr
 def _segments(starts: Any, sizes: Any, joints: list[int]) -> np.ndarray:
     """The indices of the joints' segments (of q or v), in order."""
     return np.concatenate([np.arange(starts[j], starts[j] + sizes[j]) for j in joints]).astype(int)
+
+
+def _point_loads(scene: SceneParts) -> list[PointLoad]:
+    """The point loads of a scene: its loads at frames, then its payloads' weights under the
+    model's gravity."""
+    gravity = scene.model.gravity.linear
+    return [load for load in scene.loads if isinstance(load, PointLoad)] + [
+        payload.load(gravity) for payload in scene.payloads
+    ]
 
 
 class _Compiled:
@@ -168,8 +179,7 @@ class _Compiled:
             "point_loads": [
                 (frame(load.frame), np.array(load.point), np.array(load.force))
                 + (np.array(load.torque),)
-                for load in scene.loads
-                if isinstance(load, PointLoad)
+                for load in _point_loads(scene)
             ],
         }
         return spec if any(spec.values()) else None

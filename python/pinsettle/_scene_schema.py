@@ -12,6 +12,7 @@ checked when the scene is built (``_scene``), with the same ``where`` in front.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
@@ -70,6 +71,12 @@ def _keep_or_lock(value: Any) -> bool:
 
 def _contacts_kind(value: Any) -> bool:
     return value in ("collision", "none")
+
+
+def _floor_kind(value: Any) -> bool:
+    if isinstance(value, bool):
+        return True
+    return isinstance(value, (int, float)) and math.isfinite(value)
 
 
 _FLAG: dict[str, Any] = {"expect": "true or false", "check": _is_bool}
@@ -157,21 +164,19 @@ class ModelTable:
     actuator_springs: bool = key(
         False, **_FLAG, needs="mjcf", purpose="an MJCF file's actuators ('mjcf')"
     )
-    contacts: str = key(
-        "none",
+    contacts: str | None = key(
+        None,
         expect="'collision' (contact points from the model's collision geometry) or 'none'",
         check=_contacts_kind,
     )
-    hull_points: Any = key(  # checked by Scene.add_collision_contacts
-        16, needs="contacts", purpose='contacts = "collision" (the most points of a mesh\'s hull)'
+    floor: Any = key(
+        None,
+        expect="true (a level plane under the model's lowest contact point at its start), a "
+        "height z (m) or false",
+        check=_floor_kind,
     )
-    contacts_exclude: list[Any] = key(
-        [],
-        expect="a list of shape or frame names",
-        check=_is_list,
-        needs="contacts",
-        purpose='contacts = "collision" (shapes or frames left out)',
-    )
+    hull_points: Any = key(16)  # checked by Scene.add_collision_contacts
+    contacts_exclude: list[Any] = key([], expect="a list of shape or frame names", check=_is_list)
 
     SOURCES: ClassVar[tuple[str, ...]] = ("urdf", "robot", "mjcf")
 
@@ -185,6 +190,34 @@ class ModelTable:
                 + ("neither" if not sources else "all three" if len(sources) == 3 else "both")
                 + (f" ({' and '.join(sources)})" if sources else "")
             )
+
+    def takes_contacts(self) -> bool:
+        """Whether the model's collision shapes are contacts: ``contacts = "collision"``, a
+        ``floor``, or an MJCF file without a ``contacts`` key (MuJoCo collides its geoms)."""
+        if self.contacts is not None:
+            return self.contacts == "collision"
+        return self.has_floor or self.mjcf is not None
+
+    @property
+    def has_floor(self) -> bool:
+        """Whether ``floor`` asks for a floor (``false`` does not; a height 0 does)."""
+        return self.floor is not None and self.floor is not False
+
+    def check(self, table: Mapping[str, Any], where: str) -> None:
+        if self.has_floor and self.contacts == "none":
+            raise SceneError(
+                f'{where} floor needs contact points, and contacts = "none" leaves them out: '
+                'drop one (contacts = "collision" takes the collision shapes)'
+            )
+        for name, what in (
+            ("hull_points", "the most points of a mesh's hull"),
+            ("contacts_exclude", "shapes or frames left out"),
+        ):
+            if name in table and not self.takes_contacts():
+                raise SceneError(
+                    f"{where} {name} is for contacts from the model's collision shapes ({what}): "
+                    'contacts = "collision", a floor, or an MJCF file without contacts = "none"'
+                )
 
 
 @dataclass(frozen=True)
@@ -242,6 +275,15 @@ class LoadEntry:
 
 
 @dataclass(frozen=True)
+class PayloadEntry:
+    """``[[payload]]``: ``Scene.add_payload``, a mass's weight at a point of a frame."""
+
+    frame: Any = key()
+    mass: Any = key()
+    offset: Any = key((0.0, 0.0, 0.0))
+
+
+@dataclass(frozen=True)
 class LoopEntry:
     """``[[loop]]``: ``Scene.add_loop``."""
 
@@ -295,6 +337,7 @@ class SceneFile:
     joint_springs: list[JointSpringEntry]
     springs: list[SpringEntry]
     loads: list[LoadEntry]
+    payloads: list[PayloadEntry]
     loops: list[LoopEntry]
     limits: list[LimitEntry]
     grounds: list[GroundEntry]
@@ -307,6 +350,7 @@ _ARRAYS: tuple[tuple[str, type[Any], str], ...] = (
     ("joint_spring", JointSpringEntry, "joint_springs"),
     ("spring", SpringEntry, "springs"),
     ("load", LoadEntry, "loads"),
+    ("payload", PayloadEntry, "payloads"),
     ("loop", LoopEntry, "loops"),
     ("limit", LimitEntry, "limits"),
     ("ground", GroundEntry, "grounds"),

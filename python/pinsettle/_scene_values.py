@@ -68,6 +68,21 @@ class PointLoad:
 
 
 @dataclass(frozen=True)
+class Payload:
+    """A payload: a point mass (kg) at ``offset`` (m, in the frame's axes) from a frame's
+    origin. Its weight, mass times gravity, hangs there: a point load (``load``)."""
+
+    frame: str
+    mass: float
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def load(self, gravity: Sequence[float]) -> PointLoad:
+        """The payload's weight under ``gravity`` (m/s^2, world axes) as a point load."""
+        weight = tuple(self.mass * float(g) for g in gravity)
+        return PointLoad(self.frame, self.offset, weight)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
 class Loop:
     """A loop closure: ``a_point`` of ``a_frame`` and ``b_point`` of ``b_frame`` coincide
     (``kind`` 'point': a spherical joint, a pin joint in a plane) or the two frames, moved to

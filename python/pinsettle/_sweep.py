@@ -712,8 +712,9 @@ def sweep(  # noqa: PLR0913 (its keyword options are the sweep command's flags)
             name).
         vary: scene value -> the values it takes: ``"start.JOINT"``, a field of a force element
             by its index (``"joint_spring[0].stiffness"``, ``"spring[1].rest_length"``,
-            ``"load[0].effort"``, ``"load[2].force"``), ``"gravity"``, or
-            ``"payload.FRAME.mass"`` (a point mass at the frame's origin, kg). A vector value
+            ``"load[0].effort"``, ``"load[2].force"``, ``"payload[0].mass"``), ``"gravity"``,
+            or ``"payload.FRAME.mass"`` (kg: the [[payload]] on the frame, else a payload at
+            the frame's origin). A vector value
             takes vectors, or numbers: a magnitude along the scene's own vector. Several keys
             make the full grid; ``zip=True`` pairs their values instead.
         starts: start configurations (n, model.nq), or ``("random", n, seed)``: uniform inside

@@ -56,27 +56,30 @@ _ELEMENT_FIELDS = {
     "joint_spring": ("stiffness", "rest", "damping"),
     "spring": ("stiffness", "rest_length", "damping"),
     "load": ("effort", "force", "torque", "point"),
+    "payload": ("mass", "offset"),
 }
 _KEY_FORMS = (
     "start.JOINT",
     "joint_spring[i].stiffness|rest|damping",
     "spring[i].stiffness|rest_length|damping",
     "load[i].effort|force|torque|point",
+    "payload[i].mass|offset",
     "gravity",
     "payload.FRAME.mass",
 )
-_ELEMENT_RE = re.compile(r"^(joint_spring|spring|load)\[(-?\d+)\]\.(\w+)$")
+_ELEMENT_RE = re.compile(r"^(joint_spring|spring|load|payload)\[(-?\d+)\]\.(\w+)$")
 
 
 @dataclass(frozen=True)
 class Key:
     """A scene value a sweep varies, resolved against the scene.
 
-    ``kind`` is 'start', 'joint_spring', 'spring', 'load', 'gravity' or 'payload'; ``index``
-    the element's index (force elements), ``name`` the joint (start) or frame (payload),
-    ``field`` the element's field. ``size`` is the number of entries of a value (1: a number);
-    ``direction`` the unit vector a number scales on a vector value (None: numbers are not
-    allowed there, or the value is a number anyway).
+    ``kind`` is 'start', 'joint_spring', 'spring', 'load', 'payload' (a [[payload]]),
+    'gravity' or 'frame_payload' (``payload.FRAME.mass`` on a frame without a [[payload]]);
+    ``index`` the element's index (force elements, payloads), ``name`` the joint (start) or
+    frame (frame_payload), ``field`` the element's field. ``size`` is the number of entries
+    of a value (1: a number); ``direction`` the unit vector a number scales on a vector value
+    (None: numbers are not allowed there, or the value is a number anyway).
     """
 
     text: str
@@ -93,6 +96,7 @@ def _elements(scene: Scene, kind: str) -> list[Any]:
         "joint_spring": scene.joint_springs,
         "spring": scene.springs,
         "load": scene.loads,
+        "payload": scene.payloads,
     }
     return lists[kind]
 
@@ -113,23 +117,34 @@ def _start_key(text: str, model: pinocchio.Model) -> Key:
     return Key(text, "start", name=joint, size=size)
 
 
-def _payload_key(text: str, model: pinocchio.Model) -> Key:
-    """The key ``payload.FRAME.mass``: a point mass at a frame that moves."""
+def _payload_key(text: str, scene: Scene) -> Key:
+    """The key ``payload.FRAME.mass``: the mass of the scene's [[payload]] on the frame, or,
+    without one, a payload at the frame's origin (a frame that moves)."""
     frame = text[len("payload.") : -len(".mass")]
+    model = scene.model
     frames = list(dict.fromkeys(f.name for f in model.frames))
     if frame not in frames:
         raise ValueError(f"vary key '{text}': " + unknown_key_message("frame", frame, frames))
+    tables = [k for k, p in enumerate(scene.payloads) if p.frame == frame]
+    if len(tables) > 1:
+        raise ValueError(
+            f"vary key '{text}': frame '{frame}' has {len(tables)} [[payload]] tables; name "
+            f"one by its index: " + " or ".join(f"payload[{k}].mass" for k in tables)
+        )
+    if tables:
+        return Key(text, "payload", tables[0], field="mass")
     if model.frames[model.getFrameId(frame)].parentJoint == 0:
         raise ValueError(
             f"vary key '{text}': frame '{frame}' is fixed to the world: a mass there does nothing"
         )
-    return Key(text, "payload", name=frame, field="mass")
+    return Key(text, "frame_payload", name=frame, field="mass")
 
 
 def _element_fields(kind: str, element: Any) -> tuple[tuple[str, ...], str]:
     """The fields a sweep may vary on a force element, and what the element is (in words)."""
     if kind != "load":
-        return _ELEMENT_FIELDS[kind], {"joint_spring": "a joint spring", "spring": "a spring"}[kind]
+        what = {"joint_spring": "a joint spring", "spring": "a spring", "payload": "a payload"}
+        return _ELEMENT_FIELDS[kind], what[kind]
     if isinstance(element, JointLoad):
         return ("effort",), "a joint load"
     return ("force", "torque", "point"), "a load at a frame"
@@ -175,7 +190,7 @@ def parse_key(text: Any, scene: Scene) -> Key:
     if text.startswith("start."):
         return _start_key(text, scene.model)
     if text.startswith("payload.") and text.endswith(".mass") and len(text) > 13:
-        return _payload_key(text, scene.model)
+        return _payload_key(text, scene)
     return _element_key(text, scene)
 
 
@@ -264,6 +279,7 @@ def scene_data(scene: Scene) -> dict[str, Any]:
         "joint_springs": list(scene.joint_springs),
         "springs": list(scene.springs),
         "loads": list(scene.loads),
+        "payloads": list(scene.payloads),
         "loops": list(scene.loops),
         "couplings": list(scene.couplings),
         "locked": list(scene.locked),
@@ -274,15 +290,12 @@ def scene_data(scene: Scene) -> dict[str, Any]:
     }
 
 
-def _add_payload(model: pinocchio.Model, frame: str, mass: float) -> None:
-    """A point mass at the origin of ``frame``, added to the body that carries it."""
+def _add_payload(scene: Scene, frame: str, mass: float, offset: Any) -> None:
+    """A payload of a case: none for a mass of 0 (a sweep may start from no payload)."""
     if mass < 0:
         raise SceneError(f"the mass must be >= 0 (kg), got {mass}")
-    f = model.frames[model.getFrameId(frame)]
-    j = f.parentJoint
-    model.inertias[j] = model.inertias[j] + pinocchio.Inertia(
-        mass, f.placement.translation, np.zeros((3, 3))
-    )
+    if mass > 0:
+        scene.add_payload(frame, mass, offset)
 
 
 Changes = tuple[tuple[int, Any], ...]
@@ -315,7 +328,7 @@ def _sort_changes(keys: Sequence[Key], changes: Changes) -> _Sorted:
         key = keys[index]
         if key.kind == "gravity":
             out.gravity = (key, _vector_value(key, value))
-        elif key.kind == "payload":
+        elif key.kind == "frame_payload":
             out.payloads.append((key, value))
         elif key.kind in _ELEMENT_FIELDS:
             fixed = _vector_value(key, value) if key.size > 1 else value
@@ -335,11 +348,8 @@ def _at(key: Key | None, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> N
 
 
 def _scene_of(data: Mapping[str, Any], changed: _Sorted) -> Scene:
-    """The scene of ``data`` with its model (and the payloads), files, notes and gravity; no
-    elements yet."""
+    """The scene of ``data`` with its model, files, notes and gravity; no elements yet."""
     model = pinocchio.Model(data["model"])
-    for key, mass in changed.payloads:
-        _at(key, _add_payload, model, key.name, mass)
     scene = Scene(
         model,
         settings=data["settings"],
@@ -375,7 +385,13 @@ def _add_load(
 
 
 def _add_force_elements(scene: Scene, data: Mapping[str, Any], changed: _Sorted) -> None:
-    """The joint springs, springs and loads of ``data``, with the changed fields."""
+    """The payloads, joint springs, springs and loads of ``data``, with the changed fields
+    (payloads first: a bad mass is named before the other elements' values)."""
+    for k, payload in enumerate(data["payloads"]):
+        key, v = changed.element("payload", k, payload)
+        _at(key, _add_payload, scene, v["frame"], v["mass"], v["offset"])
+    for key, mass in changed.payloads:  # payload.FRAME.mass on a frame without a [[payload]]
+        _at(key, _add_payload, scene, key.name, mass, (0.0, 0.0, 0.0))
     for k, s in enumerate(data["joint_springs"]):
         key, v = changed.element("joint_spring", k, s)
         _at(key, scene.add_joint_spring, v["joint"], v["stiffness"], v["rest"], v["damping"])
@@ -401,7 +417,10 @@ def _add_constraints(scene: Scene, data: Mapping[str, Any]) -> None:
     for limit in data["joint_limits"]:
         scene.set_limit(limit.joint, limit.lower, limit.upper)
     for g in data["grounds"]:
-        scene.add_ground(g.point, g.normal, g.friction, g.name)
+        if g.box is None:
+            scene.add_ground(g.point, g.normal, g.friction, g.name)
+        else:  # a box is turned by its rpy, not by a normal
+            scene.add_ground(g.point, None, g.friction, g.name, box=g.box, rpy=g.rpy)
     for c in data["contacts"]:
         scene.add_contact(c.frame, c.point, c.radius, c.name)
 

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from . import _sweep, _sweep_cases, _sweep_plot
-from ._cli_flags import add_flags, check_flags, flag, switch
+from ._cli_flags import CONTACT_FLAGS, add_flags, check_flags, contact_options, flag, switch
 from ._scene import load_scene
 from .scenes import scene_path
 
@@ -74,7 +74,7 @@ def _workers_here(args: argparse.Namespace) -> str | None:
 
 #: The sweep's own arguments, in the order of its help; the checks run in this order too.
 FLAGS = (
-    flag("scene", help="scene file (.toml) or scene name"),
+    flag("scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"),
     flag(
         "--vary",
         action="append",
@@ -82,8 +82,9 @@ FLAGS = (
         metavar="KEY=LO:HI:N",
         help="a scene value and its values: N evenly spaced from LO to HI, or a list V1,V2,... "
         "(repeatable: the full grid). Keys: start.JOINT, joint_spring[i].stiffness|rest|damping, "
-        "spring[i].stiffness|rest_length|damping, load[i].effort|force|torque|point, gravity, "
-        "payload.FRAME.mass (a vector value: a magnitude along the scene's own vector)",
+        "spring[i].stiffness|rest_length|damping, load[i].effort|force|torque|point, "
+        "payload[i].mass|offset, gravity, payload.FRAME.mass (a vector value: a magnitude "
+        "along the scene's own vector)",
     ),
     flag(
         "--random",
@@ -158,6 +159,7 @@ def add_parser(
         "interrupted.",
     )
     add_flags(parser, FLAGS)
+    add_flags(parser, CONTACT_FLAGS)
     add_limits_flag(parser, "scene model")
     add_setting_flags(parser)
     parser.set_defaults(func=lambda args: run(args, overrides(args)))
@@ -401,7 +403,7 @@ def _sweep_args(args: argparse.Namespace) -> tuple[dict[str, list[float]], Path 
 def _run(args: argparse.Namespace, overrides: dict[str, Any]) -> int:
     _sweep_cases.pandas()
     vary, out = _sweep_args(args)
-    scene = load_scene(scene_path(args.scene))
+    scene = load_scene(scene_path(args.scene), **contact_options(args))
     resume = read_table(out) if out is not None and out.exists() else None
     starts = None if args.random is None else ("random", args.random, args.seed or 0)
     df = _sweep.sweep(

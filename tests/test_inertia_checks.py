@@ -131,3 +131,19 @@ def test_an_mjcf_body_with_a_negative_mass_is_refused_naming_the_body(tmp_path):
     with pytest.raises(ValueError) as error:
         pinsettle.load_scene(path)
     assert "link" in str(error.value) and "mass" in str(error.value), str(error.value)
+
+
+def test_an_mjcf_body_with_a_negative_diagonal_inertia_is_refused_naming_the_body(tmp_path):
+    path = tmp_path / "arm.xml"
+    path.write_text(
+        """<mujoco><worldbody><body name="link" pos="0 0 1">
+             <joint name="hinge" type="hinge" axis="0 1 0"/>
+             <inertial pos="0 0 -0.5" mass="1" diaginertia="0.1 -0.1 0.1"/>
+           </body></worldbody></mujoco>""",
+        encoding="utf-8",
+    )
+    with pytest.raises(ValueError) as error:
+        pinsettle.solve(pinsettle.load_scene(path))
+    assert "'link'" in str(error.value) and "positive semidefinite" in str(error.value), str(
+        error.value
+    )

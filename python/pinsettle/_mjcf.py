@@ -65,6 +65,19 @@ from ._mjcf_statics import _joint_statics, _option, _other_sections, _Statics, s
 __all__ = ["FREE_OBJECTS", "MjcfError", "MjcfModel", "is_mjcf", "load_mjcf"]
 
 
+def _check_inertia(tensor: np.ndarray, where: str) -> None:
+    """Refuse a given inertia no rigid body has (before boundinertia would lift a negative
+    moment to its bound: diaginertia="0.1 -0.1 0.1" was solved as "0.1 0 0.1")."""
+    if not np.isfinite(tensor).all():
+        raise MjcfError(f"{where}: its inertia must be finite")
+    moments = np.linalg.eigvalsh(0.5 * (tensor + tensor.T))
+    if moments[0] < -1e-9 * max(np.abs(moments).max(), 1e-12):
+        raise MjcfError(
+            f"{where}: its inertia has principal moments {np.array2string(moments, precision=4)} "
+            "kg m^2; an inertia must be positive semidefinite"
+        )
+
+
 @dataclass
 class MjcfModel:
     """An MJCF file read for statics.
@@ -260,11 +273,12 @@ class _Writer:
         reader = self.reader
         a = given.attrib
         where = f"{reader.path}: <inertial> of body '{body.name}'"
-        mass = max(
-            float(_floats(a.get("mass", ""), f"{where} mass", (1,))[0]), reader.compiler.boundmass
-        )
-        if mass < 0:
-            raise MjcfError(f"{where} mass: must be >= 0, got {mass:g}")
+        given_mass = float(_floats(a.get("mass", ""), f"{where} mass", (1,))[0])
+        # Checked before boundmass lifts it (to 0 by default: mass="-1" was solved as a
+        # massless body; MuJoCo refuses it).
+        if not np.isfinite(given_mass) or given_mass < 0:
+            raise MjcfError(f"{where} mass: must be finite and >= 0, got {given_mass:g}")
+        mass = max(given_mass, reader.compiler.boundmass)
         inertial = ET.SubElement(el, "inertial", mass=repr(mass))
         assert body.inertial_pose is not None
         self._place(inertial, body.inertial_pose)
@@ -283,6 +297,7 @@ class _Writer:
             diagonal = _floats(a.get("diaginertia", "0 0 0"), f"{where} diaginertia", (3,))
             inertial.set("diaginertia", _text(diagonal))
             tensor = rotation @ np.diag(diagonal)
+        _check_inertia(tensor, where)
         self.inertias[body.name] = (
             mass,
             np.array(body.inertial_pose.translation),

@@ -70,7 +70,13 @@ def _check_inertia(tensor: np.ndarray, where: str) -> None:
     moment to its bound: diaginertia="0.1 -0.1 0.1" was solved as "0.1 0 0.1")."""
     if not np.isfinite(tensor).all():
         raise MjcfError(f"{where}: its inertia must be finite")
-    moments = np.linalg.eigvalsh(0.5 * (tensor + tensor.T))
+    # Scaled to its largest entry first: a moment of 1e308 overflows the sum of the halves.
+    scale = float(np.abs(tensor).max())
+    moments = (
+        np.linalg.eigvalsh(0.5 * (tensor / scale + tensor.T / scale)) * scale
+        if scale
+        else np.zeros(3)
+    )
     if moments[0] < -1e-9 * max(np.abs(moments).max(), 1e-12):
         raise MjcfError(
             f"{where}: its inertia has principal moments {np.array2string(moments, precision=4)} "

@@ -262,7 +262,8 @@ def _link_inertia_fault(inertial: ET.Element) -> str | None:
     )
     if not np.isfinite(matrix).all():
         return "an inertia that is not finite"
-    moments = np.linalg.eigvalsh(matrix)
+    scale = float(np.abs(matrix).max())
+    moments = np.linalg.eigvalsh(matrix / scale) * scale if scale else np.zeros(3)
     if moments[0] < -1e-9 * max(np.abs(moments).max(), 1e-12):
         return (
             f"an inertia with principal moments {np.array2string(moments, precision=4)} kg m^2; "

@@ -768,3 +768,21 @@ def test_limits_on_a_joint_of_several_entries_are_noted_and_warned():
         for name in ("double_pendulum_continuous", "solo12"):
             robot = pinsettle.load_robot(name)
             assert pinsettle.solve(robot, max_steps=10).unapplied_limits == ()
+
+
+@pytest.mark.parametrize("name", GALLERY)
+def test_robot_gallery_converges_to_round_off_by_default(name):
+    # `pinsettle solve` of `robot = NAME` (root fixed, mimic joints coupled): a converged rest
+    # is polished to round-off, at most 1e-10 of the robot's force scale (baxter ended at
+    # 8.1e-5 N m, unpolished: Newton's first step along its soft wrists overshot). The
+    # residual is recomputed here with pinocchio, off the stops, the stops pushing.
+    scene = pinsettle.Scene.from_robot(name)
+    result = pinsettle.solve(scene)
+    assert result.status == "converged", result.summary()
+    model = scene.model
+    data = model.createData()
+    g0 = pinocchio.computeGeneralizedGravity(model, data, scene.q0())
+    tau = scene.static_force(result.q)
+    scale = max(np.abs(g0).max(), np.abs(tau).max(), 1e-3)
+    assert result.residual <= 1e-10 * scale, (result.residual, scale, result.summary())
+    assert abs(scene.residual(result.q)) <= 1e-10 * scale

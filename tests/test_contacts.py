@@ -370,3 +370,17 @@ def test_a_floating_robot_with_its_motors_off_lies_on_its_body(name, pose, trunk
     if trunk:  # the trunk's boxes carry most of its weight
         on_body = sum(c.normal_force for c in result.contacts if c.name.startswith(trunk))
         assert on_body >= 0.5 * check.total_normal[2]
+
+
+def test_a_contact_names_its_body():
+    # go1 lying with its motors off: each foot's point on its foot link, the trunk's four on
+    # the trunk; the JSON of the command line carries the body too.
+    scene = pinsettle.load_scene(ROBOTS / "go1_motors_off.toml")
+    result = pinsettle.solve(scene)
+    bodies = {c.name: c.body for c in result.contacts}
+    assert bodies, result.summary()
+    for name, body in bodies.items():
+        expected = "trunk" if name.startswith("trunk") else name
+        assert body == expected, (name, body)
+    assert all("body" in c for c in result.to_dict()["contacts"])
+    assert "trunk#2 (trunk)" in result.summary()

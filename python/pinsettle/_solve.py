@@ -93,7 +93,8 @@ class Contact:
     in), whether it is ``sticking`` (the tangential force strictly inside the friction cone;
     at its edge the contact would slide) and whether the rest hangs on it by a thread,
     ``marginal``: it carries at most 1e-3 of the largest normal force, or its tangential force
-    is within 1 % of the cone's edge (a stable rest held so is ``'marginal'``)."""
+    is within 1 % of the cone's edge (a stable rest held so is ``'marginal'``). ``body`` is the
+    body (link) the point is on, '' where the solve had no scene to tell it."""
 
     name: str
     ground: str
@@ -104,6 +105,7 @@ class Contact:
     gap: float
     sticking: bool
     marginal: bool
+    body: str = ""
 
 
 @dataclass(frozen=True)
@@ -320,7 +322,8 @@ class Result:
             if c.marginal:
                 state += ", marginal"
             lines.append(
-                f"  {c.name:<14} on {c.ground}: normal {c.normal_force:.6g} N, tangential "
+                f"  {c.name + (f' ({c.body})' if c.body and c.body != c.name else ''):<14} "
+                f"on {c.ground}: normal {c.normal_force:.6g} N, tangential "
                 f"{float(np.linalg.norm(c.tangential_force)):.4g} N, gap {c.gap:.2e} m, {state}"
             )
         return lines
@@ -411,6 +414,7 @@ class Result:
             "contacts": [
                 {
                     "name": c.name,
+                    "body": c.body,
                     "ground": c.ground,
                     "point": c.point.tolist(),
                     "normal": c.normal.tolist(),

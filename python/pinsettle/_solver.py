@@ -168,6 +168,8 @@ class Solver:
         raw["v"] = compiled.full_v(raw["v"], full.nv)
         raw["joints"] = self._reader.values(raw["q"])  # of the full model
         raw["equal_limits"] = mechanism.equal  # less the joints the scene sets stops on
+        bodies = _contact_bodies(scene)
+        raw["contacts"] = [(*c, bodies.get(c[0], "")) for c in raw["contacts"] or ()]
         trace = raw["trace"]
         if trace is not None:
             if trace["q"] is not None:
@@ -308,6 +310,20 @@ def _warn_unapplied(unapplied: tuple[str, ...], stacklevel: int) -> None:
         UserWarning,
         stacklevel=stacklevel + 1,
     )
+
+
+def _contact_bodies(scene: Scene) -> dict[str, str]:
+    """The body (link: the BODY frame the point's frame hangs from) of each contact point."""
+    model = scene.model
+    bodies = {}
+    for contact in scene.contacts:
+        if not model.existFrame(contact.frame):
+            continue
+        f = model.getFrameId(contact.frame)
+        while model.frames[f].type != pinocchio.FrameType.BODY and model.frames[f].parentFrame != f:
+            f = model.frames[f].parentFrame
+        bodies[contact.name] = model.frames[f].name
+    return bodies
 
 
 def _full_joints(reduced: pinocchio.Model, full: pinocchio.Model, joints: Any) -> np.ndarray:

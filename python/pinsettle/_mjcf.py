@@ -303,7 +303,7 @@ class _Writer:
             diagonal = _floats(a.get("diaginertia", "0 0 0"), f"{where} diaginertia", (3,))
             inertial.set("diaginertia", _text(diagonal))
             tensor = rotation @ np.diag(diagonal)
-        _check_inertia(tensor, where)
+        _check_inertia(tensor @ rotation.T, where)
         self.inertias[body.name] = (
             mass,
             np.array(body.inertial_pose.translation),

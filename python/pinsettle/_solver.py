@@ -315,11 +315,17 @@ def _warn_unapplied(unapplied: tuple[str, ...], stacklevel: int) -> None:
 def _contact_bodies(scene: Scene) -> dict[str, str]:
     """The body (link: the BODY frame the point's frame hangs from) of each contact point."""
     model = scene.model
+    # By name, a body's frame first: an MJCF joint and its body may share a name (humanoid_CMU's
+    # 'root'), which pinocchio's getFrameId refuses as ambiguous.
+    frames: dict[str, int] = {}
+    for f, frame in enumerate(model.frames):
+        if frame.name not in frames or frame.type == pinocchio.FrameType.BODY:
+            frames[frame.name] = f
     bodies = {}
     for contact in scene.contacts:
-        if not model.existFrame(contact.frame):
+        if contact.frame not in frames:
             continue
-        f = model.getFrameId(contact.frame)
+        f = frames[contact.frame]
         while model.frames[f].type != pinocchio.FrameType.BODY and model.frames[f].parentFrame != f:
             f = model.frames[f].parentFrame
         bodies[contact.name] = model.frames[f].name

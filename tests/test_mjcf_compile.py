@@ -317,9 +317,10 @@ def test_the_saved_quadruped_is_refused_for_its_tendon_equalities_only(tmp_path,
 @pytest.mark.parametrize(
     "parts, joints, flags",
     [
-        (HALF_CHEETAH, ("rootx", "rootz", "rooty"), ()),
-        (CHEETAH, ("rootx", "rootz", "rooty"), ()),
-        (DOG, ("root",), ("--free-objects", "lock")),  # its ball locked where it lies
+        # Off their floors (the judge leaves contacts out): the hung legs on their springs.
+        (HALF_CHEETAH, ("rootx", "rootz", "rooty"), ("--no-contacts",)),
+        (CHEETAH, ("rootx", "rootz", "rooty"), ("--no-contacts",)),
+        (DOG, ("root",), ("--free-objects", "lock", "--no-contacts")),  # its ball locked
     ],
     ids=["half_cheetah", "cheetah", "dog"],
 )

@@ -811,7 +811,7 @@ class Scene:
                 numbers, a negative radius, a name given twice.
         """
         frame = self._frame_name(frame, "frame")
-        j = self.model.frames[self.model.getFrameId(frame)].parentJoint
+        j = self.model.frames[_body_frame(self.model, frame)].parentJoint
         if j == 0:
             raise SceneError(f"frame: '{frame}' is fixed to the world; a contact needs a body")
         if name is None:

@@ -14,7 +14,7 @@ import pinocchio
 
 from . import _core
 from ._checks import as_vector
-from ._scene import Scene, has_mimic_joints
+from ._scene import Scene, _body_frame, has_mimic_joints
 from ._scene_values import JointReader
 from ._settings import Settings, make_settings
 from ._solve import Contact, Progress, Result, Trace, _limits_flag, _progress_reporter
@@ -315,17 +315,11 @@ def _warn_unapplied(unapplied: tuple[str, ...], stacklevel: int) -> None:
 def _contact_bodies(scene: Scene) -> dict[str, str]:
     """The body (link: the BODY frame the point's frame hangs from) of each contact point."""
     model = scene.model
-    # By name, a body's frame first: an MJCF joint and its body may share a name (humanoid_CMU's
-    # 'root'), which pinocchio's getFrameId refuses as ambiguous.
-    frames: dict[str, int] = {}
-    for f, frame in enumerate(model.frames):
-        if frame.name not in frames or frame.type == pinocchio.FrameType.BODY:
-            frames[frame.name] = f
     bodies = {}
     for contact in scene.contacts:
-        if contact.frame not in frames:
+        if not model.existFrame(contact.frame):
             continue
-        f = frames[contact.frame]
+        f = _body_frame(model, contact.frame)  # a body's first: a joint may share its name
         while model.frames[f].type != pinocchio.FrameType.BODY and model.frames[f].parentFrame != f:
             f = model.frames[f].parentFrame
         bodies[contact.name] = model.frames[f].name

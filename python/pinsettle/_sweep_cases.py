@@ -21,7 +21,7 @@ import pinocchio
 
 from . import _core
 from ._checks import unknown_key_message
-from ._scene import JointLoad, PointLoad, Scene, SceneError
+from ._scene import JointLoad, PointLoad, Scene, SceneError, _body_frame
 from ._settings import make_settings
 from ._solve import Result
 from ._solver import Solver
@@ -133,7 +133,7 @@ def _payload_key(text: str, scene: Scene) -> Key:
         )
     if tables:
         return Key(text, "payload", tables[0], field="mass")
-    if model.frames[model.getFrameId(frame)].parentJoint == 0:
+    if model.frames[_body_frame(model, frame)].parentJoint == 0:
         raise ValueError(
             f"vary key '{text}': frame '{frame}' is fixed to the world: a mass there does nothing"
         )

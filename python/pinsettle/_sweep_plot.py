@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ._play_extra import VIZ_INSTALL
-from ._sweep_cases import MissingDependencyError, pandas
+from ._sweep_cases import OUTPUT_COLUMNS, MissingDependencyError, pandas
 
 #: The file formats of a plot, by the file's extension.
 PLOT_FORMATS = {".png": "png", ".svg": "svg"}
@@ -22,19 +22,7 @@ PLOT_FORMATS = {".png": "png", ".svg": "svg"}
 API_NAMES = {"column": "column", "key": "key", "path": "path"}
 FLAG_NAMES = {"column": "--plot-column", "key": "--plot-key", "path": "--plot"}
 #: The columns of a sweep's table that hold no varied value (besides the joints').
-_NOT_VARIED = (
-    "case",
-    "start",
-    "status",
-    "residual",
-    "stability",
-    "min_stiffness_eigenvalue",
-    "at_limit",
-    "steps",
-    "wall_time",
-    "jump",
-    "error",
-)
+_NOT_VARIED = ("case", "start", *OUTPUT_COLUMNS)
 
 
 def require_matplotlib(what: str) -> None:

@@ -94,7 +94,7 @@ def _ninja_times(build_dir: Path) -> dict[str, float]:
         return times
     for line in log.read_text().splitlines()[1:]:
         start, end, _, output, _ = line.split("\t")
-        name = re.sub(r"^CMakeFiles/[^/]+\.dir/", "", output)
+        name = re.sub(r"^(core/)?CMakeFiles/[^/]+\.dir/", "", output)
         times[name] = round((int(end) - int(start)) / 1000.0, 1)
     return times
 

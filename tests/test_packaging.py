@@ -1,5 +1,5 @@
-"""The installed package: the extension finds Pinocchio without LD_LIBRARY_PATH, and ships its
-type stubs and C++ package files."""
+"""The installed package: the extension finds Pinocchio without LD_LIBRARY_PATH, ships its type
+stubs and C++ package files, and a second build of the same checkout compiles nothing."""
 
 from __future__ import annotations
 
@@ -7,6 +7,8 @@ import os
 import shutil
 import subprocess
 import sys
+import sysconfig
+import zipfile
 from pathlib import Path
 
 import pinsettle
@@ -14,6 +16,7 @@ import pytest
 from pinsettle import _core
 
 PACKAGE = Path(pinsettle.__file__).resolve().parent
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_extension_resolves_pinocchio_through_its_rpath():
@@ -130,3 +133,53 @@ def test_cmake_install_to_a_plain_prefix_gives_a_working_package(tmp_path):
     run(cmake, "--build", str(consumer / "build"))
     out = run(str(consumer / "build" / "consumer"))
     assert "kt" in out
+
+
+def _kept_build_folder() -> Path | None:
+    """This checkout's kept wheel build folder for this Python (pyproject.toml's build-dir), if
+    a build has run there."""
+    module = f"_core{sysconfig.get_config_var('EXT_SUFFIX')}"
+    for core in sorted((ROOT / "build").glob("*/core")):
+        if (core / module).is_file() and (core.parent / ".ninja_log").is_file():
+            return core.parent
+    return None
+
+
+def _ninja_log(build: Path) -> set[tuple[str, ...]]:
+    """ninja's record of the commands it ran: (start, end, mtime, output, command hash)."""
+    lines = (build / ".ninja_log").read_text().splitlines()
+    return {tuple(line.split("\t")) for line in lines if not line.startswith("#")}
+
+
+def test_a_second_build_of_the_same_sources_compiles_nothing(tmp_path):
+    """After `pip install .` (the README's commands), building the same checkout again with pip
+    (its own isolated build environment, at a new path) compiles no file: the kept build folder
+    survives scikit-build-core's clearing (cmake/wheel/) and the dependencies keep their paths
+    (cmake/stable_deps.py). The rebuilt wheel's module is the installed one, byte for byte.
+    About 30 s: pip installs the build requirements again."""
+    build = _kept_build_folder()
+    if build is None:
+        message = (
+            f"no kept wheel build of this checkout under {ROOT / 'build'} for this Python: "
+            "pinsettle was not installed from it with `pip install .`"
+        )
+        if os.environ.get("PINSETTLE_REQUIRE_BUILD_DIR") == "1":
+            pytest.fail(message + " (PINSETTLE_REQUIRE_BUILD_DIR=1)")
+        pytest.skip(message)
+    before = _ninja_log(build)
+    drop = ("SKBUILD_", "PIP_NO_BUILD_ISOLATION")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(drop)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-w", str(tmp_path), str(ROOT)],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    assert proc.returncode == 0, f"pip wheel failed:\n{proc.stdout}\n{proc.stderr}"
+    ran = sorted(entry[3] for entry in _ninja_log(build) - before)
+    compiled = [output for output in ran if output.endswith(".o")]
+    assert not compiled, f"the second build compiled {compiled} (ninja ran {ran})"
+    (wheel,) = tmp_path.glob("pinsettle-*.whl")
+    with zipfile.ZipFile(wheel) as archive:
+        built = archive.read(f"pinsettle/{Path(_core.__file__).name}")
+    assert built == Path(_core.__file__).read_bytes()

@@ -281,3 +281,22 @@ def test_cli_bad_input_exits_2(args, said):
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert said in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_worked_example_of_the_docs_is_what_the_commands_print(tmp_path: Path):
+    # docs/loads.md quotes the table of `pinsettle hold` on its scene, and the payloads.
+    page = (Path(__file__).parents[1] / "docs" / "loads.md").read_text(encoding="utf-8")
+    scene_text = page.split("```toml\n", 1)[1].split("```", 1)[0]
+    table = page.split("` prints:\n\n```\n", 1)[1].split("```", 1)[0]
+    scene = tmp_path / "ur5_3kg.toml"
+    scene.write_text(scene_text, encoding="utf-8")
+    proc = run("hold", str(scene))
+    assert proc.returncode == 0, proc.stderr
+    assert table.strip() in proc.stdout
+    words = " ".join(page.split())
+    straight = pinsettle.payload(pinsettle.load_scene("ur5"), None, "tool0")
+    assert f"gives {straight.mass:.2f} kg, limited by `{straight.limiting_joint}`" in words
+    q = np.array([0.0, -1.5708, 1.5708, 0.0, 0.0, 0.0])
+    bent = pinsettle.payload(pinsettle.load_scene("ur5"), q, "tool0")
+    assert bent.limiting_joint == "elbow_joint"
+    assert f"payload is {bent.mass:.2f} kg, limited by the elbow" in words

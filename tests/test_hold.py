@@ -300,3 +300,17 @@ def test_worked_example_of_the_docs_is_what_the_commands_print(tmp_path: Path):
     bent = pinsettle.payload(pinsettle.load_scene("ur5"), q, "tool0")
     assert bent.limiting_joint == "elbow_joint"
     assert f"payload is {bent.mass:.2f} kg, limited by the elbow" in words
+
+
+def test_cli_pose_and_robot_name():
+    # z1 is a robot of example-robot-data, not a scene: its URDF, and its own SRDF's poses.
+    proc = run("hold", "z1", "--pose", "arm_up", "--start", "joint1=0.4", "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = one_json(proc)
+    scene = pinsettle.Scene.from_robot("z1")
+    scene.load_srdf(pinsettle._model_files.robot_srdf("z1"))
+    scene.set_pose("arm_up").set_start(joint1=0.4)
+    q = scene.q0()
+    assert np.array(out["q"]) == pytest.approx(q, abs=0) and q[0] == 0.4
+    assert q[1] != 0.0  # the pose moved more than the joint given
+    assert_close(np.array(list(out["efforts"].values())), gravity(scene.model, q))

@@ -28,6 +28,7 @@ from pinsettle._cli_flags import (
     setting_flags,
 )
 from pinsettle._memory import new_data
+from pinsettle._model_files import ROBOT_SRDF, robot_srdf
 from pinsettle._progress import StatusLine, status_line
 from pinsettle._settings import SETTING_FIELDS, SETTING_TYPES
 from pinsettle._solve import effort_kinds, effort_unit
@@ -86,6 +87,13 @@ JSON_FLAG = flag("--json", action="store_true", help="print one JSON object")
 
 SCENE_ARGUMENT = flag(
     "scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"
+)
+
+#: hold and payload: a robot name as well (its URDF).
+HELD_SCENE_ARGUMENT = flag(
+    "scene",
+    help="scene file (.toml), scene name, model file (.urdf, MJCF .xml), or robot name of "
+    "example-robot-data (`pinsettle robots`; a scene name first)",
 )
 
 
@@ -185,11 +193,31 @@ def _parse_start(items: list[str]) -> list[tuple[str, str, float | list[float]]]
     return out
 
 
+def _set_pose(scene: pinsettle.Scene, pose: str) -> None:
+    """--pose: a named pose of the scene, the robot's own SRDF read for it as [start] pose
+    does when the scene names none (a robot of example-robot-data)."""
+    own = None
+    if scene.urdf is not None and pose not in scene.poses and not scene.srdf:
+        robots = {pinsettle.robot_urdf(name): name for name in ROBOT_SRDF}
+        own = robot_srdf(robots[scene.urdf]) if scene.urdf in robots else None
+    if own is not None:
+        scene.load_srdf(own)
+    try:
+        scene.set_pose(pose)
+    except pinsettle.SceneError as error:
+        raise pinsettle.SceneError(f"--pose {pose}: {error}") from None
+
+
 def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray | None]:
     """The scene of args.scene (a scene file or name, a URDF or an MJCF file) and the start of
     its --start flags (None: the scene's own)."""
+    path = args.scene
+    if getattr(args, "robot_names", False) and not Path(path).is_file():
+        # hold and payload take a robot of example-robot-data too, as its URDF
+        if path not in pinsettle.scene_names() and path in pinsettle.robot_names():
+            path = pinsettle.robot_urdf(path)
     scene = pinsettle.load_scene(
-        args.scene,
+        path,
         floating=True if args.floating else None,
         free_objects=args.free_objects,
         actuator_springs=True if args.actuator_springs else None,
@@ -197,10 +225,7 @@ def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray |
     )
     pose = getattr(args, "pose", None)  # the commands of _HOLDING have --pose
     if pose is not None:
-        try:
-            scene.set_pose(pose)
-        except pinsettle.SceneError as error:
-            raise pinsettle.SceneError(f"--pose {pose}: {error}") from None
+        _set_pose(scene, pose)
     if not args.start:
         return scene, None if pose is None else scene.q0()
     for item, name, value in _parse_start(args.start):
@@ -395,13 +420,14 @@ class _Command:
     flags: tuple[Flag, ...] = ()
     settings: bool = False
     description: str | None = None
+    robot_names: bool = False  # SCENE may be a robot name of example-robot-data
 
     def add_to(self, sub: Any) -> None:
         parser = sub.add_parser(self.name, help=self.help, description=self.description)
         add_flags(parser, self.flags)
         if self.settings:
             _add_setting_flags(parser)
-        parser.set_defaults(func=self.func)
+        parser.set_defaults(func=self.func, robot_names=self.robot_names)
 
 
 #: The commands that solve one scene: their own arguments, then those of the model and start.
@@ -476,18 +502,19 @@ _HOLDING = (
         "hold",
         "the joint efforts that hold a scene still at its start pose, against their limits",
         _hold,
-        (SCENE_ARGUMENT, JSON_FLAG, *MODEL_FILE_FLAGS, POSE_FLAG, START_FLAG),
+        (HELD_SCENE_ARGUMENT, JSON_FLAG, *MODEL_FILE_FLAGS, POSE_FLAG, START_FLAG),
         description="The effort each joint's motor applies to hold the mechanism still at the "
         "pose (the scene's start, --pose, --start): gravity minus the scene's springs and "
         "loads, with each joint's effort limit (a URDF's <limit effort>) and the joints over "
         "it. Exit status 1 when a joint is over its limit.",
+        robot_names=True,
     ),
     _Command(
         "payload",
         "the largest mass a frame can carry at a pose with every joint within its limit",
         _payload,
         (
-            SCENE_ARGUMENT,
+            HELD_SCENE_ARGUMENT,
             flag("--frame", required=True, metavar="F", help="frame (link) that carries it"),
             flag(
                 "--offset",
@@ -506,6 +533,7 @@ _HOLDING = (
         description="The largest point mass at the frame (its origin, or --offset) that the "
         "pose holds with every joint within its effort limit, and the joint that limits it. "
         "Exit status 1 when the pose cannot hold even no payload.",
+        robot_names=True,
     ),
 )
 

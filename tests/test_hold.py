@@ -142,6 +142,30 @@ def test_refused(scene_name, message):
         pinsettle.hold(pinsettle.load_scene(scene_name))
 
 
+def test_ground_contacts_are_refused():
+    scene = pinsettle.load_scene("ur5")
+    scene.add_ground((0.0, 0.0, -0.5)).add_contact("tool0")
+    with pytest.raises(pinsettle.SceneError, match="ground contacts .*not yet supported"):
+        pinsettle.hold(scene)
+    with pytest.raises(pinsettle.SceneError, match="ground contacts"):
+        pinsettle.payload(scene, None, "tool0")
+
+
+def test_prismatic_joint_in_newtons():
+    # A 2 kg block on a vertical slider 0.1 m up its 500 N/m spring: the motor carries its
+    # weight (+z, against gravity) and the spring's pull back down, 2 g + 500 * 0.1 N.
+    scene = pinsettle.load_scene("slider_spring")
+    q = np.array([0.1])
+    result = pinsettle.hold(scene, q)
+    expected = 2.0 * np.linalg.norm(scene.gravity) + 500.0 * 0.1
+    assert result.efforts["slider"] == pytest.approx(expected, rel=1e-12)
+    assert_close(result.tau, gravity(scene.model, q) + 500.0 * q)
+    assert result.effort_limits == {"slider": 1000.0}
+    proc = run("hold", "slider_spring", "--start", "slider=0.1")
+    assert proc.returncode == 0, proc.stderr
+    assert f"{expected:.4g} N " in proc.stdout and "1000 N" in proc.stdout
+
+
 # --- payload -----------------------------------------------------------------------------------
 
 

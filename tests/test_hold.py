@@ -338,3 +338,14 @@ def test_cli_pose_and_robot_name():
     assert np.array(out["q"]) == pytest.approx(q, abs=0) and q[0] == 0.4
     assert q[1] != 0.0  # the pose moved more than the joint given
     assert_close(np.array(list(out["efforts"].values())), gravity(scene.model, q))
+
+
+def test_payload_without_limits_is_unbounded():
+    # The double pendulum's joints have no limit (effort="0"): nothing bounds the mass.
+    found = pinsettle.payload(pinsettle.load_scene("double_pendulum_springs"), None, "link2")
+    assert found.mass == np.inf and found.limiting_joint is None and found.loaded is None
+    assert np.abs(found.per_kg).max() > 0  # the mass does load the joints
+    proc = run("payload", "double_pendulum_springs", "--frame", "link2", "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = one_json(proc)
+    assert out["mass"] is None and out["limiting_joint"] is None

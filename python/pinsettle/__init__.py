@@ -11,6 +11,7 @@ import importlib.metadata as _metadata
 
 import pinocchio  # noqa: F401  (registers the converters that pinsettle._core reads models with)
 
+from ._hold import Hold, PayloadCapacity, hold, payload
 from ._scene import Scene, SceneError, load_scene
 from ._settings import Settings
 from ._solve import (
@@ -45,10 +46,14 @@ __all__ = [
     "assess_stability",
     "distinct_rests",
     "get_cmake_dir",
+    "hold",
+    "Hold",
     "kinetic_energies",
     "load_robot",
     "load_scene",
     "load_urdf",
+    "payload",
+    "PayloadCapacity",
     "play",
     "plot_sweep",
     "robot_names",

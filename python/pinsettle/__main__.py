@@ -28,6 +28,7 @@ from pinsettle._cli_flags import (
     setting_flags,
 )
 from pinsettle._memory import new_data
+from pinsettle._model_files import ROBOT_SRDF, robot_srdf
 from pinsettle._progress import StatusLine, status_line
 from pinsettle._settings import SETTING_FIELDS, SETTING_TYPES
 from pinsettle._solve import effort_kinds, effort_unit
@@ -86,6 +87,13 @@ JSON_FLAG = flag("--json", action="store_true", help="print one JSON object")
 
 SCENE_ARGUMENT = flag(
     "scene", help="scene file (.toml), scene name, or model file (.urdf, MJCF .xml)"
+)
+
+#: hold and payload: a robot name as well (its URDF).
+HELD_SCENE_ARGUMENT = flag(
+    "scene",
+    help="scene file (.toml), scene name, model file (.urdf, MJCF .xml), or robot name of "
+    "example-robot-data (`pinsettle robots`; a scene name first)",
 )
 
 
@@ -185,18 +193,41 @@ def _parse_start(items: list[str]) -> list[tuple[str, str, float | list[float]]]
     return out
 
 
+def _set_pose(scene: pinsettle.Scene, pose: str) -> None:
+    """--pose: a named pose of the scene, the robot's own SRDF read for it as [start] pose
+    does when the scene names none (a robot of example-robot-data)."""
+    own = None
+    if scene.urdf is not None and pose not in scene.poses and not scene.srdf:
+        robots = {pinsettle.robot_urdf(name): name for name in ROBOT_SRDF}
+        own = robot_srdf(robots[scene.urdf]) if scene.urdf in robots else None
+    if own is not None:
+        scene.load_srdf(own)
+    try:
+        scene.set_pose(pose)
+    except pinsettle.SceneError as error:
+        raise pinsettle.SceneError(f"--pose {pose}: {error}") from None
+
+
 def _load_scene(args: argparse.Namespace) -> tuple[pinsettle.Scene, np.ndarray | None]:
     """The scene of args.scene (a scene file or name, a URDF or an MJCF file) and the start of
     its --start flags (None: the scene's own)."""
+    path = args.scene
+    if getattr(args, "robot_names", False) and not Path(path).is_file():
+        # hold and payload take a robot of example-robot-data too, as its URDF
+        if path not in pinsettle.scene_names() and path in pinsettle.robot_names():
+            path = pinsettle.robot_urdf(path)
     scene = pinsettle.load_scene(
-        args.scene,
+        path,
         floating=True if args.floating else None,
         free_objects=args.free_objects,
         actuator_springs=True if args.actuator_springs else None,
         **contact_options(args),
     )
+    pose = getattr(args, "pose", None)  # the commands of _HOLDING have --pose
+    if pose is not None:
+        _set_pose(scene, pose)
     if not args.start:
-        return scene, None
+        return scene, None if pose is None else scene.q0()
     for item, name, value in _parse_start(args.start):
         # An error names the flag as typed: "--start root=0,0,1,2,0,0,0: the quaternion ..."
         scene._set_joint_start(name, value, f"--start {item}")
@@ -247,6 +278,32 @@ def _solve(args: argparse.Namespace) -> int:
         _print_title(scene)
         print(result.summary(scene))
     return 0 if result.converged else 1
+
+
+def _hold(args: argparse.Namespace) -> int:
+    from pinsettle._hold import hold, hold_summary
+
+    scene, q0 = _load_scene(args)
+    result = hold(scene, q0)
+    if args.json:
+        print(json.dumps({"scene": str(scene.path), "notes": scene.notes, **result.to_dict()}))
+    else:
+        _print_title(scene)
+        print(hold_summary(scene.model, result))
+    return 1 if result.over_limit else 0
+
+
+def _payload(args: argparse.Namespace) -> int:
+    from pinsettle._hold import payload_at, payload_summary
+
+    scene, q0 = _load_scene(args)
+    result = payload_at(scene, q0, args.frame, args.offset, ("--frame", "--offset"))
+    if args.json:
+        print(json.dumps({"scene": str(scene.path), "notes": scene.notes, **result.to_dict()}))
+    else:
+        _print_title(scene)
+        print(payload_summary(scene.model, result))
+    return 1 if result.hold.over_limit else 0
 
 
 def _speed(text: str) -> float:
@@ -363,13 +420,14 @@ class _Command:
     flags: tuple[Flag, ...] = ()
     settings: bool = False
     description: str | None = None
+    robot_names: bool = False  # SCENE may be a robot name of example-robot-data
 
     def add_to(self, sub: Any) -> None:
         parser = sub.add_parser(self.name, help=self.help, description=self.description)
         add_flags(parser, self.flags)
         if self.settings:
             _add_setting_flags(parser)
-        parser.set_defaults(func=self.func)
+        parser.set_defaults(func=self.func, robot_names=self.robot_names)
 
 
 #: The commands that solve one scene: their own arguments, then those of the model and start.
@@ -431,6 +489,54 @@ _SOLVING = (
     ),
 )
 
+POSE_FLAG = flag(
+    "--pose",
+    metavar="NAME",
+    help="start from a named pose of the model (an SRDF's group_state, an MJCF keyframe); "
+    "--start then overrides single joints",
+)
+
+#: The commands that read what a pose asks of its motors (no solve: the pose is given).
+_HOLDING = (
+    _Command(
+        "hold",
+        "the joint efforts that hold a scene still at its start pose, against their limits",
+        _hold,
+        (HELD_SCENE_ARGUMENT, JSON_FLAG, *MODEL_FILE_FLAGS, POSE_FLAG, START_FLAG),
+        description="The effort each joint's motor applies to hold the mechanism still at the "
+        "pose (the scene's start, --pose, --start): gravity minus the scene's springs and "
+        "loads, with each joint's effort limit (a URDF's <limit effort>) and the joints over "
+        "it. Exit status 1 when a joint is over its limit.",
+        robot_names=True,
+    ),
+    _Command(
+        "payload",
+        "the largest mass a frame can carry at a pose with every joint within its limit",
+        _payload,
+        (
+            HELD_SCENE_ARGUMENT,
+            flag("--frame", required=True, metavar="F", help="frame (link) that carries it"),
+            flag(
+                "--offset",
+                nargs=3,
+                type=float,
+                default=[0.0, 0.0, 0.0],
+                metavar=("X", "Y", "Z"),
+                help="the mass's point from the frame's origin, in the frame's axes (m; "
+                "default 0 0 0)",
+            ),
+            JSON_FLAG,
+            *MODEL_FILE_FLAGS,
+            POSE_FLAG,
+            START_FLAG,
+        ),
+        description="The largest point mass at the frame (its origin, or --offset) that the "
+        "pose holds with every joint within its effort limit, and the joint that limits it. "
+        "Exit status 1 when the pose cannot hold even no payload.",
+        robot_names=True,
+    ),
+)
+
 #: The commands that list what the package has.
 _LISTING = (
     _Command("scenes", "list the scenes of the library with a description", _scenes),
@@ -445,7 +551,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Static equilibrium of mechanisms by kinetic damping on Pinocchio.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    for command in _SOLVING:
+    for command in (*_SOLVING, *_HOLDING):
         command.add_to(sub)
     # The sweep command lives with the sweep (pandas is imported only when it runs).
     from pinsettle import _sweep_cli

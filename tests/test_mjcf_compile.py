@@ -25,6 +25,7 @@ import pinocchio
 import pinsettle
 import pytest
 import third_party_models as gallery  # tests/third_party_models.py (tests/ is on sys.path)
+from conftest import mujoco_warnings
 from contact_reference import assert_rests_on_the_floor
 from pinsettle._collision_contacts import ELLIPSOID_TOL, directions, ellipsoid_points
 from pinsettle._mjcf import MjcfError, load_mjcf
@@ -36,6 +37,13 @@ DOG = ("dm_control", "suite", "dog.xml")
 DOG_V2 = ("dm_control", "locomotion", "walkers", "assets", "dog_v2", "dog.xml")
 HUMANOID_CMU = ("dm_control", "suite", "humanoid_CMU.xml")
 QUADRUPED = ("dm_control", "suite", "quadruped.xml")
+
+
+def mj_compile(mujoco, path: Path):
+    """MuJoCo's model of the file, its compile warnings kept off MUJOCO_LOG.TXT (MuJoCo 4.0
+    warns that settotalmass is deprecated)."""
+    with mujoco_warnings(mujoco):
+        return mujoco.MjModel.from_xml_path(str(path))
 
 
 def write(tmp_path: Path, text: str, name: str = "model.xml") -> Path:
@@ -68,7 +76,7 @@ def copy_of(source: Path, out: Path, remove_joints=(), edit=lambda root: None) -
 
 def assert_masses_are_mujocos(mujoco, path: Path, **kw) -> None:
     """Each body's mass, centre of mass and principal moments as MuJoCo compiles them."""
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mj_compile(mujoco, path)
     ours = load_mjcf(path, **kw).inertias
     for b in range(1, mj.nbody):
         name = mj.body(b).name
@@ -134,7 +142,7 @@ def test_settotalmass_scales_after_boundmass_as_mujoco(tmp_path, mujoco, free_ob
 
 def assert_springdampers_are_mujocos(mujoco, path: Path, **kw) -> dict:
     """Each springdamper joint's stiffness and damping as MuJoCo compiles them, and its spring."""
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mj_compile(mujoco, path)
     model = load_mjcf(path, **kw)
     springs = {name: (k, rest) for name, k, rest in model.joint_springs}
     assert model.springdampers
@@ -191,7 +199,7 @@ def test_springdamper_takes_the_inertia_at_qpos0_as_mujoco(tmp_path, mujoco):
     # its origin (MuJoCo's simple body: its mass alone, the armature left out) and one without.
     path = write(tmp_path, SPRINGDAMPER.format(others=SLIDERS))
     gains = assert_springdampers_are_mujocos(mujoco, path)
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mj_compile(mujoco, path)
     lift, cart = (mj.body_mass[mj.body(name).id] for name in ("lift", "cart"))
     assert gains["lift"] == pytest.approx((lift / 0.5**2, 2 * lift / 0.5), rel=1e-12)
     assert gains["rail"] == pytest.approx(((cart + 0.3) / 0.5**2, 2 * (cart + 0.3) / 0.5))
@@ -241,7 +249,7 @@ def test_springdamper_errors_are_mujocos(tmp_path, mujoco, joint, fragments):
         assert fragment in message, message
     if "ball" not in joint:  # MuJoCo refuses these too (a ball's spring it would honour)
         with pytest.raises(ValueError):
-            mujoco.MjModel.from_xml_path(str(path))
+            mj_compile(mujoco, path)
 
 
 # --- a free joint's range and limited ---------------------------------------------------------
@@ -263,7 +271,7 @@ FREE_LIMITED = """<mujoco>
 @pytest.mark.parametrize("free", ["", 'range="1 -1"', 'limited="true"', 'limited="false"'])
 def test_a_free_joint_is_unlimited_as_mujoco_compiles_it(tmp_path, mujoco, free):
     path = write(tmp_path, FREE_LIMITED.format(free=free))
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mj_compile(mujoco, path)
     assert list(mj.jnt_limited) == [0, 1]
     model = load_mjcf(path)
     hip = model.model.idx_qs[model.model.getJointId("hip")]
@@ -288,7 +296,7 @@ def test_what_mujoco_refuses_on_a_free_joint_is_refused(tmp_path, mujoco, elemen
         "</mujoco>",
     )
     with pytest.raises(ValueError):
-        mujoco.MjModel.from_xml_path(str(path))
+        mj_compile(mujoco, path)
     message = str(pytest.raises(MjcfError, load_mjcf, path).value)
     for fragment in fragments:
         assert fragment in message, message
@@ -296,7 +304,7 @@ def test_what_mujoco_refuses_on_a_free_joint_is_refused(tmp_path, mujoco, elemen
 
 def saved_quadruped(mujoco, tmp_path: Path) -> Path:
     """MuJoCo's own saved copy of dm_control's quadruped (its free joint limited by its class)."""
-    model = mujoco.MjModel.from_xml_path(str(model_file(*QUADRUPED)))
+    model = mj_compile(mujoco, model_file(*QUADRUPED))
     path = tmp_path / "quadruped_saved.xml"
     mujoco.mj_saveLastXML(str(path), model)
     text = path.read_text()
@@ -410,7 +418,7 @@ def test_an_ellipsoid_rests_on_its_shortest_axis_as_in_mujoco(tmp_path, mujoco, 
     assert abs(axis[2]) >= np.cos(np.radians(5))
     # MuJoCo's own ellipsoid at that pose touches its floor, sunk in by at most the tolerance;
     # its damped settle is there too.
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mj_compile(mujoco, path)
     data = mujoco.MjData(mj)
     data.qpos[:] = np.concatenate([q[:3], [q[6]], q[3:6]])
     mujoco.mj_forward(mj, data)
@@ -427,7 +435,7 @@ def assert_ellipsoids_rest_as_mujoco_places_them(mujoco, path, result, names) ->
     """At the rest, MuJoCo's own distance from each named ellipsoid to the floor: it sinks in
     by at most the tolerance (the contact spheres inside it stay out), and one whose spheres
     carry a force touches."""
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mj_compile(mujoco, path)
     data = mujoco.MjData(mj)
     joints = result.to_dict()["joints"]
     for j in range(mj.njnt):
@@ -445,7 +453,7 @@ def assert_ellipsoids_rest_as_mujoco_places_them(mujoco, path, result, names) ->
 
 def mujoco_springs(mujoco, path: Path) -> list[tuple[str, float, float]]:
     """The joint springs as MuJoCo compiles them (hinges and slides): the rest's check."""
-    mj = mujoco.MjModel.from_xml_path(str(path))
+    mj = mj_compile(mujoco, path)
     return [
         (mj.joint(j).name, float(mj.jnt_stiffness[j]), float(mj.qpos_spring[mj.jnt_qposadr[j]]))
         for j in range(mj.njnt)

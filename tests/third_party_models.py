@@ -246,10 +246,16 @@ _DSBL_GRAVITY, _DSBL_ACTUATION = 128, 2048
 
 
 def _mujoco_model(path: Path) -> Any:
+    """MuJoCo's model of the file, its compile warnings (settotalmass is deprecated in MuJoCo
+    4.0) kept off MUJOCO_LOG.TXT in the working directory."""
     import mujoco
 
-    model = mujoco.MjModel.from_xml_path(str(path))
-    return model
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda text: None)
+    try:
+        return mujoco.MjModel.from_xml_path(str(path))
+    finally:
+        mujoco.set_mju_user_warning(previous)
 
 
 def _mj_random_qpos(m: Any, rng: np.random.Generator, limits: bool) -> np.ndarray:

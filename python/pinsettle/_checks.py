@@ -43,3 +43,14 @@ def as_flag(value: Any, name: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be True or False, got {type(value).__name__} {value!r}")
     return bool(value)
+
+
+def negative_moments(tensor: np.ndarray) -> np.ndarray | None:
+    """The principal moments of a finite rotational inertia (kg m^2) when it is not positive
+    semidefinite (its smallest below -1e-9 of its largest), else None. Scaled to its largest
+    entry first: a moment of 1e308 overflows the sum of its halves."""
+    scale = float(np.abs(tensor).max())
+    if scale == 0.0:
+        return None
+    moments = np.linalg.eigvalsh(0.5 * (tensor / scale + tensor.T / scale)) * scale
+    return moments if moments[0] < -1e-9 * max(np.abs(moments).max(), 1e-12) else None

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import pinocchio
 
+from ._checks import negative_moments
 from ._memory import new_data
 from ._mjcf_actuators import _actuators, _ActuatorSprings
 from ._mjcf_contacts import MjcfCollision, mjcf_collision
@@ -70,14 +71,8 @@ def _check_inertia(tensor: np.ndarray, where: str) -> None:
     moment to its bound: diaginertia="0.1 -0.1 0.1" was solved as "0.1 0 0.1")."""
     if not np.isfinite(tensor).all():
         raise MjcfError(f"{where}: its inertia must be finite")
-    # Scaled to its largest entry first: a moment of 1e308 overflows the sum of the halves.
-    scale = float(np.abs(tensor).max())
-    moments = (
-        np.linalg.eigvalsh(0.5 * (tensor / scale + tensor.T / scale)) * scale
-        if scale
-        else np.zeros(3)
-    )
-    if moments[0] < -1e-9 * max(np.abs(moments).max(), 1e-12):
+    moments = negative_moments(tensor)
+    if moments is not None:
         raise MjcfError(
             f"{where}: its inertia has principal moments {np.array2string(moments, precision=4)} "
             "kg m^2; an inertia must be positive semidefinite"

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio
 
-from ._checks import unknown_key_message
+from ._checks import negative_moments, unknown_key_message
 from ._urdf_mimic import parse_xml, urdf_mimic_tags, xml_bytes
 
 # name -> (URDF path below example-robot-data/robots, root attached by a free-flyer joint)
@@ -262,9 +262,8 @@ def _link_inertia_fault(inertial: ET.Element) -> str | None:
     )
     if not np.isfinite(matrix).all():
         return "an inertia that is not finite"
-    scale = float(np.abs(matrix).max())
-    moments = np.linalg.eigvalsh(matrix / scale) * scale if scale else np.zeros(3)
-    if moments[0] < -1e-9 * max(np.abs(moments).max(), 1e-12):
+    moments = negative_moments(matrix)
+    if moments is not None:
         return (
             f"an inertia with principal moments {np.array2string(moments, precision=4)} kg m^2; "
             "an inertia must be positive semidefinite"

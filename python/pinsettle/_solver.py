@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -30,6 +30,8 @@ class _Mechanism:
     compiled: Any  # the scene's _Compiled, or None
     equal: tuple[str, ...]
     unapplied: tuple[str, ...]
+    #: The body of each contact point (_contact_bodies), found once for all its solves.
+    bodies: dict[str, str] = field(default_factory=dict)
 
 
 class Solver:
@@ -168,7 +170,7 @@ class Solver:
         raw["v"] = compiled.full_v(raw["v"], full.nv)
         raw["joints"] = self._reader.values(raw["q"])  # of the full model
         raw["equal_limits"] = mechanism.equal  # less the joints the scene sets stops on
-        bodies = _contact_bodies(scene)
+        bodies = mechanism.bodies
         raw["contacts"] = [(*c, bodies.get(c[0], "")) for c in raw["contacts"] or ()]
         trace = raw["trace"]
         if trace is not None:
@@ -296,7 +298,7 @@ def _scene_mechanism(scene: Scene, compiled: Any, limits: bool) -> _Mechanism:
     )
     equal = tuple(compiled.unset_equal_limits(core.equal_limits))
     unapplied = tuple(str(name) for name in core.unapplied_limits)
-    return _Mechanism(core, compiled, equal, unapplied)
+    return _Mechanism(core, compiled, equal, unapplied, _contact_bodies(scene))
 
 
 def _warn_unapplied(unapplied: tuple[str, ...], stacklevel: int) -> None:

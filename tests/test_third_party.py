@@ -245,19 +245,26 @@ def test_weld_hung_arm_on_its_stops_comes_to_rest(tmp_path: Path) -> None:
     assert answer["residual"] <= gallery.REL_TOL * verdict.scale
 
 
-def test_mjcf_rests_on_its_floor() -> None:
-    """gymnasium's ant, its root free: ``pinsettle solve ant.xml --json`` takes the file's
-    floor and geoms (MuJoCo collides them) by default and stands the ant on it, a rest MuJoCo
-    confirms: the answer's contact forces, through MuJoCo's Jacobians, and its stops balance
-    MuJoCo's static force, the floor carries the weight to 1e-9, no contact sinks in (by the
-    answer or by MuJoCo's own contacts at the answer, each of the answer's found there)."""
+@pytest.fixture(scope="module")
+def ant_on_its_floor() -> tuple[Path, Any]:
+    """gymnasium's ant.xml and `pinsettle solve ant.xml --json` as a user types it (its floor
+    taken by default), run once for the tests that judge it."""
     _require("gymnasium", "gymnasium's ant")
     _require("mujoco", "the MJCF judge")
     _require("scipy", "the judge")
     root = gallery.package_dir("gymnasium")
     assert root is not None
     path = root / "envs/mujoco/assets/ant.xml"
-    run = gallery.run_cli(path, False)
+    return path, gallery.run_cli(path, False)
+
+
+def test_mjcf_rests_on_its_floor(ant_on_its_floor: tuple[Path, Any]) -> None:
+    """gymnasium's ant, its root free: ``pinsettle solve ant.xml --json`` takes the file's
+    floor and geoms (MuJoCo collides them) by default and stands the ant on it, a rest MuJoCo
+    confirms: the answer's contact forces, through MuJoCo's Jacobians, and its stops balance
+    MuJoCo's static force, the floor carries the weight to 1e-9, no contact sinks in (by the
+    answer or by MuJoCo's own contacts at the answer, each of the answer's found there)."""
+    path, run = ant_on_its_floor
     assert run.code == 0 and run.answer is not None, run.stderr[-500:]
     answer = run.answer
     assert answer["status"] == "converged", (answer["status"], answer["reason"])
@@ -271,16 +278,10 @@ def test_mjcf_rests_on_its_floor() -> None:
     assert gallery.judge(path, fall.answer, False).falls
 
 
-def test_judge_rejects_a_rest_off_the_floor() -> None:
+def test_judge_rejects_a_rest_off_the_floor(ant_on_its_floor: tuple[Path, Any]) -> None:
     """The floor judge catches a wrong rest: the ant lifted 1 mm (MuJoCo finds no contacts),
     a contact force halved (the weight is not carried), a joint moved (not a rest)."""
-    _require("gymnasium", "gymnasium's ant")
-    _require("mujoco", "the MJCF judge")
-    _require("scipy", "the judge")
-    root = gallery.package_dir("gymnasium")
-    assert root is not None
-    path = root / "envs/mujoco/assets/ant.xml"
-    run = gallery.run_cli(path, False)
+    path, run = ant_on_its_floor
     assert run.answer is not None and run.answer["converged"], run.stderr[-300:]
 
     def lift(a: dict[str, Any]) -> None:
